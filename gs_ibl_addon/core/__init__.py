@@ -1,0 +1,1 @@
+"""gs-ibl core: everything that works without Blender (numpy, Vulkan, OpenImageIO). Never imports bpy."""

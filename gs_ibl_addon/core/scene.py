@@ -1,0 +1,137 @@
+"""The in-memory splat scene every stage after file reading works on.
+
+Values are *activated* (what the renderer uses), not the raw values stored in a 3DGS PLY:
+opacity is sigmoid(raw), scale is exp(raw), rotation is a unit quaternion (w, x, y, z).
+Colour is kept as SH coefficients exactly as 3DGS stores them: ``sh[:, 0]`` is f_dc, and the
+rendered colour toward direction d is ``max(0, SH_C0 * sh[:, 0] + 0.5 + sum_l>0 Y_lm(d) * sh[:, k])``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SH_C0 = 0.28209479177387814
+
+
+def sh_coeff_count(degree: int) -> int:
+    return (degree + 1) ** 2
+
+
+def rgb_to_sh_dc(rgb: np.ndarray) -> np.ndarray:
+    """Inverse of the degree-0 colour rule: the f_dc that renders as ``rgb``."""
+    return (np.asarray(rgb, np.float32) - 0.5) / SH_C0
+
+
+@dataclass
+class SplatScene:
+    positions: np.ndarray  # (N, 3) float32, scene units
+    scales: np.ndarray  # (N, 3) float32, > 0 (activated: exp of the PLY value)
+    rotations: np.ndarray  # (N, 4) float32 unit quaternions (w, x, y, z)
+    opacities: np.ndarray  # (N,) float32 in (0, 1) (activated: sigmoid of the PLY value)
+    sh: np.ndarray  # (N, (degree+1)^2, 3) float32; [:, 0] is f_dc, [:, 1:] the f_rest in 3DGS order
+    source: str = "<memory>"  # file it came from, for messages
+    repairs: dict[str, int] = field(default_factory=dict)  # what reading repaired, with counts
+
+    def __post_init__(self) -> None:
+        n = len(self.positions)
+        for name, arr, shape in (
+            ("positions", self.positions, (n, 3)),
+            ("scales", self.scales, (n, 3)),
+            ("rotations", self.rotations, (n, 4)),
+            ("opacities", self.opacities, (n,)),
+        ):
+            if arr.shape != shape:
+                raise ValueError(f"{self.source}: {name} has shape {arr.shape}, expected {shape}")
+        if self.sh.ndim != 3 or self.sh.shape[0] != n or self.sh.shape[2] != 3:
+            raise ValueError(f"{self.source}: sh has shape {self.sh.shape}, expected (N, K, 3)")
+        if self.sh.shape[1] not in (1, 4, 9, 16):
+            raise ValueError(f"{self.source}: {self.sh.shape[1]} SH coefficients per channel; expected 1, 4, 9 or 16")
+
+    @property
+    def count(self) -> int:
+        return len(self.positions)
+
+    @property
+    def sh_degree(self) -> int:
+        return int(round(np.sqrt(self.sh.shape[1]))) - 1
+
+    def with_sh_degree(self, degree: int) -> "SplatScene":
+        """The same splats with SH truncated (or zero-padded) to ``degree``."""
+        k = sh_coeff_count(degree)
+        sh = np.zeros((self.count, k, 3), np.float32)
+        m = min(k, self.sh.shape[1])
+        sh[:, :m] = self.sh[:, :m]
+        return SplatScene(self.positions, self.scales, self.rotations, self.opacities, sh, self.source, dict(self.repairs))
+
+    def subset(self, index: np.ndarray) -> "SplatScene":
+        return SplatScene(self.positions[index], self.scales[index], self.rotations[index], self.opacities[index],
+                          self.sh[index], self.source, dict(self.repairs))
+
+    def transformed(self, matrix: np.ndarray) -> "SplatScene":
+        """Splats moved by a 4x4 similarity transform (rotation, uniform scale, translation).
+
+        SH view dependence is not rotated (as most viewers do); the DC colour, which carries
+        nearly all of a probe's light, is exact.
+        """
+        m = np.asarray(matrix, np.float64)
+        lin = m[:3, :3]
+        s = np.cbrt(np.linalg.det(lin))
+        if not s > 0:
+            raise ValueError("transform must have a positive determinant")
+        r = lin / s
+        pos = self.positions.astype(np.float64) @ lin.T + m[:3, 3]
+        q = quat_multiply(matrix_to_quat(r), self.rotations.astype(np.float64))
+        return SplatScene(pos.astype(np.float32), (self.scales * s).astype(np.float32), q.astype(np.float32),
+                          self.opacities, self.sh, self.source, dict(self.repairs))
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.count == 0:
+            return np.zeros(3, np.float32), np.zeros(3, np.float32)
+        return self.positions.min(0), self.positions.max(0)
+
+    @staticmethod
+    def empty() -> "SplatScene":
+        return SplatScene(np.zeros((0, 3), np.float32), np.ones((0, 3), np.float32),
+                          np.zeros((0, 4), np.float32), np.zeros((0,), np.float32), np.zeros((0, 1, 3), np.float32))
+
+
+def quat_to_matrix(q: np.ndarray) -> np.ndarray:
+    """(N, 4) unit quaternions (w, x, y, z) -> (N, 3, 3) rotation matrices."""
+    q = np.asarray(q, np.float64)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
+        np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], -1),
+        np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], -1),
+    ], -2)
+
+
+def matrix_to_quat(r: np.ndarray) -> np.ndarray:
+    """A single 3x3 rotation matrix -> unit quaternion (w, x, y, z)."""
+    r = np.asarray(r, np.float64)
+    t = np.trace(r)
+    if t > 0:
+        s = np.sqrt(t + 1.0) * 2
+        q = [0.25 * s, (r[2, 1] - r[1, 2]) / s, (r[0, 2] - r[2, 0]) / s, (r[1, 0] - r[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(r)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = np.sqrt(1.0 + r[i, i] - r[j, j] - r[k, k]) * 2
+        q = [0.0] * 4
+        q[0] = (r[k, j] - r[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (r[j, i] + r[i, j]) / s
+        q[1 + k] = (r[k, i] + r[i, k]) / s
+    q = np.array(q)
+    return q / np.linalg.norm(q)
+
+
+def quat_multiply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a*b, broadcasting (w, x, y, z)."""
+    aw, ax, ay, az = np.moveaxis(np.asarray(a, np.float64), -1, 0)
+    bw, bx, by, bz = np.moveaxis(np.asarray(b, np.float64), -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], -1)
