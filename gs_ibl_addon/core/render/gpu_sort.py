@@ -1,0 +1,121 @@
+"""GPU prefix sum and stable LSD radix sort (4-bit digits) of uint32 key/value pairs, recorded into a Recorder.
+
+Counts may live on the GPU (``count`` buffer), so a sort of a GPU-sized list needs no read-back: work is dispatched
+for a known capacity and blocks past the count return at once.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..vk import Buffer, Recorder
+from ..vk.compute import groups, pack
+
+SCAN_BLOCK = 1024
+SORT_BLOCK = 4096
+
+
+class Scanner:
+    """Exclusive prefix sums of up to ``capacity`` uints; scratch buffers are kept for reuse."""
+
+    def __init__(self, ctx, capacity: int) -> None:
+        self.ctx = ctx
+        self.levels: list[tuple[int, Buffer]] = []  # (length of the level being scanned, its block-sums buffer)
+        n = max(1, int(capacity))
+        while True:
+            nb = -(-n // SCAN_BLOCK)
+            self.levels.append((n, Buffer(ctx, nb * 4, f"scan-sums-{len(self.levels)}")))
+            if nb == 1:
+                break
+            n = nb
+        self.capacity = int(capacity)
+
+    def record(self, rec: Recorder, data: Buffer, n: int) -> tuple[Buffer, int]:
+        """Scan ``data[:n]`` in place; returns (buffer, index) holding the grand total."""
+        if n > self.capacity:
+            raise ValueError(f"scan of {n} > capacity {self.capacity}")
+        blk = self.ctx.pipeline("scan_block", 2, 4)
+        add = self.ctx.pipeline("scan_add", 2, 4)
+        chain = []
+        cur, length = data, max(1, int(n))
+        for _, sums in self.levels:
+            rec.dispatch(blk, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), pack("I", length))
+            chain.append((cur, sums, length))
+            nb = -(-length // SCAN_BLOCK)
+            if nb == 1:
+                break
+            cur, length = sums, nb
+        for cur, sums, length in reversed(chain[:-1]):
+            rec.dispatch(add, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), pack("I", length))
+        return chain[-1][1], 0
+
+    def destroy(self) -> None:
+        for _, b in self.levels:
+            b.destroy()
+
+
+class RadixSorter:
+    """Stable sort of (key, value) uint32 pairs by the low ``bits`` bits of the key, for up to ``capacity`` pairs."""
+
+    def __init__(self, ctx, capacity: int) -> None:
+        self.ctx = ctx
+        self.capacity = max(1, int(capacity))
+        self.n_blocks = -(-self.capacity // SORT_BLOCK)
+        self.keys_tmp = Buffer(ctx, self.capacity * 4, "sort-keys-tmp")
+        self.vals_tmp = Buffer(ctx, self.capacity * 4, "sort-vals-tmp")
+        self.hist = Buffer(ctx, 16 * self.n_blocks * 4, "sort-hist")
+        self.scanner = Scanner(ctx, 16 * self.n_blocks)
+
+    def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int) -> None:
+        """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy)."""
+        hist_p = self.ctx.pipeline("radix_hist", 3, 12)
+        scat_p = self.ctx.pipeline("radix_scatter", 6, 12)
+        g = groups(self.n_blocks, 1, self.ctx)
+        src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
+        passes = max(1, -(-int(bits) // 4))
+        for i in range(passes):
+            push = pack("III", self.n_blocks, 4 * i, count_index)
+            rec.dispatch(hist_p, [src_k, self.hist, count], g, push)
+            self.scanner.record(rec, self.hist, 16 * self.n_blocks)
+            rec.dispatch(scat_p, [src_k, src_v, dst_k, dst_v, self.hist, count], g, push)
+            src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
+        if src_k is not keys:
+            rec.copy(src_k, keys, self.capacity * 4)
+            rec.copy(src_v, vals, self.capacity * 4)
+
+    def destroy(self) -> None:
+        for b in (self.keys_tmp, self.vals_tmp, self.hist):
+            b.destroy()
+        self.scanner.destroy()
+
+
+def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32) -> tuple[np.ndarray, np.ndarray]:
+    """Convenience for tests: sort host arrays on the GPU."""
+    n = len(keys)
+    kb, vb = Buffer(ctx, n * 4, "k"), Buffer(ctx, n * 4, "v")
+    cb = Buffer(ctx, 16, "count")
+    kb.write(keys.astype(np.uint32))
+    vb.write(vals.astype(np.uint32))
+    cb.write(np.array([n, 0, 0, 0], np.uint32))
+    sorter = RadixSorter(ctx, n)
+    with Recorder(ctx) as rec:
+        sorter.record(rec, kb, vb, cb, 0, bits)
+    out = kb.read(np.uint32, n), vb.read(np.uint32, n)
+    sorter.destroy()
+    for b in (kb, vb, cb):
+        b.destroy()
+    return out
+
+
+def exclusive_scan(ctx, data: np.ndarray) -> tuple[np.ndarray, int]:
+    """Convenience for tests: exclusive scan of a host array on the GPU; returns (scan, total)."""
+    n = len(data)
+    b = Buffer(ctx, n * 4, "scan-data")
+    b.write(data.astype(np.uint32))
+    sc = Scanner(ctx, n)
+    with Recorder(ctx) as rec:
+        tot_buf, idx = sc.record(rec, b, n)
+    out = b.read(np.uint32, n)
+    total = int(tot_buf.read(np.uint32, 1, idx * 4)[0])
+    sc.destroy()
+    b.destroy()
+    return out, total

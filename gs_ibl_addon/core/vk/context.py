@@ -1,0 +1,152 @@
+"""Vulkan instance/device selection and the objects that live as long as the device.
+
+Device choice: ``GS_IBL_DEVICE`` (or the ``device`` argument) may be an index, a case-insensitive substring of the
+device name, ``gpu`` (discrete or integrated GPU only) or ``cpu`` (lavapipe). By default a discrete GPU is taken,
+else an integrated or virtual GPU, else any device (lavapipe).
+"""
+from __future__ import annotations
+
+import os
+import threading
+from importlib import resources
+
+INSTALL_HINT = ("install a Vulkan loader and driver: on Debian/Ubuntu `apt-get install libvulkan1 mesa-vulkan-drivers` "
+                "(Mesa lavapipe runs Vulkan on the CPU), or a GPU driver that provides Vulkan")
+
+
+class VulkanUnavailable(RuntimeError):
+    """No Vulkan loader, no device, or the requested device is missing."""
+
+
+def _vk():
+    try:
+        import vulkan
+        return vulkan
+    except (ImportError, OSError) as e:  # the cffi module raises OSError when libvulkan.so.1 is missing
+        raise VulkanUnavailable(f"Vulkan is not available ({e}); {INSTALL_HINT}") from e
+
+
+_TYPE_RANK = {2: 0, 1: 1, 3: 2, 4: 3, 0: 4}  # discrete, integrated, virtual, cpu, other
+
+
+class VulkanContext:
+    """Instance, one device with one compute queue, a command pool, and caches of pipelines and descriptor sets."""
+
+    def __init__(self, device: str | None = None) -> None:
+        vk = self.vk = _vk()
+        self._keep: list = []
+        app = vk.VkApplicationInfo(pApplicationName="gs-ibl", applicationVersion=1, pEngineName="gs-ibl",
+                                   engineVersion=1, apiVersion=vk.VK_MAKE_VERSION(1, 2, 0))
+        ici = vk.VkInstanceCreateInfo(pApplicationInfo=app)
+        try:
+            self.instance = vk.vkCreateInstance(ici, None)
+        except Exception as e:
+            raise VulkanUnavailable(f"could not create a Vulkan instance ({type(e).__name__}); {INSTALL_HINT}") from e
+        phys = vk.vkEnumeratePhysicalDevices(self.instance)
+        if not phys:
+            raise VulkanUnavailable(f"the Vulkan loader found no device; {INSTALL_HINT}")
+        self.physical_device = self._choose(phys, device if device is not None else os.environ.get("GS_IBL_DEVICE"))
+        props = vk.vkGetPhysicalDeviceProperties(self.physical_device)
+        self.device_name: str = props.deviceName if isinstance(props.deviceName, str) else vk.ffi.string(props.deviceName).decode()
+        self.device_type: int = props.deviceType
+        self.is_cpu = props.deviceType == vk.VK_PHYSICAL_DEVICE_TYPE_CPU
+        self.timestamp_period_ns: float = props.limits.timestampPeriod
+        self.max_workgroups = tuple(props.limits.maxComputeWorkGroupCount)
+        self.memory_properties = vk.vkGetPhysicalDeviceMemoryProperties(self.physical_device)
+
+        families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
+        self.queue_family = next(i for i, f in enumerate(families) if f.queueFlags & vk.VK_QUEUE_COMPUTE_BIT)
+        self.timestamps_supported = families[self.queue_family].timestampValidBits > 0 and self.timestamp_period_ns > 0
+        priorities = vk.ffi.new("float[]", [1.0])
+        qci = vk.VkDeviceQueueCreateInfo(queueFamilyIndex=self.queue_family, queueCount=1, pQueuePriorities=priorities)
+        qcis = [qci]
+        dci = vk.VkDeviceCreateInfo(queueCreateInfoCount=1, pQueueCreateInfos=qcis)
+        self.device = vk.vkCreateDevice(self.physical_device, dci, None)
+        self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
+        pci = vk.VkCommandPoolCreateInfo(queueFamilyIndex=self.queue_family,
+                                         flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT)
+        self.command_pool = vk.vkCreateCommandPool(self.device, pci, None)
+        self._pipelines: dict[str, object] = {}
+        self.lock = threading.RLock()
+
+    def _choose(self, phys: list, want: str | None):
+        vk = self.vk
+        infos = []
+        for i, p in enumerate(phys):
+            pr = vk.vkGetPhysicalDeviceProperties(p)
+            name = pr.deviceName if isinstance(pr.deviceName, str) else vk.ffi.string(pr.deviceName).decode()
+            infos.append((i, p, name, pr.deviceType))
+        names = ", ".join(f"{i}: {n}" for i, _, n, _ in infos)
+        if want:
+            w = want.strip().lower()
+            if w.isdigit():
+                if int(w) < len(infos):
+                    return infos[int(w)][1]
+            elif w == "gpu":
+                gpus = [x for x in infos if x[3] in (1, 2, 3)]
+                if gpus:
+                    return min(gpus, key=lambda x: _TYPE_RANK[x[3]])[1]
+            elif w == "cpu":
+                cpus = [x for x in infos if x[3] == 4]
+                if cpus:
+                    return cpus[0][1]
+            else:
+                for _, p, n, _ in infos:
+                    if w in n.lower():
+                        return p
+            raise VulkanUnavailable(f"no Vulkan device matches GS_IBL_DEVICE={want!r}; devices here: {names}")
+        return min(infos, key=lambda x: _TYPE_RANK.get(x[3], 5))[1]
+
+    def memory_type(self, type_bits: int, flags: int) -> int:
+        mp = self.memory_properties
+        for i in range(mp.memoryTypeCount):
+            if type_bits & (1 << i) and (mp.memoryTypes[i].propertyFlags & flags) == flags:
+                return i
+        raise VulkanUnavailable(f"{self.device_name}: no memory type with flags {flags:#x}")
+
+    def pipeline(self, name: str, n_buffers: int, push_size: int = 0):
+        """The compute pipeline of shader ``name`` (gs_ibl_addon/shaders/<name>.spv), created once."""
+        from .compute import Pipeline
+        with self.lock:
+            p = self._pipelines.get(name)
+            if p is None:
+                p = self._pipelines[name] = Pipeline(self, name, _load_spirv(name), n_buffers, push_size)
+            return p
+
+    def close(self) -> None:
+        vk = self.vk
+        if getattr(self, "device", None) is None:
+            return
+        vk.vkDeviceWaitIdle(self.device)
+        for p in self._pipelines.values():
+            p.destroy()
+        self._pipelines.clear()
+        vk.vkDestroyCommandPool(self.device, self.command_pool, None)
+        vk.vkDestroyDevice(self.device, None)
+        vk.vkDestroyInstance(self.instance, None)
+        self.device = None
+
+
+def _load_spirv(name: str) -> bytes:
+    path = resources.files(__package__.rsplit(".", 2)[0]).joinpath("shaders", f"{name}.spv")
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise VulkanUnavailable(f"compiled shader {path} is missing; run scripts/build_shaders.py "
+                                "(needs glslc: `apt-get install glslc`)") from None
+
+
+_CONTEXT: VulkanContext | None = None
+_CONTEXT_LOCK = threading.Lock()
+
+
+def get_context(device: str | None = None) -> VulkanContext:
+    """The process-wide context (created on first use; a different ``device`` request replaces it)."""
+    global _CONTEXT
+    with _CONTEXT_LOCK:
+        if _CONTEXT is None or (device is not None and device != getattr(_CONTEXT, "_requested", None)):
+            if _CONTEXT is not None:
+                _CONTEXT.close()
+            _CONTEXT = VulkanContext(device)
+            _CONTEXT._requested = device
+        return _CONTEXT
