@@ -1,0 +1,70 @@
+"""Cameras as batches of views sharing one origin: a pinhole camera is one view, a probe cubemap six.
+
+Each view is a rectangle on the plane at distance 1 along ``forward``: pixel (i, j), row 0 at the top, looks along
+``forward + s * tan_x * right + t * tan_y * down`` with s, t the pixel centre in (-1, 1). A cubemap face (tan = 1)
+is exactly the texel convention of core/cubemap.py, so rendered faces and filters agree by construction.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..cubemap import FACE_BASES
+
+TILE = 16
+
+
+@dataclass(frozen=True)
+class View:
+    forward: np.ndarray
+    right: np.ndarray
+    down: np.ndarray
+    tan_x: float
+    tan_y: float
+    width: int
+    height: int
+
+    @property
+    def tiles(self) -> tuple[int, int]:
+        return -(-self.width // TILE), -(-self.height // TILE)
+
+    def pixel_directions(self) -> np.ndarray:
+        """(H, W, 3) unnormalised ray directions of the pixel centres."""
+        s = ((np.arange(self.width) + 0.5) / self.width * 2 - 1) * self.tan_x
+        t = ((np.arange(self.height) + 0.5) / self.height * 2 - 1) * self.tan_y
+        tt, ss = np.meshgrid(t, s, indexing="ij")
+        return (self.forward[None, None] + ss[..., None] * self.right[None, None]
+                + tt[..., None] * self.down[None, None])
+
+
+@dataclass(frozen=True)
+class ViewBatch:
+    origin: np.ndarray
+    views: tuple[View, ...]
+    pixel_angle: float  # radians per pixel at the view centre; sets the anti-aliasing dilation
+
+    @staticmethod
+    def cubemap(origin, face_size: int) -> "ViewBatch":
+        views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
+                      for f in range(6))
+        return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size)
+
+    @staticmethod
+    def pinhole(position, look_at, fov_deg: float, width: int, height: int, up=(0.0, 0.0, 1.0)) -> "ViewBatch":
+        """A perspective camera; ``fov_deg`` is the horizontal field of view; ``up`` defaults to Blender's +Z."""
+        o = np.asarray(position, np.float64).reshape(3)
+        f = np.asarray(look_at, np.float64).reshape(3) - o
+        if not np.linalg.norm(f) > 0:
+            raise ValueError("camera position and look-at point coincide")
+        f /= np.linalg.norm(f)
+        r = np.cross(f, np.asarray(up, np.float64))
+        if np.linalg.norm(r) < 1e-6:  # looking straight along up: pick any perpendicular
+            r = np.cross(f, [1.0, 0.0, 0.0] if abs(f[0]) < 0.9 else [0.0, 1.0, 0.0])
+        r /= np.linalg.norm(r)
+        down = np.cross(f, r)
+        if not 0 < fov_deg < 179:
+            raise ValueError(f"field of view {fov_deg} degrees is outside (0, 179)")
+        tx = float(np.tan(np.radians(fov_deg) / 2))
+        ty = tx * height / width
+        return ViewBatch(o, (View(f, r, down, tx, ty, int(width), int(height)),), 2.0 * tx / width)

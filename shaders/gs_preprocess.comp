@@ -1,0 +1,77 @@
+#version 450
+// Per splat, once for all views of the batch: cull, whitening transform for the per-ray evaluation, SH colour
+// toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin).
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+layout(local_size_x = 256) in;
+layout(std430, binding = 0) readonly buffer PosOp { vec4 pos_op[]; };
+layout(std430, binding = 1) readonly buffer Scale { vec4 scale[]; };
+layout(std430, binding = 2) readonly buffer Rot { vec4 rot[]; };
+layout(std430, binding = 3) readonly buffer SH { float sh[]; };
+layout(std430, binding = 4) readonly buffer Views { View views[]; };
+layout(std430, binding = 5) writeonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = 6) writeonly buffer TileCount { uint tile_count[]; };
+layout(std430, binding = 7) writeonly buffer DepthKey { uint depth_key[]; };
+layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
+layout(push_constant) uniform P { vec3 origin; uint n; float pixel_angle; float near; uint sh_k; uint n_views; } p;
+
+const float C0 = 0.28209479177387814, C1 = 0.4886025119029199;
+
+vec3 sh_color(uint i, vec3 d) {
+    uint b = i * p.sh_k * 3u;
+    vec3 c = C0 * vec3(sh[b], sh[b + 1u], sh[b + 2u]);
+    if (p.sh_k > 1u) {
+        float x = d.x, y = d.y, z = d.z;
+        float basis[16];
+        basis[1] = -C1 * y; basis[2] = C1 * z; basis[3] = -C1 * x;
+        if (p.sh_k > 4u) {
+            float xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
+            basis[4] = 1.0925484305920792 * xy; basis[5] = -1.0925484305920792 * yz;
+            basis[6] = 0.31539156525252005 * (2.0 * zz - xx - yy); basis[7] = -1.0925484305920792 * xz;
+            basis[8] = 0.5462742152960396 * (xx - yy);
+            if (p.sh_k > 9u) {
+                basis[9] = -0.5900435899266435 * y * (3.0 * xx - yy); basis[10] = 2.890611442640554 * xy * z;
+                basis[11] = -0.4570457994644658 * y * (4.0 * zz - xx - yy);
+                basis[12] = 0.3731763325901154 * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+                basis[13] = -0.4570457994644658 * x * (4.0 * zz - xx - yy);
+                basis[14] = 1.445305721320277 * z * (xx - yy); basis[15] = -0.5900435899266435 * x * (xx - 3.0 * yy);
+            }
+        }
+        for (uint k = 1u; k < p.sh_k; ++k) {
+            uint o = b + 3u * k;
+            c += basis[k] * vec3(sh[o], sh[o + 1u], sh[o + 2u]);
+        }
+    }
+    return max(c + 0.5, vec3(0.0));
+}
+
+void main() {
+    uint i = linear_group() * 256u + gl_LocalInvocationID.x;
+    if (i >= p.n) return;
+    depth_val[i] = i;
+    depth_key[i] = 0xFFFFFFFFu;
+    tile_count[i] = 0u;
+    vec4 po = pos_op[i];
+    vec3 mu = po.xyz - p.origin;
+    float dist = length(mu);
+    float cutoff = 2.0 * log(255.0 * po.w);
+    if (!(dist > p.near) || !(cutoff > 0.0)) return;
+    mat3 R = quat_to_mat(rot[i]);
+    vec3 s2 = dilated_scale2(scale[i].xyz, dist, p.pixel_angle);
+    mat3 cov = cut_covariance(R, s2, cutoff);
+    uint count = 0u;
+    for (uint v = 0u; v < p.n_views; ++v) {
+        uvec4 rc;
+        if (view_rect(views[v], mu, cov, rc)) count += (rc.z - rc.x) * (rc.w - rc.y);
+    }
+    if (count == 0u) return;
+    vec3 inv = inversesqrt(s2);
+    vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
+    vec3 ol = -vec3(dot(w0, mu), dot(w1, mu), dot(w2, mu));
+    prepared[4u * i + 0u] = vec4(w0, ol.x);
+    prepared[4u * i + 1u] = vec4(w1, ol.y);
+    prepared[4u * i + 2u] = vec4(w2, ol.z);
+    prepared[4u * i + 3u] = vec4(sh_color(i, mu / dist), po.w);
+    tile_count[i] = count;
+    depth_key[i] = floatBitsToUint(dist);
+}

@@ -1,0 +1,66 @@
+#version 450
+// One workgroup per 16x16 tile of any view: front-to-back compositing of the tile's splats, each evaluated along
+// the pixel's ray, in batches staged through shared memory; stops when every pixel of the tile is opaque.
+#extension GL_GOOGLE_include_directive : require
+#include "splat_common.glsl"
+layout(local_size_x = 16, local_size_y = 16) in;
+layout(std430, binding = 0) readonly buffer Views { View views[]; };
+layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
+layout(std430, binding = 2) readonly buffer InstVal { uint inst_val[]; };
+layout(std430, binding = 3) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };
+layout(push_constant) uniform P { uint n_views; uint total_tiles; } p;
+
+const float ALPHA_MIN = 1.0 / 255.0, ALPHA_MAX = 0.99, T_MIN = 1e-4;
+shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
+shared uint s_done;
+
+void main() {
+    uint g = linear_group();
+    if (g >= p.total_tiles) return;  // uniform per workgroup
+    uint v = 0u;
+    for (uint k = 1u; k < p.n_views; ++k) if (g >= views[k].dims.w) v = k;
+    View vw = views[v];
+    uint local_tile = g - vw.dims.w;
+    uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
+    uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
+    bool inside = px < vw.dims.x && py < vw.dims.y;
+    float s = ((float(px) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w;
+    float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
+    vec3 d = vw.fwd.xyz + s * vw.right_tanx.xyz + t * vw.down_tany.xyz;
+
+    uvec2 range = ranges[g];
+    uint lid = gl_LocalInvocationIndex;
+    bool done = !inside;
+    vec3 color = vec3(0.0);
+    float T = 1.0;
+    for (uint start = range.x; start < range.y; start += 256u) {
+        barrier();
+        if (lid == 0u) s_done = 0u;
+        barrier();
+        if (done) atomicAdd(s_done, 1u);
+        uint j = start + lid;
+        if (j < range.y) {
+            uint i = inst_val[j];
+            s_w0[lid] = prepared[4u * i]; s_w1[lid] = prepared[4u * i + 1u];
+            s_w2[lid] = prepared[4u * i + 2u]; s_col[lid] = prepared[4u * i + 3u];
+        }
+        barrier();
+        if (s_done == 256u) break;
+        uint batch = min(256u, range.y - start);
+        for (uint k = 0u; k < batch && !done; ++k) {
+            vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
+            vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
+            if (dot(ol, dl) >= 0.0) continue;  // the closest approach lies behind the origin
+            vec3 cr = cross(ol, dl);
+            float m = dot(cr, cr) / dot(dl, dl);
+            float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
+            if (alpha < ALPHA_MIN) continue;
+            float test_T = T * (1.0 - alpha);
+            if (test_T < T_MIN) { done = true; break; }
+            color += T * alpha * s_col[k].rgb;
+            T = test_T;
+        }
+    }
+    if (inside) image[vw.extra.x + py * vw.dims.x + px] = vec4(color, 1.0 - T);
+}

@@ -1,0 +1,63 @@
+// Splat maths shared by preprocess and emit; mirrors gs_ibl_addon/core/render/splat_math.py.
+#include "common.glsl"
+
+struct View {
+    vec4 right_tanx;   // right (xyz), tan of the half width
+    vec4 down_tany;    // down (xyz), tan of the half height
+    vec4 fwd;          // forward (xyz)
+    uvec4 dims;        // width, height, tiles_x, first tile of this view in the batch
+    uvec4 extra;       // first pixel of this view in the output, tiles_y
+};
+
+const uint TILE = 16u;
+const float DILATION_PX2 = 0.3;
+
+mat3 quat_to_mat(vec4 q) {  // q = (w, x, y, z), unit; returns columns
+    float w = q.x, x = q.y, y = q.z, z = q.w;
+    return mat3(
+        1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y),
+        2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x),
+        2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y));
+}
+
+// Squared dilated scales: 3DGS's 0.3 px^2 screen-space low-pass, as a 3D isotropic variance at this distance.
+vec3 dilated_scale2(vec3 s, float dist, float pixel_angle) {
+    float d = pixel_angle * dist;
+    return s * s + vec3(DILATION_PX2 * d * d);
+}
+
+// Tiles of view v touched by the ellipsoid {x : (x - mu)^T cov^-1 (x - mu) <= 1} (mu relative to the origin).
+// Tight bounds from the tangent planes through the origin (the projected quadric); the whole view when the
+// ellipsoid straddles the plane through the origin facing the view. Returns false when it touches no tile.
+bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
+    vec3 f = v.fwd.xyz;
+    vec3 cf = cov * f;
+    float z = dot(f, mu);
+    float ff = dot(f, cf);
+    if (z + sqrt(max(ff, 0.0)) <= 0.0) return false;
+    uint tx = v.dims.z, ty = v.extra.y;
+    float a = ff - z * z;
+    if (a >= -1e-6 * z * z) { rect = uvec4(0u, 0u, tx, ty); return true; }
+    vec3 r = v.right_tanx.xyz, dn = v.down_tany.xyz;
+    float x = dot(r, mu), y = dot(dn, mu);
+    float bx = dot(r, cf) - x * z, cx = dot(r, cov * r) - x * x;
+    float by = dot(dn, cf) - y * z, cy = dot(dn, cov * dn) - y * y;
+    float sx = sqrt(max(bx * bx - a * cx, 0.0)), sy = sqrt(max(by * by - a * cy, 0.0));
+    // a < 0: the roots (b -+ sqrt(disc)) / a are the two tangent slopes, smaller first.
+    vec2 ux = vec2(bx + sx, bx - sx) / a, uy = vec2(by + sy, by - sy) / a;
+    float w = float(v.dims.x), h = float(v.dims.y);
+    float px0 = (ux.x / v.right_tanx.w + 1.0) * 0.5 * w - 0.5, px1 = (ux.y / v.right_tanx.w + 1.0) * 0.5 * w + 0.5;
+    float py0 = (uy.x / v.down_tany.w + 1.0) * 0.5 * h - 0.5, py1 = (uy.y / v.down_tany.w + 1.0) * 0.5 * h + 0.5;
+    if (px1 < 0.0 || py1 < 0.0 || px0 > w || py0 > h) return false;
+    uint x0 = uint(max(px0, 0.0)) / TILE, y0 = uint(max(py0, 0.0)) / TILE;
+    uint x1 = min(uint(min(px1, w)) / TILE + 1u, tx), y1 = min(uint(min(py1, h)) / TILE + 1u, ty);
+    if (x0 >= x1 || y0 >= y1) return false;
+    rect = uvec4(x0, y0, x1, y1);
+    return true;
+}
+
+// The ellipsoid beyond which the splat's alpha falls below 1/255: cutoff * Sigma'.
+mat3 cut_covariance(mat3 rot, vec3 s2, float cutoff) {
+    mat3 rs = mat3(rot[0] * s2.x, rot[1] * s2.y, rot[2] * s2.z);
+    return cutoff * (rs * transpose(rot));
+}
