@@ -36,9 +36,15 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
     float ff = dot(f, cf);
     if (z + sqrt(max(ff, 0.0)) <= 0.0) return false;
     uint tx = v.dims.z, ty = v.extra.y;
+    vec3 r = v.right_tanx.xyz, dn = v.down_tany.xyz;
+    // Outside one of the four side planes of the view's frustum (all through the origin): touches nothing.
+    vec3 planes[4] = vec3[4](v.right_tanx.w * f - r, v.right_tanx.w * f + r, v.down_tany.w * f - dn, v.down_tany.w * f + dn);
+    for (int k = 0; k < 4; ++k) {
+        vec3 n = planes[k];
+        if (dot(n, mu) + sqrt(max(dot(n, cov * n), 0.0)) < 0.0) return false;
+    }
     float a = ff - z * z;
     if (a >= -1e-6 * z * z) { rect = uvec4(0u, 0u, tx, ty); return true; }
-    vec3 r = v.right_tanx.xyz, dn = v.down_tany.xyz;
     float x = dot(r, mu), y = dot(dn, mu);
     float bx = dot(r, cf) - x * z, cx = dot(r, cov * r) - x * x;
     float by = dot(dn, cf) - y * z, cy = dot(dn, cov * dn) - y * y;

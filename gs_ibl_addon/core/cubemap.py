@@ -93,3 +93,42 @@ def direction_to_latlong(dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     u = (0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2.0 * np.pi)) % 1.0
     v = np.arccos(np.clip(d[..., 2], -1.0, 1.0)) / np.pi
     return u, v
+
+
+def edge_neighbours(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every border texel of every face, its neighbour across the cube edge, and its neighbour inward.
+
+    Returns three (M, 3) int arrays of (face, row, column). Comparing the first pair measures a seam; the
+    second pair is the same step inside a face, the yardstick for what a seam-free difference looks like.
+    """
+    n = size
+    idx = np.arange(n)
+    sides = [  # (rows, cols, inward step (drow, dcol))
+        (np.zeros(n, int), idx, (1, 0)), (np.full(n, n - 1), idx, (-1, 0)),
+        (idx, np.zeros(n, int), (0, 1)), (idx, np.full(n, n - 1), (0, -1)),
+    ]
+    s, t = face_st(n)
+    edge, across, inward = [], [], []
+    for face in range(6):
+        f, r, d = FACE_BASES[face]
+        for rows, cols, (dr, dc) in sides:
+            ss, tt = s[rows, cols], t[rows, cols]
+            # one texel outward, beyond the face's edge
+            so, to = ss - dc * 2.0 / n, tt - dr * 2.0 / n
+            dirs = f[None] + so[:, None] * r[None] + to[:, None] * d[None]
+            fa, sa, ta = direction_to_face(dirs)
+            ia = np.clip(((sa + 1) * 0.5 * n).astype(int), 0, n - 1)
+            ja = np.clip(((ta + 1) * 0.5 * n).astype(int), 0, n - 1)
+            edge.append(np.stack([np.full(n, face), rows, cols], 1))
+            across.append(np.stack([fa, ja, ia], 1))
+            inward.append(np.stack([np.full(n, face), rows + dr, cols + dc], 1))
+    return np.concatenate(edge), np.concatenate(across), np.concatenate(inward)
+
+
+def seam_ratio(cube: np.ndarray) -> float:
+    """Mean colour step across cube edges over the mean step one texel inward: about 1 without seams."""
+    e, a, i = edge_neighbours(cube.shape[1])
+    rgb = cube[..., :3]
+    across = np.abs(rgb[e[:, 0], e[:, 1], e[:, 2]] - rgb[a[:, 0], a[:, 1], a[:, 2]]).mean()
+    inward = np.abs(rgb[e[:, 0], e[:, 1], e[:, 2]] - rgb[i[:, 0], i[:, 1], i[:, 2]]).mean()
+    return float(across / max(inward, 1e-12))
