@@ -1,0 +1,120 @@
+"""File > Import > Gaussian Splatting, and drag-and-drop of splat files into the viewport."""
+from __future__ import annotations
+
+import os
+
+import bpy
+import numpy as np
+from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, StringProperty
+from bpy_extras.io_utils import ImportHelper, axis_conversion
+
+from ..core.formats import EXTENSIONS, SplatFormatError, read_scene
+from .splat_object import create_splat_object
+
+_AXES = [(a, a, "") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
+
+# preset -> (forward, up) of the file, in Blender's importer terms (Blender itself: forward Y, up Z).
+AXIS_PRESETS = {
+    "OPENCV": ("Z", "-Y"),  # 3DGS/COLMAP training output: x right, y down, z forward
+    "OPENGL": ("-Z", "Y"),  # y up, looking down -z (glTF, three.js, many web viewers)
+    "BLENDER": ("Y", "Z"),  # already Z up: no rotation
+}
+_FILTER = ";".join("*" + e for e in EXTENSIONS)
+
+
+def import_matrix(preset: str, forward: str, up: str, scale: float) -> np.ndarray:
+    """Object matrix that turns file coordinates into Blender's (Z up), times a uniform scale."""
+    if preset != "CUSTOM":
+        forward, up = AXIS_PRESETS[preset]
+    m = np.identity(4)
+    m[:3, :3] = np.array(axis_conversion(from_forward=forward, from_up=up).to_3x3()) * scale
+    return m
+
+
+class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
+    """Import a 3D Gaussian Splatting file as a splat object (stored in the .blend)"""
+    bl_idname = "gs_ibl.import_splats"
+    bl_label = "Import Gaussian Splatting"
+    bl_options = {"REGISTER", "UNDO", "PRESET"}
+
+    filename_ext = ".ply"
+    filter_glob: StringProperty(default=_FILTER, options={"HIDDEN"})
+    files: CollectionProperty(type=bpy.types.OperatorFileListElement, options={"HIDDEN", "SKIP_SAVE"})
+    directory: StringProperty(subtype="DIR_PATH", options={"HIDDEN", "SKIP_SAVE"})
+
+    axis_preset: EnumProperty(
+        name="Orientation",
+        items=[("OPENCV", "3DGS / OpenCV (Y down, Z forward)",
+                "Training output of 3DGS and COLMAP: rotates the scene so the file's -Y is Blender's up (+Z)"),
+               ("OPENGL", "OpenGL (Y up, -Z forward)", "Y-up files: the file's +Y becomes Blender's +Z"),
+               ("BLENDER", "Blender (Z up)", "No rotation"),
+               ("CUSTOM", "Custom", "Choose the file's forward and up axes")],
+        default="OPENCV")
+    axis_forward: EnumProperty(name="Forward", items=_AXES, default="Z")
+    axis_up: EnumProperty(name="Up", items=_AXES, default="-Y")
+    global_scale: FloatProperty(name="Scale", default=1.0, min=1e-4, max=1e4, soft_min=0.01, soft_max=100.0)
+    show_proxy: BoolProperty(name="Point Proxy", default=True,
+                             description="Show a random subset of the splats as coloured points in the viewport")
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(self, "axis_preset")
+        if self.axis_preset == "CUSTOM":
+            layout.prop(self, "axis_forward")
+            layout.prop(self, "axis_up")
+        layout.prop(self, "global_scale")
+        layout.prop(self, "show_proxy")
+
+    def _paths(self) -> list[str]:
+        names = [f.name for f in self.files if f.name]
+        if names and self.directory:
+            return [os.path.join(self.directory, n) for n in names]
+        return [self.filepath]
+
+    def execute(self, context):
+        if self.axis_preset == "CUSTOM" and self.axis_forward.lstrip("-") == self.axis_up.lstrip("-"):
+            self.report({"ERROR"}, "Forward and Up must be different axes")
+            return {"CANCELLED"}
+        matrix = import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale)
+        # Read everything first: a bad file cancels the whole import before anything is created.
+        scenes = []
+        for path in self._paths():
+            try:
+                scenes.append((path, read_scene(path)))
+            except (SplatFormatError, ValueError, OSError) as e:
+                self.report({"ERROR"}, str(e))
+                return {"CANCELLED"}
+        for path, scene in scenes:
+            name = os.path.splitext(os.path.basename(path))[0] or "Splats"
+            obj = create_splat_object(context, scene, name, matrix, proxy=self.show_proxy)
+            repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
+            self.report({"INFO"}, f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r}"
+                        + (f"; repaired {repaired}" if repaired else ""))
+        return {"FINISHED"}
+
+    def invoke(self, context, event):
+        if self.filepath or (self.directory and len(self.files)):
+            # Dropped on the viewport: the file is known, ask only for the options.
+            return self.invoke_popup(context)
+        return ImportHelper.invoke(self, context, event)
+
+
+class GSIBL_FH_splats(bpy.types.FileHandler):
+    bl_idname = "GSIBL_FH_splats"
+    bl_label = "Gaussian Splatting"
+    bl_import_operator = GSIBL_OT_import_splats.bl_idname
+    bl_file_extensions = ";".join(EXTENSIONS)
+
+    @classmethod
+    def poll_drop(cls, context):
+        return context.area is not None and context.area.type in {"VIEW_3D", "OUTLINER"}
+
+
+def menu_import(self, context):
+    self.layout.operator(GSIBL_OT_import_splats.bl_idname, text="Gaussian Splatting (" +
+                         ", ".join(EXTENSIONS) + ")")
+
+
+CLASSES = (GSIBL_OT_import_splats, GSIBL_FH_splats)
+MENUS = ((bpy.types.TOPBAR_MT_file_import, menu_import),)

@@ -1,0 +1,184 @@
+"""The splat object: a mesh of loose vertices that carries every splat, saved inside the .blend.
+
+One vertex per splat (its position); the other activated SplatScene fields are point-domain attributes:
+  gs_scale (FLOAT_VECTOR), gs_rotation (QUATERNION, w x y z), gs_opacity (FLOAT), gs_sh_00 .. gs_sh_NN
+  (FLOAT_VECTOR, one per SH coefficient, RGB) and gs_color (FLOAT_COLOR: the DC colour + opacity, for display).
+The object's matrix_world is the splats' transform (import axis conversion included), so moving the object
+moves the light. Deleting vertices in Edit Mode crops the splats: every attribute stays per vertex.
+
+Loose vertices are not drawn in Object Mode, so a Geometry Nodes modifier shows a random subset of them as
+points (at most PROXY_POINTS) with their colour; very large scenes also switch to bounds display.
+The object never renders (hide_render): its light reaches meshes through the baked probe, not as geometry.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+from mathutils import Matrix
+
+from ..core.scene import SH_C0, SplatScene
+
+MARKER = "gs_ibl"  # object custom property: {"source": path, "sh_degree": d, "version": 1}
+PROXY_TREE = "GS-IBL Splat Proxy"
+PROXY_MATERIAL = "GS-IBL Splat Colour"
+PROXY_MODIFIER = "GS-IBL Proxy"
+PROXY_POINTS = 200_000  # points drawn at most; the data keeps every splat
+BOUNDS_ABOVE = 5_000_000  # above this many splats the object shows as its bounds box
+
+_SH_NAME = "gs_sh_{:02d}"
+
+
+def is_splat_object(obj: bpy.types.Object | None) -> bool:
+    return obj is not None and obj.type == "MESH" and MARKER in obj.keys()
+
+
+def _new_attr(mesh: bpy.types.Mesh, name: str, kind: str, field: str, values: np.ndarray) -> None:
+    attr = mesh.attributes.new(name, kind, "POINT")
+    attr.data.foreach_set(field, np.ascontiguousarray(values, np.float32).ravel())
+
+
+def _fill_mesh(mesh: bpy.types.Mesh, scene: SplatScene) -> None:
+    n = scene.count
+    mesh.vertices.add(n)
+    mesh.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(scene.positions, np.float32).ravel())
+    _new_attr(mesh, "gs_scale", "FLOAT_VECTOR", "vector", scene.scales)
+    _new_attr(mesh, "gs_rotation", "QUATERNION", "value", scene.rotations)
+    _new_attr(mesh, "gs_opacity", "FLOAT", "value", scene.opacities)
+    for k in range(scene.sh.shape[1]):
+        _new_attr(mesh, _SH_NAME.format(k), "FLOAT_VECTOR", "vector", scene.sh[:, k])
+    rgba = np.empty((n, 4), np.float32)
+    rgba[:, :3] = np.maximum(SH_C0 * scene.sh[:, 0] + 0.5, 0.0)
+    rgba[:, 3] = scene.opacities
+    _new_attr(mesh, "gs_color", "FLOAT_COLOR", "color", rgba)
+    mesh.color_attributes.active_color = mesh.color_attributes["gs_color"]
+    mesh.update()
+
+
+def _proxy_material() -> bpy.types.Material:
+    mat = bpy.data.materials.get(PROXY_MATERIAL)
+    if mat is not None and mat.get(MARKER):
+        return mat
+    mat = bpy.data.materials.new(PROXY_MATERIAL)
+    mat[MARKER] = 1
+    if mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    attr = nt.nodes.new("ShaderNodeAttribute")
+    attr.attribute_name = "gs_color"
+    emit = nt.nodes.new("ShaderNodeEmission")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(attr.outputs["Color"], emit.inputs["Color"])
+    nt.links.new(emit.outputs["Emission"], out.inputs["Surface"])
+    return mat
+
+
+def _proxy_tree() -> bpy.types.NodeTree:
+    """Geometry Nodes: a random fraction of the vertices as coloured points (display only)."""
+    tree = bpy.data.node_groups.get(PROXY_TREE)
+    if tree is not None and tree.get(MARKER):
+        return tree
+    tree = bpy.data.node_groups.new(PROXY_TREE, "GeometryNodeTree")
+    tree[MARKER] = 1
+    iface = tree.interface
+    iface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    frac = iface.new_socket("Fraction", in_out="INPUT", socket_type="NodeSocketFloat")
+    frac.default_value, frac.min_value, frac.max_value = 1.0, 0.0, 1.0
+    rad = iface.new_socket("Radius", in_out="INPUT", socket_type="NodeSocketFloat")
+    rad.default_value, rad.min_value = 0.01, 0.0
+    iface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    n = tree.nodes
+    gin, gout = n.new("NodeGroupInput"), n.new("NodeGroupOutput")
+    rnd = n.new("FunctionNodeRandomValue")
+    rnd.data_type = "BOOLEAN"
+    pts = n.new("GeometryNodeMeshToPoints")
+    setmat = n.new("GeometryNodeSetMaterial")
+    setmat.inputs["Material"].default_value = _proxy_material()
+    L = tree.links
+    L.new(gin.outputs["Fraction"], rnd.inputs["Probability"])
+    L.new(gin.outputs["Geometry"], pts.inputs["Mesh"])
+    L.new(rnd.outputs[3], pts.inputs["Selection"])  # the BOOLEAN output
+    L.new(gin.outputs["Radius"], pts.inputs["Radius"])
+    L.new(pts.outputs["Points"], setmat.inputs["Geometry"])
+    L.new(setmat.outputs["Geometry"], gout.inputs[0])
+    return tree
+
+
+def _add_proxy(obj: bpy.types.Object, scene: SplatScene) -> None:
+    tree = _proxy_tree()
+    mod = obj.modifiers.new(PROXY_MODIFIER, "NODES")
+    mod.node_group = tree
+    ids = {item.name: item.identifier for item in tree.interface.items_tree if item.item_type == "SOCKET"
+           and item.in_out == "INPUT"}
+    mod[ids["Fraction"]] = float(min(1.0, PROXY_POINTS / max(scene.count, 1)))
+    radius = float(np.median(scene.scales.mean(1))) if scene.count else 0.01
+    mod[ids["Radius"]] = max(radius, 1e-4)
+    if scene.count > BOUNDS_ABOVE:
+        obj.display_type = "BOUNDS"
+
+
+def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str,
+                        matrix: np.ndarray | None = None, proxy: bool = True) -> bpy.types.Object:
+    """A new splat object holding ``scene``, linked to the active collection, selected and active.
+
+    On any failure every datablock made here is removed again, so the file is as it was.
+    """
+    mesh = bpy.data.meshes.new(name)
+    obj = None
+    try:
+        _fill_mesh(mesh, scene)
+        obj = bpy.data.objects.new(name, mesh)
+        obj[MARKER] = {"source": scene.source, "sh_degree": scene.sh_degree, "version": 1}
+        if matrix is not None:
+            # a Matrix, not nested lists: RNA would read nested lists column-major (transposed)
+            obj.matrix_world = Matrix([list(r) for r in np.asarray(matrix, np.float64)])
+        obj.hide_render = True
+        if proxy:
+            _add_proxy(obj, scene)
+        context.collection.objects.link(obj)
+    except BaseException:
+        if obj is not None:
+            bpy.data.objects.remove(obj)
+        bpy.data.meshes.remove(mesh)
+        raise
+    for o in context.view_layer.objects.selected:
+        o.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+    return obj
+
+
+def _get_attr(mesh: bpy.types.Mesh, name: str, field: str, width: int) -> np.ndarray:
+    attr = mesh.attributes.get(name)
+    if attr is None:
+        raise ValueError(f"splat object {mesh.name!r} lacks attribute {name!r}: re-import the splat file")
+    n = len(mesh.vertices)
+    out = np.empty(n * width, np.float32)
+    attr.data.foreach_get(field, out)
+    return out.reshape((n, width)) if width > 1 else out
+
+
+def scene_from_mesh(mesh: bpy.types.Mesh, source: str = "<blender>") -> SplatScene:
+    """The splats as stored, in the object's local space."""
+    n = len(mesh.vertices)
+    pos = np.empty(n * 3, np.float32)
+    mesh.attributes["position"].data.foreach_get("vector", pos)
+    k = 0
+    while mesh.attributes.get(_SH_NAME.format(k)) is not None:
+        k += 1
+    if k not in (1, 4, 9, 16):
+        raise ValueError(f"splat object {mesh.name!r} has {k} SH attributes (expected 1, 4, 9 or 16): re-import it")
+    sh = np.stack([_get_attr(mesh, _SH_NAME.format(i), "vector", 3) for i in range(k)], 1)
+    return SplatScene(pos.reshape(n, 3), _get_attr(mesh, "gs_scale", "vector", 3),
+                      _get_attr(mesh, "gs_rotation", "value", 4), _get_attr(mesh, "gs_opacity", "value", 1), sh,
+                      source=source)
+
+
+def scene_from_object(obj: bpy.types.Object) -> SplatScene:
+    """The object's splats in Blender world space (its matrix_world applied): what a probe bake needs."""
+    if not is_splat_object(obj):
+        raise ValueError(f"{obj.name if obj else None!r} is not a GS-IBL splat object (import a splat file first)")
+    info = obj[MARKER]
+    source = str(info.get("source", obj.name)) if hasattr(info, "get") else obj.name
+    local = scene_from_mesh(obj.data, source)
+    return local.transformed(np.array(obj.matrix_world, np.float64))

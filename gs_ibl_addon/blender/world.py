@@ -1,0 +1,262 @@
+"""Writing baked light into Blender: float lat-long images, the GS-IBL World, the irradiance node group.
+
+Never touches what the user made: our images, World and node group carry the custom property ``gs_ibl``
+(with a role) and are found by it, not by name; a user's datablock of the same name is left alone (ours then
+gets Blender's .001 suffix). scene.world changes only through use_world(), which remembers the World it
+replaces so restore_world() can put it back.
+
+Lat-long images follow core/cubemap.py (Blender's equirectangular mapping, top row = +Z); Blender stores
+image rows bottom-up, so rows are flipped on the way in.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import bpy
+import numpy as np
+
+MARKER = "gs_ibl"
+WORLD_NAME = "GS-IBL World"
+IRRADIANCE_GROUP = "GS-IBL Irradiance"
+PREVIOUS_WORLD = "gs_ibl_previous_world"  # scene custom property: the World use_world() replaced
+
+
+def _ours(collection, role: str):
+    for idb in collection:
+        if idb.get(MARKER) == role and idb.library is None:
+            return idb
+    return None
+
+
+# ---------------------------------------------------------------------------------------------- images
+
+def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: bool = True,
+                  save_dir: str | None = None) -> bpy.types.Image:
+    """Create or update our float image for ``role`` ("radiance", "irradiance", ...) from (H, W, 3) linear RGB.
+
+    pack=True keeps it inside the .blend (as OpenEXR); otherwise it is saved as an EXR in save_dir
+    (default: next to the .blend, which must then be saved).
+    """
+    px = np.asarray(pixels, np.float32)
+    if px.ndim != 3 or px.shape[2] not in (3, 4) or px.shape[1] != 2 * px.shape[0]:
+        raise ValueError(f"lat-long image must be (H, 2H, 3) float, got {px.shape}")
+    if not np.isfinite(px).all():
+        raise ValueError(f"lat-long image for {role!r} contains NaN or infinite values")
+    h, w = px.shape[:2]
+    img = _ours(bpy.data.images, role)
+    if pack:
+        if img is not None and (img.source != "GENERATED" or tuple(img.size) != (w, h) or not img.is_float):
+            bpy.data.images.remove(img)
+            img = None
+        if img is None:
+            img = bpy.data.images.new(name or f"GS-IBL {role.capitalize()}", w, h, alpha=False, float_buffer=True)
+            img[MARKER] = role
+        rgba = np.ones((h, w, 4), np.float32)
+        rgba[..., :3] = px[::-1, :, :3]  # Blender stores the bottom row first
+        img.pixels.foreach_set(rgba.ravel())
+        img.file_format = "OPEN_EXR"  # packs as a float EXR, not an 8-bit PNG
+        img.pack()
+    else:
+        folder = save_dir or (bpy.path.abspath("//") if bpy.data.filepath else None)
+        if not folder:
+            raise ValueError("save the .blend first (baked images are written next to it), or pack the images")
+        from ..core.image_io import write_exr
+        base = bpy.path.clean_name(img.name if img is not None else (name or f"GS-IBL {role.capitalize()}"))
+        path = os.path.join(folder, base + ".exr")
+        write_exr(path, px[..., :3])  # 32-bit float (Image.save would write half floats)
+        if img is None:
+            img = bpy.data.images.load(path, check_existing=False)
+            img.name = name or f"GS-IBL {role.capitalize()}"
+            img[MARKER] = role
+        else:
+            if img.packed_file is not None:
+                img.unpack(method="REMOVE")
+            img.source = "FILE"
+            img.filepath = bpy.path.relpath(path) if bpy.data.filepath else path
+            img.reload()
+    img.update()
+    return img
+
+
+def image_latlong_pixels(img: bpy.types.Image) -> np.ndarray:
+    """Inverse of latlong_image: (H, W, 3) float, top row first."""
+    w, h = img.size
+    buf = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(buf)
+    return buf.reshape(h, w, 4)[::-1, :, :3].copy()
+
+
+# ---------------------------------------------------------------------------------------------- World
+
+def _background_output(world: bpy.types.World):
+    """(World Output node, the socket that feeds its Surface) of a node World, or (None, None)."""
+    nt = world.node_tree
+    if nt is None:
+        return None, None
+    outs = [n for n in nt.nodes if n.bl_idname == "ShaderNodeOutputWorld"]
+    out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+    if out is None or not out.inputs["Surface"].links:
+        return out, None
+    return out, out.inputs["Surface"].links[0].from_socket
+
+
+def build_world(radiance: bpy.types.Image, strength: float = 1.0, keep_background: bool = False,
+                background_from: bpy.types.World | None = None) -> bpy.types.World:
+    """Our World lit by ``radiance``; rebuilt in place of an earlier GS-IBL World (its users follow).
+
+    keep_background: camera rays see ``background_from`` (a copy of its nodes, or its colour) instead of
+    the probe, so the rendered backdrop stays as the user had it while everything else is lit by the probe.
+    """
+    old = _ours(bpy.data.worlds, "world")
+    if keep_background and background_from is not None and background_from.get(MARKER) != "world":
+        world = background_from.copy()  # the user's World stays as it is; we edit the copy
+    else:
+        world = bpy.data.worlds.new(WORLD_NAME)
+        if background_from is not None:
+            world.color = background_from.color
+    world[MARKER] = "world"
+    if world.node_tree is None:  # before Blender 5 a new World has no node tree until use_nodes is set
+        world.use_nodes = True
+    nt = world.node_tree
+    out, prev_shader = _background_output(world)
+    if out is None:
+        out = nt.nodes.new("ShaderNodeOutputWorld")
+    if not keep_background:
+        for n in list(nt.nodes):
+            if n != out:
+                nt.nodes.remove(n)
+        prev_shader = None
+    elif prev_shader is None:  # a World without nodes feeding the output: use its colour
+        bg_prev = nt.nodes.new("ShaderNodeBackground")
+        bg_prev.inputs["Color"].default_value = (*world.color, 1.0)
+        prev_shader = bg_prev.outputs["Background"]
+    env = nt.nodes.new("ShaderNodeTexEnvironment")
+    env.name = env.label = "GS-IBL Radiance"
+    env.image = radiance
+    env.interpolation = "Linear"
+    env.projection = "EQUIRECTANGULAR"
+    bg = nt.nodes.new("ShaderNodeBackground")
+    bg.name = bg.label = "GS-IBL Strength"
+    bg.inputs["Strength"].default_value = strength
+    nt.links.new(env.outputs["Color"], bg.inputs["Color"])
+    env.location = out.location.x - 650, out.location.y - 300
+    bg.location = out.location.x - 350, out.location.y - 300
+    if keep_background:
+        path = nt.nodes.new("ShaderNodeLightPath")
+        mix = nt.nodes.new("ShaderNodeMixShader")
+        mix.name = mix.label = "GS-IBL Keep Background"
+        # Fac 0 -> first shader (probe light), Fac 1 -> second (what the camera saw before)
+        nt.links.new(path.outputs["Is Camera Ray"], mix.inputs["Fac"])
+        nt.links.new(bg.outputs["Background"], mix.inputs[1])
+        nt.links.new(prev_shader, mix.inputs[2])
+        nt.links.new(mix.outputs["Shader"], out.inputs["Surface"])
+        path.location, mix.location = (out.location.x - 350, out.location.y + 250), (out.location.x - 150, out.location.y)
+    else:
+        nt.links.new(bg.outputs["Background"], out.inputs["Surface"])
+    if old is not None and old != world:
+        old.user_remap(world)
+        bpy.data.worlds.remove(old)
+    world.name = WORLD_NAME
+    return world
+
+
+def set_world_strength(world: bpy.types.World, strength: float) -> None:
+    node = world.node_tree.nodes.get("GS-IBL Strength") if world.node_tree else None
+    if node is not None:
+        node.inputs["Strength"].default_value = strength
+
+
+def use_world(scene: bpy.types.Scene, world: bpy.types.World) -> None:
+    """Make ``world`` the scene's World, remembering the one it replaces (unless that is ours)."""
+    current = scene.world
+    if current is not None and current != world and current.get(MARKER) != "world":
+        scene[PREVIOUS_WORLD] = current
+    scene.world = world
+
+
+def restore_world(scene: bpy.types.Scene) -> bool:
+    """Put back the World that use_world() replaced; False if there is none to restore."""
+    prev = scene.get(PREVIOUS_WORLD)
+    if not isinstance(prev, bpy.types.World):
+        return False
+    scene.world = prev
+    del scene[PREVIOUS_WORLD]
+    return True
+
+
+# ---------------------------------------------------------------------------------------------- node group
+
+def irradiance_group(image: bpy.types.Image) -> bpy.types.ShaderNodeTree:
+    """Shader node group: our irradiance lat-long looked up along the world-space shading normal.
+
+    Outputs "Irradiance" (E(n)/pi times Strength: a white Lambertian surface's outgoing radiance) and
+    "Diffuse" (an Emission shader of Albedo x Irradiance: the thesis's fast diffuse path, no ray tracing).
+    The lookup is the one of core/cubemap.py written in math nodes:
+    u = 0.5 - atan2(y, x) / 2pi,  v (bottom-up) = 1 - acos(z) / pi.
+    """
+    tree = _ours(bpy.data.node_groups, "irradiance")
+    if tree is None:
+        tree = bpy.data.node_groups.new(IRRADIANCE_GROUP, "ShaderNodeTree")
+        tree[MARKER] = "irradiance"
+        _build_irradiance_tree(tree)
+    tree.nodes["GS-IBL Irradiance Image"].image = image
+    return tree
+
+
+def _build_irradiance_tree(tree: bpy.types.ShaderNodeTree) -> None:
+    iface = tree.interface
+    alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    alb.default_value = (0.8, 0.8, 0.8, 1.0)
+    st = iface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
+    st.default_value, st.min_value = 1.0, 0.0
+    iface.new_socket("Diffuse", in_out="OUTPUT", socket_type="NodeSocketShader")
+    iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketColor")
+    N, L = tree.nodes, tree.links
+    gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
+    geo = N.new("ShaderNodeNewGeometry")
+    sep = N.new("ShaderNodeSeparateXYZ")
+    L.new(geo.outputs["Normal"], sep.inputs[0])
+
+    def op(name, a, b=None, x=0):
+        m = N.new("ShaderNodeMath")
+        m.operation = name
+        m.location = (x, 0)
+        for i, v in enumerate((a, b)):
+            if v is None:
+                continue
+            if isinstance(v, (int, float)):
+                m.inputs[i].default_value = v
+            else:
+                L.new(v, m.inputs[i])
+        return m.outputs[0]
+
+    az = op("ARCTAN2", sep.outputs["Y"], sep.outputs["X"])  # atan2(A, B)
+    u = op("MULTIPLY_ADD", az, -1.0 / (2.0 * math.pi), x=200)
+    u.node.inputs[2].default_value = 0.5
+    zc = op("MINIMUM", op("MAXIMUM", sep.outputs["Z"], -1.0), 1.0)
+    polar = op("ARCCOSINE", zc)
+    v = op("MULTIPLY_ADD", polar, -1.0 / math.pi, x=200)
+    v.node.inputs[2].default_value = 1.0
+    comb = N.new("ShaderNodeCombineXYZ")
+    L.new(u, comb.inputs["X"])
+    L.new(v, comb.inputs["Y"])
+    tex = N.new("ShaderNodeTexImage")
+    tex.name = tex.label = "GS-IBL Irradiance Image"
+    tex.interpolation = "Linear"
+    tex.extension = "REPEAT"  # wraps the azimuth seam
+    L.new(comb.outputs[0], tex.inputs["Vector"])
+    scaled = N.new("ShaderNodeVectorMath")
+    scaled.operation = "SCALE"
+    L.new(tex.outputs["Color"], scaled.inputs[0])
+    L.new(gin.outputs["Strength"], scaled.inputs["Scale"])
+    diffuse = N.new("ShaderNodeVectorMath")
+    diffuse.operation = "MULTIPLY"
+    L.new(scaled.outputs[0], diffuse.inputs[0])
+    L.new(gin.outputs["Albedo"], diffuse.inputs[1])
+    emit = N.new("ShaderNodeEmission")
+    L.new(diffuse.outputs[0], emit.inputs["Color"])
+    L.new(emit.outputs[0], gout.inputs["Diffuse"])
+    L.new(scaled.outputs[0], gout.inputs["Irradiance"])
+    gout.location = (1400, 0)
+

@@ -1,0 +1,279 @@
+"""The standard 3DGS PLY layout (as written by the INRIA reference trainer and most tools): read and write.
+
+Layout: one ``vertex`` element with float properties ``x y z``, optional ``nx ny nz`` (ignored),
+``f_dc_0..2``, ``f_rest_0..R-1`` with R in {0, 9, 24, 45} (SH degree 0-3), ``opacity``, ``scale_0..2``,
+``rot_0..3``. Extra properties are ignored; any numeric property type is accepted (cast to float32).
+Binary little/big-endian files are read through plyfile's header parser and memory-mapped in chunks (so a file
+of any size costs little more than the resulting arrays); ASCII files are read by plyfile in one go.
+
+f_rest is stored channel-major: ``f_rest_{c * (K-1) + (k-1)}`` is coefficient k of channel c, where K is the
+number of SH coefficients per channel; ``SplatScene.sh[:, k, c]`` holds it and ``sh[:, 0]`` is f_dc.
+
+Activation (what ``SplatScene`` holds): opacity = sigmoid(raw), scale = exp(raw), rotation = the quaternion
+``(rot_0, rot_1, rot_2, rot_3) = (w, x, y, z)`` divided by its length (computed in float64, rounded to float32).
+
+Errors (one ``SplatFormatError`` naming the file, the field and what to do; nothing is returned):
+  missing file; unreadable header (not a PLY); no ``vertex`` element; a mesh / point-cloud PLY (a ``face``
+  element, or none of the splat properties) ; missing or misspelt properties (the close name found is suggested);
+  a list property where a number is expected; an f_rest count other than 0, 9, 24, 45 or gaps in its numbering;
+  a truncated file (fewer bytes or lines than the header promises); zero splats; every splat non-finite.
+Repairs (done silently to the data, counted in ``scene.repairs``; a key is present only when its count is > 0):
+  ``dropped_nonfinite``  splats with NaN/inf in any field used (or whose exp(scale) overflows float32) are dropped;
+  ``clamped_scales``     splats with a scale below ``MIN_SCALE`` (exp(raw) zero or subnormal, where 1/scale^2 would
+                         overflow float32 in a renderer) get that axis clamped to ``MIN_SCALE``;
+  ``identity_rotations`` splats whose quaternion is exactly zero get the identity rotation.
+Unnormalised quaternions are not a repair: 3DGS always stores them unnormalised, and normalising is the activation.
+A quaternion that is already unit to float32 precision is kept bit-for-bit, and ``write_ply`` picks, per value,
+the float32 raw opacity/scale whose activation gives back exactly the scene's float32 value where one exists, so
+``read_ply(write_ply(read_ply(f)))`` equals ``read_ply(f)`` bit-for-bit.
+"""
+from __future__ import annotations
+
+import difflib
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+from plyfile import PlyData, PlyElement, PlyListProperty, PlyParseError
+
+from . import SplatFormatError
+from ..scene import SplatScene
+
+CHUNK_ROWS = 1 << 16  # splats converted per step: bounds temporaries to a few MB whatever the file size
+F_REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest properties -> SH degree
+
+_SPLAT_ONLY = ["f_dc_0", "f_dc_1", "f_dc_2", "opacity", "scale_0", "scale_1", "scale_2",
+               "rot_0", "rot_1", "rot_2", "rot_3"]
+_REQUIRED = ["x", "y", "z"] + _SPLAT_ONLY
+_F_REST = re.compile(r"f_rest_(\d+)$")
+_ADVICE = ("a 3DGS splat PLY needs the vertex properties x y z f_dc_0..2 opacity scale_0..2 rot_0..3 "
+           "(and optionally f_rest_*); re-export it from your 3DGS trainer or editor in the standard layout")
+
+
+@dataclass
+class _Layout:
+    """Where each activated quantity comes from: the property names in the order of a raw row."""
+    names: list[str]
+    k: int  # SH coefficients per channel
+
+    @classmethod
+    def standard(cls, degree: int) -> "_Layout":
+        k = (degree + 1) ** 2
+        rest = [f"f_rest_{i}" for i in range(3 * (k - 1))]
+        return cls(["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2", *rest, "opacity",
+                    "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"], k)
+
+    @property
+    def sh_end(self) -> int:
+        return 6 + 3 * (self.k - 1)
+
+
+# Activations, in float64 then rounded once to float32: the writer inverts exactly these functions.
+def _sigmoid32(raw: np.ndarray) -> np.ndarray:
+    with np.errstate(over="ignore"):
+        return (1.0 / (1.0 + np.exp(-np.asarray(raw, np.float64)))).astype(np.float32)
+
+
+def _exp32(raw: np.ndarray) -> np.ndarray:
+    with np.errstate(over="ignore"):
+        return np.exp(np.asarray(raw, np.float64)).astype(np.float32)
+
+
+# Below about 1e-12 an axis scale is degenerate: 1/scale^2 (the inverse covariance a renderer builds) nears float32
+# overflow. The clamp value is exp() of a float32 raw value, so that a written repaired scene reads back unchanged.
+MIN_SCALE = _exp32(np.float32(-27.6))
+
+
+def _fail(path: str, message: str) -> SplatFormatError:
+    return SplatFormatError(f"{path}: {message}")
+
+
+def _check_header(path: str, ply: PlyData) -> tuple[PlyElement, _Layout]:
+    names = [e.name for e in ply.elements]
+    if "vertex" not in names:
+        raise _fail(path, f"no 'vertex' element (elements found: {', '.join(names) or 'none'}); {_ADVICE}")
+    vertex = ply["vertex"]
+    props = [p.name for p in vertex.properties]
+    missing = [n for n in _REQUIRED if n not in props]
+    if missing:
+        looks_splat = any(difflib.get_close_matches(n, props, n=1, cutoff=0.8) for n in _SPLAT_ONLY)
+        if "face" in names or not looks_splat:
+            why = "it has a 'face' element" if "face" in names else f"its vertices have only {', '.join(props)}"
+            raise _fail(path, f"this is a mesh or point-cloud PLY, not a 3DGS splat file ({why}; no "
+                              f"{', '.join(missing)}). Import it with File > Import > Stanford PLY instead, or "
+                              f"choose the splat PLY your 3DGS trainer wrote (e.g. point_cloud.ply)")
+        unused = [p for p in props if p not in _REQUIRED]
+        parts = []
+        for n in missing:
+            close = difflib.get_close_matches(n, unused, n=1, cutoff=0.6)
+            parts.append(f"'{n}'" + (f" (found '{close[0]}': a misspelling? rename it to '{n}')" if close else ""))
+        raise _fail(path, f"vertex property {', '.join(parts)} missing; {_ADVICE}")
+
+    rest = sorted(int(m.group(1)) for p in props if (m := _F_REST.match(p)))
+    if len(rest) not in F_REST_COUNTS:
+        raise _fail(path, f"{len(rest)} f_rest_* properties; the standard layout has 0, 9, 24 or 45 "
+                          f"(SH degree 0-3). Re-export the file with SH degree 0-3")
+    if rest != list(range(len(rest))):
+        gap = sorted(set(range(len(rest))) - set(rest))
+        raise _fail(path, f"f_rest properties are not numbered 0..{len(rest) - 1} (f_rest_{gap[0]} is missing); "
+                          f"the file is not in the standard layout: re-export it")
+    layout = _Layout.standard(F_REST_COUNTS[len(rest)])
+    for p in vertex.properties:
+        if p.name in layout.names and isinstance(p, PlyListProperty):
+            raise _fail(path, f"vertex property '{p.name}' is a list, expected one number per splat; "
+                              f"re-export the file in the standard 3DGS layout")
+    if vertex.count == 0:
+        raise _fail(path, "the vertex element holds 0 splats: nothing to import. Check the export")
+    return vertex, layout
+
+
+def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
+    """Yield the vertex rows as structured arrays, chunk by chunk, memory-mapped (or read) from the file."""
+    dtype = vertex.dtype(ply.byte_order)
+    first = ply.elements[0].name == "vertex" and not any(isinstance(p, PlyListProperty) for p in vertex.properties)
+    if not first:
+        # Rare layouts (vertex after a variable-size element): let plyfile parse everything.
+        data = _read_all(path, mmap=True)["vertex"].data
+        for i in range(0, len(data), CHUNK_ROWS):
+            yield data[i:i + CHUNK_ROWS]
+        return
+    need = vertex.count * dtype.itemsize
+    have = os.path.getsize(path) - offset
+    if have < need:
+        raise _fail(path, f"the file is truncated: the header promises {vertex.count} splats ({need} bytes) but only "
+                          f"{have} bytes follow ({have // dtype.itemsize} whole splats). The download or copy was "
+                          f"probably cut off: get the file again")
+    for i in range(0, vertex.count, CHUNK_ROWS):
+        # A fresh small map per chunk, dropped after use, so resident memory never holds the whole file.
+        rows = np.memmap(path, dtype, "r", offset + i * dtype.itemsize, (min(CHUNK_ROWS, vertex.count - i),))
+        yield rows
+        del rows
+
+
+def _read_all(path: str, mmap: bool) -> PlyData:
+    try:
+        return PlyData.read(path, mmap=mmap)
+    except PlyParseError as e:
+        if "early end-of-file" in str(e):
+            raise _fail(path, f"the file is truncated ({e}): the download or copy was probably cut off; "
+                              f"get the file again") from None
+        raise _fail(path, f"the PLY data cannot be parsed ({e}); re-export the file") from None
+
+
+def read_ply(path: str | os.PathLike) -> SplatScene:
+    """Read a standard 3DGS PLY into an activated SplatScene (see the module docstring for errors and repairs)."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise _fail(path, "no such file")
+    try:
+        with open(path, "rb") as f:
+            # plyfile's header parser on its own, so that a mesh or a bad layout is refused before any data is read.
+            ply = PlyData._parse_header(f)
+            offset = f.tell()
+    except (PlyParseError, UnicodeDecodeError) as e:
+        raise _fail(path, f"not a readable PLY file (header: {e}); choose a 3DGS .ply file") from None
+    vertex, layout = _check_header(path, ply)
+    if ply.text:
+        data = _read_all(path, mmap=False)["vertex"].data
+        chunks = (data[i:i + CHUNK_ROWS] for i in range(0, len(data), CHUNK_ROWS))
+    else:
+        chunks = _rows_binary(path, ply, vertex, offset)
+    return _activate(path, chunks, vertex.count, layout)
+
+
+def _activate(path: str, chunks, n: int, layout: _Layout) -> SplatScene:
+    k = layout.k
+    pos = np.empty((n, 3), np.float32)
+    sh = np.empty((n, k, 3), np.float32)
+    opa = np.empty((n,), np.float32)
+    scl = np.empty((n, 3), np.float32)
+    rot = np.empty((n, 4), np.float32)
+    counts = {"dropped_nonfinite": 0, "clamped_scales": 0, "identity_rotations": 0}
+    m = 0  # rows kept so far: dropped splats are compacted away as we go, never copied twice
+    e = layout.sh_end
+    for rows in chunks:
+        raw = np.empty((len(rows), len(layout.names)), np.float32)
+        for j, name in enumerate(layout.names):
+            raw[:, j] = rows[name]
+        s = _exp32(raw[:, e + 1:e + 4])
+        keep = np.isfinite(raw).all(1) & np.isfinite(s).all(1)
+        c = int(keep.sum())
+        counts["dropped_nonfinite"] += len(raw) - c
+        raw, s = raw[keep], s[keep]
+
+        pos[m:m + c] = raw[:, 0:3]
+        sh[m:m + c, 0] = raw[:, 3:6]
+        # channel-major f_rest: column 6 + ch*(k-1) + (i-1) -> sh[:, i, ch]
+        sh[m:m + c, 1:] = raw[:, 6:e].reshape(c, 3, k - 1).transpose(0, 2, 1)
+        opa[m:m + c] = _sigmoid32(raw[:, e])
+        small = s < MIN_SCALE
+        counts["clamped_scales"] += int(small.any(1).sum())
+        s[small] = MIN_SCALE
+        scl[m:m + c] = s
+        rot[m:m + c] = _normalise(raw[:, e + 4:e + 8], counts)
+        m += c
+    if m == 0:
+        raise _fail(path, f"all {n} splats have NaN or infinite values; the file is damaged: re-export it")
+    repairs = {key: v for key, v in counts.items() if v}
+    # Views of the first m rows: when splats were dropped the tail is unused, which is cheaper than copying.
+    return SplatScene(pos[:m], scl[:m], rot[:m], opa[:m], sh[:m], source=path, repairs=repairs)
+
+
+def _normalise(q32: np.ndarray, counts: dict[str, int]) -> np.ndarray:
+    q = q32.astype(np.float64)
+    n2 = np.einsum("ij,ij->i", q, q)
+    zero = n2 == 0
+    counts["identity_rotations"] += int(zero.sum())
+    q[zero] = (1.0, 0.0, 0.0, 0.0)
+    n2[zero] = 1.0
+    out = (q / np.sqrt(n2)[:, None]).astype(np.float32)
+    # Already unit to float32 precision: keep the stored bits, so that re-reading a written scene changes nothing.
+    unit = np.abs(n2 - 1.0) <= 2.0 ** -21
+    out[unit & ~zero] = q32[unit & ~zero]
+    return out
+
+
+def _invert_exactly(forward, y: np.ndarray, guess: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """float32 raw values r with forward(r) == y where such r lies within 3 ulp of the float64 inverse ``guess``."""
+    with np.errstate(invalid="ignore"):
+        r0 = np.clip(guess, lo, hi).astype(np.float32)
+    best = r0.copy()
+    found = forward(r0) == y
+    for direction in (np.float32(np.inf), np.float32(-np.inf)):
+        r = r0
+        for _ in range(3):
+            if found.all():
+                return best
+            r = np.nextafter(r, direction)
+            hit = ~found & (forward(r) == y)
+            best[hit] = r[hit]
+            found |= hit
+    return best
+
+
+def write_ply(path: str | os.PathLike, scene: SplatScene, ascii: bool = False, byte_order: str = "<") -> None:
+    """Write ``scene`` in the standard 3DGS layout (raw values: logit opacity, log scale; normals written as 0).
+
+    ``read_ply`` of the result gives back the scene's positions, SH and unit quaternions bit-for-bit, and opacities
+    and scales bit-for-bit wherever the float32 value is reachable as the activation of a float32 raw value (always
+    for a scene that was itself read from a PLY; otherwise to within one float32 rounding).
+    """
+    path = os.fspath(path)
+    n, k = scene.count, scene.sh.shape[1]
+    layout = _Layout.standard(scene.sh_degree)
+    names = layout.names[:3] + ["nx", "ny", "nz"] + layout.names[3:]
+    rows = np.zeros((n, len(names)), np.float32)  # the file's rows, as plain floats; viewed as records below
+    e = layout.sh_end + 3  # +3: the normals sit after x y z
+    rows[:, 0:3] = scene.positions
+    rows[:, 6:9] = scene.sh[:, 0]
+    rows[:, 9:e] = scene.sh[:, 1:].transpose(0, 2, 1).reshape(n, 3 * (k - 1))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = scene.opacities.astype(np.float64)
+        rows[:, e] = _invert_exactly(_sigmoid32, scene.opacities, np.log(p / (1.0 - p)), -110.0, 40.0)
+        rows[:, e + 1:e + 4] = _invert_exactly(_exp32, scene.scales, np.log(scene.scales.astype(np.float64)),
+                                               -110.0, 88.0)
+    rows[:, e + 4:e + 8] = scene.rotations
+    records = rows.view(np.dtype([(name, "f4") for name in names])).reshape(n)
+    PlyData([PlyElement.describe(records, "vertex")], text=ascii, byte_order=byte_order,
+            comments=["written by gs-ibl (standard 3DGS layout)"]).write(path)

@@ -1,0 +1,51 @@
+"""Box/mip filtering: solid-angle-weighted 2x2 downsampling, mip chains, and the thesis's fast irradiance.
+
+The thesis's "box filter" downsamples the radiance cube (512 -> 32 per face) and reads the small cube by
+normal. That is an average of radiance over a small patch around n, not the cosine-weighted hemisphere
+integral: exact for a uniform environment, too sharp otherwise unless the cube is taken down to a couple
+of texels per face (then the patch is a whole face, and the answer is coarse instead). ``box_irradiance``
+reproduces it with a selectable final face size, so the error can be measured against the exact reference
+(see tests/test_probe_filters.py for the numbers).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .. import cubemap
+from .sampling import check_cube, sample_cube_bilinear
+
+
+def downsample_cube(cube: np.ndarray) -> np.ndarray:
+    """(6, N, N, C) -> (6, N/2, N/2, C): each parent is the solid-angle-weighted mean of its 2x2 children."""
+    a = check_cube(cube)
+    n = a.shape[1]
+    if n % 2:
+        raise ValueError(f"cannot halve a cube with odd face size {n}")
+    w = cubemap.texel_solid_angles(n)[None, :, :, None]
+    num = (a * w).reshape(6, n // 2, 2, n // 2, 2, a.shape[3]).sum(axis=(2, 4))
+    den = np.broadcast_to(w, (1, n, n, 1)).reshape(1, n // 2, 2, n // 2, 2, 1).sum(axis=(2, 4))
+    return num / den
+
+
+def mip_chain(cube: np.ndarray, min_size: int = 1) -> list[np.ndarray]:
+    """[cube, cube/2, ...] down to min_size per face (halving stops at an odd size)."""
+    mips = [check_cube(cube)]
+    while mips[-1].shape[1] > min_size and mips[-1].shape[1] % 2 == 0:
+        mips.append(downsample_cube(mips[-1]))
+    return mips
+
+
+def box_irradiance(cube: np.ndarray, size: int, level_size: int | None = None) -> np.ndarray:
+    """Thesis box filter: downsample to level_size per face (default: size), read bilinearly by normal.
+
+    Returns (6, size, size, C). level_size must be the input size divided by a power of two.
+    """
+    a = check_cube(cube)
+    level_size = size if level_size is None else level_size
+    n = a.shape[1]
+    if level_size < 1 or n % level_size or (n // level_size) & (n // level_size - 1):
+        raise ValueError(f"box filter: level size {level_size} must be the face size {n} divided by a power of 2")
+    small = a
+    while small.shape[1] > level_size:
+        small = downsample_cube(small)
+    return sample_cube_bilinear(small, cubemap.face_directions(size))

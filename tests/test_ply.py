@@ -1,0 +1,298 @@
+"""Standard 3DGS PLY: round trips, activation, every refused input, every repair (real files in tmp_path)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from plyfile import PlyData, PlyElement
+
+from gs_ibl_addon.core.formats import SplatFormatError, read_scene
+from gs_ibl_addon.core.formats import ply as plymod
+from gs_ibl_addon.core.formats.ply import MIN_SCALE, read_ply, write_ply
+from gs_ibl_addon.core.scene import SplatScene
+from gs_ibl_addon.core.synthetic import random_scene
+
+FIELDS = ("positions", "scales", "rotations", "opacities", "sh")
+
+
+def standard_names(degree: int, normals: bool = True) -> list[str]:
+    k = (degree + 1) ** 2
+    return (["x", "y", "z"] + (["nx", "ny", "nz"] if normals else []) + [f"f_dc_{i}" for i in range(3)]
+            + [f"f_rest_{i}" for i in range(3 * (k - 1))] + ["opacity"] + [f"scale_{i}" for i in range(3)]
+            + [f"rot_{i}" for i in range(4)])
+
+
+def write_raw(path, columns: dict[str, np.ndarray], text: bool = False, byte_order: str = "<",
+              extra_elements: tuple = (), first: tuple = ()) -> str:
+    """A PLY written directly with plyfile from raw per-property columns (no help from the code under test)."""
+    n = len(next(iter(columns.values())))
+    rec = np.empty(n, [(k, np.asarray(v).dtype.str) for k, v in columns.items()])
+    for k, v in columns.items():
+        rec[k] = v
+    PlyData([*first, PlyElement.describe(rec, "vertex"), *extra_elements], text=text, byte_order=byte_order).write(
+        str(path))
+    return str(path)
+
+
+def raw_columns(n: int = 6, degree: int = 0, seed: int = 0) -> dict[str, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    cols = {name: rng.normal(size=n).astype(np.float32) for name in standard_names(degree)}
+    for i in range(3):
+        cols[f"scale_{i}"] = (cols[f"scale_{i}"] - 4).astype(np.float32)
+    return cols
+
+
+def assert_same(a: SplatScene, b: SplatScene) -> None:
+    for f in FIELDS:
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f), err_msg=f)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Round trips
+
+@pytest.mark.parametrize("degree", [0, 1, 2, 3])
+@pytest.mark.parametrize("fmt", ["binary_le", "binary_be", "ascii"])
+def test_round_trip(tmp_path, degree, fmt):
+    scene = random_scene(300, seed=degree, sh_degree=degree)
+    path = tmp_path / f"s{degree}.ply"
+    write_ply(path, scene, ascii=fmt == "ascii", byte_order=">" if fmt == "binary_be" else "<")
+    ply = PlyData.read(str(path))
+    assert [p.name for p in ply["vertex"].properties] == standard_names(degree)
+    assert ply.text == (fmt == "ascii")
+    if fmt != "ascii":
+        assert ply.byte_order == (">" if fmt == "binary_be" else "<")
+        assert path.stat().st_size - len(ply.header) - 1 == 300 * 4 * len(standard_names(degree))
+
+    back = read_ply(path)
+    assert back.sh_degree == degree and back.count == 300 and back.repairs == {}
+    # Stored as-is: bit-for-bit.
+    for f in ("positions", "sh", "rotations"):
+        np.testing.assert_array_equal(getattr(back, f), getattr(scene, f), err_msg=f)
+    # Through log/logit in float32: not every float32 is exp()/sigmoid() of a float32, so within a few ulp.
+    np.testing.assert_allclose(back.scales, scene.scales, rtol=1e-6)
+    np.testing.assert_array_less(np.abs(back.opacities - scene.opacities), 4 * np.spacing(scene.opacities) + 1e-12)
+    # A scene that came from a file writes back so that it reads back exactly.
+    path2 = tmp_path / f"t{degree}.ply"
+    write_ply(path2, back, ascii=fmt == "ascii")
+    assert_same(read_ply(path2), back)
+
+
+def test_read_scene_dispatches_to_read_ply(tmp_path):
+    path = tmp_path / "std.ply"
+    write_ply(path, random_scene(50, seed=3, sh_degree=1))
+    assert_same(read_scene(path), read_ply(path))
+    assert read_scene(path).source == str(path)
+
+
+def test_chunked_reading_compacts_across_chunks(tmp_path, monkeypatch):
+    """Many small memory-mapped chunks, with dropped splats in several of them, give the same scene as one chunk."""
+    cols = raw_columns(n=50, degree=1, seed=4)
+    cols["x"][[3, 7, 8, 31, 49]] = np.nan
+    path = write_raw(tmp_path / "c.ply", cols)
+    whole = read_ply(path)
+    monkeypatch.setattr(plymod, "CHUNK_ROWS", 7)
+    chunked = read_ply(path)
+    assert chunked.count == 45 and chunked.repairs == {"dropped_nonfinite": 5}
+    assert_same(chunked, whole)
+    keep = np.setdiff1d(np.arange(50), [3, 7, 8, 31, 49])
+    np.testing.assert_array_equal(chunked.positions[:, 1], cols["y"][keep])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Activation and layout
+
+def test_activation_values_and_f_rest_order(tmp_path):
+    n, degree = 3, 3
+    k = 16
+    cols = raw_columns(n, degree)
+    for i in range(45):
+        cols[f"f_rest_{i}"] = np.full(n, 100 + i, np.float32)
+    cols["f_dc_0"], cols["f_dc_1"], cols["f_dc_2"] = (np.full(n, v, np.float32) for v in (1.0, 2.0, 3.0))
+    cols["opacity"] = np.array([0.0, np.log(3.0), -np.log(3.0)], np.float32)
+    cols["scale_0"] = np.log(np.array([0.25, 1.0, 2.0], np.float32))
+    q = np.array([[2, 0, 0, 0], [1, 1, 1, 1], [0, 0, 0, -3]], np.float32)
+    for i in range(4):
+        cols[f"rot_{i}"] = q[:, i]
+    s = read_ply(write_raw(tmp_path / "a.ply", cols))
+
+    np.testing.assert_allclose(s.opacities, [0.5, 0.75, 0.25], rtol=1e-6)
+    np.testing.assert_allclose(s.scales[:, 0], [0.25, 1.0, 2.0], rtol=1e-6)
+    np.testing.assert_allclose(s.scales[:, 1], np.exp(cols["scale_1"].astype(np.float64)), rtol=1e-6)
+    np.testing.assert_allclose(s.rotations, [[1, 0, 0, 0], [0.5, 0.5, 0.5, 0.5], [0, 0, 0, -1]], atol=1e-7)
+    np.testing.assert_array_equal(s.sh[:, 0], np.tile([1.0, 2.0, 3.0], (n, 1)))
+    for c in range(3):
+        for kk in range(1, k):
+            # channel-major: f_rest index = channel * (K - 1) + (k - 1)
+            assert s.sh[0, kk, c] == 100 + c * (k - 1) + kk - 1
+    np.testing.assert_array_equal(s.positions, np.stack([cols["x"], cols["y"], cols["z"]], 1))
+
+
+def test_optional_normals_extra_properties_and_other_types(tmp_path):
+    cols = {k: v for k, v in raw_columns(5, 1).items() if k not in ("nx", "ny", "nz")}
+    cols["x"] = cols["x"].astype(np.float64)
+    cols["opacity"] = cols["opacity"].astype(">f8")
+    cols["semantic_id"] = np.arange(5, dtype=np.int32)
+    s = read_ply(write_raw(tmp_path / "o.ply", cols, byte_order=">"))
+    assert s.count == 5 and s.sh_degree == 1
+    np.testing.assert_array_equal(s.positions[:, 0], cols["x"].astype(np.float32))
+
+
+def test_vertex_after_another_element(tmp_path):
+    info = np.array([(7,)], [("version", "i4")])
+    cols = raw_columns(4, 0)
+    s = read_ply(write_raw(tmp_path / "v.ply", cols, first=(PlyElement.describe(info, "info"),)))
+    np.testing.assert_array_equal(s.positions[:, 2], cols["z"])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Repairs
+
+def test_repairs_are_applied_and_counted(tmp_path):
+    cols = raw_columns(12, 1, seed=2)
+    cols["x"][1] = np.nan
+    cols["f_rest_4"][2] = np.inf
+    cols["opacity"][3] = -np.inf
+    cols["scale_2"][4] = 100.0  # exp overflows float32: dropped with the non-finite ones
+    cols["scale_0"][5] = -200.0  # exp == 0
+    cols["scale_1"][6] = -95.0  # exp is subnormal
+    cols["scale_2"][6] = -30.0  # 9e-14 < MIN_SCALE: same splat, counted once
+    for i in range(4):
+        cols[f"rot_{i}"][7] = 0.0
+    s = read_ply(write_raw(tmp_path / "r.ply", cols))
+    assert s.repairs == {"dropped_nonfinite": 4, "clamped_scales": 2, "identity_rotations": 1}
+    keep = [0, 5, 6, 7, 8, 9, 10, 11]
+    assert s.count == len(keep)
+    np.testing.assert_array_equal(s.positions[:, 0], cols["x"][keep])
+    assert s.scales[1, 0] == MIN_SCALE and s.scales[2, 1] == MIN_SCALE and s.scales[2, 2] == MIN_SCALE
+    assert s.scales[2, 0] == np.float32(np.exp(np.float64(cols["scale_0"][6])))
+    np.testing.assert_array_equal(s.rotations[3], [1, 0, 0, 0])
+    assert all(np.isfinite(getattr(s, f)).all() for f in FIELDS)
+    assert (s.scales >= MIN_SCALE).all()
+    # The repaired scene is a clean scene: writing and reading it again repairs nothing.
+    write_ply(tmp_path / "r2.ply", s)
+    again = read_ply(tmp_path / "r2.ply")
+    assert again.repairs == {}
+    assert_same(again, s)
+
+
+def test_unnormalised_quaternions_are_activation_not_repair(tmp_path):
+    cols = raw_columns(5, 0)
+    s = read_ply(write_raw(tmp_path / "q.ply", cols))
+    assert s.repairs == {}
+    np.testing.assert_allclose(np.linalg.norm(s.rotations, axis=1), 1.0, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Refused input: one SplatFormatError naming the file, the field and what to do
+
+def expect_error(path, *needles):
+    with pytest.raises(SplatFormatError) as e:
+        read_ply(path)
+    msg = str(e.value)
+    assert str(path) in msg
+    for needle in needles:
+        assert needle in msg, msg
+    return msg
+
+
+def test_error_missing_file(tmp_path):
+    expect_error(tmp_path / "nope.ply", "no such file")
+
+
+def test_error_truncated_binary(tmp_path):
+    path = tmp_path / "t.ply"
+    write_ply(path, random_scene(100, seed=1, sh_degree=3))
+    data = path.read_bytes()
+    path.write_bytes(data[:-1000])
+    expect_error(path, "truncated", "100 splats", "get the file again")
+
+
+def test_error_truncated_ascii(tmp_path):
+    path = tmp_path / "t.ply"
+    write_ply(path, random_scene(20, seed=1, sh_degree=0), ascii=True)
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[:-3]))
+    expect_error(path, "truncated", "get the file again")
+
+
+def test_error_truncated_header(tmp_path):
+    path = tmp_path / "h.ply"
+    write_ply(path, random_scene(20, seed=1, sh_degree=0))
+    path.write_bytes(path.read_bytes()[:60])
+    expect_error(path, "not a readable PLY", "early end-of-file")
+
+
+def test_error_not_a_ply(tmp_path):
+    path = tmp_path / "x.ply"
+    path.write_bytes(b"\x00\x01garbage" * 10)
+    expect_error(path, "not a readable PLY")
+
+
+def test_error_missing_property(tmp_path):
+    cols = raw_columns(4, 0)
+    del cols["opacity"]
+    msg = expect_error(write_raw(tmp_path / "m.ply", cols), "'opacity'", "missing", "standard layout")
+    assert "found" not in msg  # nothing close to suggest
+
+
+def test_error_misspelt_properties_suggest_close_names(tmp_path):
+    cols = raw_columns(4, 0)
+    cols["scale1"] = cols.pop("scale_1")
+    cols["opacities"] = cols.pop("opacity")
+    expect_error(write_raw(tmp_path / "s.ply", cols), "'scale_1' (found 'scale1'", "'opacity' (found 'opacities'",
+                 "rename it")
+
+
+def test_error_mesh_with_faces(tmp_path):
+    verts = np.array([(0, 0, 0), (1, 0, 0), (0, 1, 0)], [("x", "f4"), ("y", "f4"), ("z", "f4")])
+    faces = np.array([([0, 1, 2],)], [("vertex_indices", "i4", (3,))])
+    path = tmp_path / "mesh.ply"
+    PlyData([PlyElement.describe(verts, "vertex"), PlyElement.describe(faces, "face")]).write(str(path))
+    expect_error(path, "mesh", "'face' element", "Stanford PLY")
+
+
+def test_error_point_cloud(tmp_path):
+    cols = {k: np.zeros(3, np.float32) for k in ("x", "y", "z", "nx", "ny", "nz")}
+    cols.update({c: np.zeros(3, np.uint8) for c in ("red", "green", "blue")})
+    expect_error(write_raw(tmp_path / "pc.ply", cols), "point-cloud", "red", "opacity")
+
+
+def test_error_no_vertex_element(tmp_path):
+    pts = np.zeros(3, [("x", "f4"), ("y", "f4"), ("z", "f4")])
+    path = tmp_path / "p.ply"
+    PlyData([PlyElement.describe(pts, "point")]).write(str(path))
+    expect_error(path, "no 'vertex' element", "point")
+
+
+@pytest.mark.parametrize("count", [3, 10, 44])
+def test_error_f_rest_count(tmp_path, count):
+    cols = raw_columns(3, 0)
+    for i in range(count):
+        cols[f"f_rest_{i}"] = np.zeros(3, np.float32)
+    expect_error(write_raw(tmp_path / "f.ply", cols), f"{count} f_rest_*", "0, 9, 24 or 45")
+
+
+def test_error_f_rest_gap(tmp_path):
+    cols = raw_columns(3, 1)
+    cols["f_rest_9"] = cols.pop("f_rest_4")
+    expect_error(write_raw(tmp_path / "g.ply", cols), "f_rest_4 is missing")
+
+
+def test_error_list_property(tmp_path):
+    cols = raw_columns(3, 0)
+    rec = np.empty(3, [(k, "f4") for k in cols if k != "opacity"] + [("opacity", "f4", (2,))])
+    for k, v in cols.items():
+        rec[k] = v if k != "opacity" else np.stack([v, v], 1)
+    path = tmp_path / "l.ply"
+    PlyData([PlyElement.describe(rec, "vertex")]).write(str(path))
+    expect_error(path, "'opacity' is a list")
+
+
+def test_error_zero_splats(tmp_path):
+    cols = {k: v[:0] for k, v in raw_columns(3, 0).items()}
+    expect_error(write_raw(tmp_path / "z.ply", cols), "0 splats")
+
+
+def test_error_all_splats_nonfinite(tmp_path):
+    cols = raw_columns(3, 0)
+    cols["y"][:] = np.nan
+    expect_error(write_raw(tmp_path / "n.ply", cols), "all 3 splats", "NaN")
