@@ -155,7 +155,9 @@ def shell_scene(radiance_fn: RadianceFn, n_splats: int, radius: float = 10.0,
     0) exactly as the radiance at its own direction; what a renderer shows between splat centres is that radiance
     blurred over about one spacing.
     """
-    d = fibonacci_sphere(n_splats)
+    # Shuffled: every splat sits at the same distance from the centre, so a renderer's depth sort leaves them in
+    # storage order; the Fibonacci lattice's order runs pole to pole and would tint every pixel toward one pole.
+    d = fibonacci_sphere(n_splats)[np.random.default_rng(n_splats).permutation(n_splats)]
     spacing = radius * np.sqrt(4.0 * np.pi / n_splats)
     rgb = radiance_fn(d)
     centres = np.asarray(center, np.float64) + radius * d
