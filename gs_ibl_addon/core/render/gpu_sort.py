@@ -53,29 +53,42 @@ class Scanner:
             b.destroy()
 
 
-class RadixSorter:
-    """Stable sort of (key, value) uint32 pairs by the low ``bits`` bits of the key, for up to ``capacity`` pairs."""
+def digit_bits_for(ctx) -> int:
+    """8-bit digits (half the passes) where subgroup ballots of >= 8 lanes exist, else 4-bit digits."""
+    return 8 if ctx.subgroup_ballot and 8 <= ctx.subgroup_size <= 128 else 4
 
-    def __init__(self, ctx, capacity: int) -> None:
+
+class RadixSorter:
+    """Stable sort of (key, value) uint32 pairs by the low ``bits`` bits of the key, for up to ``capacity`` pairs.
+
+    ``digit_bits`` 8 uses shaders/radix8_*.comp (subgroup ballots); 4 uses shaders/radix_*.comp (no subgroups).
+    """
+
+    def __init__(self, ctx, capacity: int, digit_bits: int | None = None) -> None:
         self.ctx = ctx
+        self.digit_bits = digit_bits or digit_bits_for(ctx)
+        if self.digit_bits not in (4, 8):
+            raise ValueError(f"radix digits are 4 or 8 bits, not {self.digit_bits}")
+        self.bins = 1 << self.digit_bits
         self.capacity = max(1, int(capacity))
         self.n_blocks = -(-self.capacity // SORT_BLOCK)
         self.keys_tmp = Buffer(ctx, self.capacity * 4, "sort-keys-tmp")
         self.vals_tmp = Buffer(ctx, self.capacity * 4, "sort-vals-tmp")
-        self.hist = Buffer(ctx, 16 * self.n_blocks * 4, "sort-hist")
-        self.scanner = Scanner(ctx, 16 * self.n_blocks)
+        self.hist = Buffer(ctx, self.bins * self.n_blocks * 4, "sort-hist")
+        self.scanner = Scanner(ctx, self.bins * self.n_blocks)
 
     def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int) -> None:
         """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy)."""
-        hist_p = self.ctx.pipeline("radix_hist", 3, 12)
-        scat_p = self.ctx.pipeline("radix_scatter", 6, 12)
+        prefix = "radix8" if self.digit_bits == 8 else "radix"
+        hist_p = self.ctx.pipeline(f"{prefix}_hist", 3, 12)
+        scat_p = self.ctx.pipeline(f"{prefix}_scatter", 6, 12)
         g = groups(self.n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
-        passes = max(1, -(-int(bits) // 4))
+        passes = max(1, -(-int(bits) // self.digit_bits))
         for i in range(passes):
-            push = pack("III", self.n_blocks, 4 * i, count_index)
+            push = pack("III", self.n_blocks, self.digit_bits * i, count_index)
             rec.dispatch(hist_p, [src_k, self.hist, count], g, push)
-            self.scanner.record(rec, self.hist, 16 * self.n_blocks)
+            self.scanner.record(rec, self.hist, self.bins * self.n_blocks)
             rec.dispatch(scat_p, [src_k, src_v, dst_k, dst_v, self.hist, count], g, push)
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
         if src_k is not keys:
@@ -88,7 +101,8 @@ class RadixSorter:
         self.scanner.destroy()
 
 
-def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32) -> tuple[np.ndarray, np.ndarray]:
+def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32,
+               digit_bits: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Convenience for tests: sort host arrays on the GPU."""
     n = len(keys)
     kb, vb = Buffer(ctx, n * 4, "k"), Buffer(ctx, n * 4, "v")
@@ -96,7 +110,7 @@ def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32) -> tuple
     kb.write(keys.astype(np.uint32))
     vb.write(vals.astype(np.uint32))
     cb.write(np.array([n, 0, 0, 0], np.uint32))
-    sorter = RadixSorter(ctx, n)
+    sorter = RadixSorter(ctx, n, digit_bits)
     with Recorder(ctx) as rec:
         sorter.record(rec, kb, vb, cb, 0, bits)
     out = kb.read(np.uint32, n), vb.read(np.uint32, n)

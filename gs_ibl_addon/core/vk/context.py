@@ -53,6 +53,7 @@ class VulkanContext:
         self.timestamp_period_ns: float = props.limits.timestampPeriod
         self.max_workgroups = tuple(props.limits.maxComputeWorkGroupCount)
         self.memory_properties = vk.vkGetPhysicalDeviceMemoryProperties(self.physical_device)
+        self.subgroup_size, self.subgroup_ballot = self._subgroup_info()
 
         families = vk.vkGetPhysicalDeviceQueueFamilyProperties(self.physical_device)
         self.queue_family = next(i for i, f in enumerate(families) if f.queueFlags & vk.VK_QUEUE_COMPUTE_BIT)
@@ -68,6 +69,19 @@ class VulkanContext:
         self.command_pool = vk.vkCreateCommandPool(self.device, pci, None)
         self._pipelines: dict[str, object] = {}
         self.lock = threading.RLock()
+
+    def _subgroup_info(self) -> tuple[int, bool]:
+        vk = self.vk
+        sub = vk.ffi.new("VkPhysicalDeviceSubgroupProperties*")
+        sub.sType = vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_SUBGROUP_PROPERTIES
+        props2 = vk.ffi.new("VkPhysicalDeviceProperties2*")
+        props2.sType = vk.VK_STRUCTURE_TYPE_PHYSICAL_DEVICE_PROPERTIES_2
+        props2.pNext = sub
+        vk.vkGetPhysicalDeviceProperties2(self.physical_device, props2)
+        compute = bool(sub.supportedStages & vk.VK_SHADER_STAGE_COMPUTE_BIT)
+        ballot = compute and bool(sub.supportedOperations & vk.VK_SUBGROUP_FEATURE_BALLOT_BIT) and bool(
+            sub.supportedOperations & vk.VK_SUBGROUP_FEATURE_BASIC_BIT)
+        return int(sub.subgroupSize), ballot
 
     def _choose(self, phys: list, want: str | None):
         vk = self.vk

@@ -1,0 +1,28 @@
+#version 450
+// 8-bit radix pass, step 1: per-block histogram (blocks of 4096 keys), digit-major: hist[d * n_blocks + block].
+#extension GL_GOOGLE_include_directive : require
+#include "common.glsl"
+layout(local_size_x = 128) in;
+layout(std430, binding = 0) readonly buffer Keys { uint keys[]; };
+layout(std430, binding = 1) buffer Hist { uint hist[]; };
+layout(std430, binding = 2) readonly buffer Count { uint count[]; };
+layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; } p;
+shared uint h[256];
+
+void main() {
+    uint lid = gl_LocalInvocationID.x;
+    uint block = linear_group();
+    if (block >= p.n_blocks) return;
+    h[lid] = 0u;
+    h[lid + 128u] = 0u;
+    barrier();
+    uint n = count[p.count_index];
+    uint base = block * 4096u;
+    for (uint i = 0u; i < 32u; ++i) {
+        uint idx = base + i * 128u + lid;
+        if (idx < n) atomicAdd(h[(keys[idx] >> p.shift) & 255u], 1u);
+    }
+    barrier();
+    hist[lid * p.n_blocks + block] = h[lid];
+    hist[(lid + 128u) * p.n_blocks + block] = h[lid + 128u];
+}
