@@ -17,9 +17,14 @@ layout(push_constant) uniform P { vec3 origin; uint n; float pixel_angle; float 
 
 const float C0 = 0.28209479177387814, C1 = 0.4886025119029199;
 
+// SH is stored coefficient-major (sh[(k * 3 + channel) * n + splat]) so that a warp's loads are contiguous.
+vec3 sh_coeff(uint i, uint k) {
+    uint b = 3u * k * p.n + i;
+    return vec3(sh[b], sh[b + p.n], sh[b + 2u * p.n]);
+}
+
 vec3 sh_color(uint i, vec3 d) {
-    uint b = i * p.sh_k * 3u;
-    vec3 c = C0 * vec3(sh[b], sh[b + 1u], sh[b + 2u]);
+    vec3 c = C0 * sh_coeff(i, 0u);
     if (p.sh_k > 1u) {
         float x = d.x, y = d.y, z = d.z;
         float basis[16];
@@ -37,10 +42,7 @@ vec3 sh_color(uint i, vec3 d) {
                 basis[14] = 1.445305721320277 * z * (xx - yy); basis[15] = -0.5900435899266435 * x * (xx - 3.0 * yy);
             }
         }
-        for (uint k = 1u; k < p.sh_k; ++k) {
-            uint o = b + 3u * k;
-            c += basis[k] * vec3(sh[o], sh[o + 1u], sh[o + 2u]);
-        }
+        for (uint k = 1u; k < p.sh_k; ++k) c += basis[k] * sh_coeff(i, k);
     }
     return max(c + 0.5, vec3(0.0));
 }

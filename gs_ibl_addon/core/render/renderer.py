@@ -68,7 +68,8 @@ class SplatRenderer:
             self.pos_op.write(np.concatenate([scene.positions, scene.opacities[:, None]], 1).astype(np.float32))
             self.scale.write(np.concatenate([scene.scales, np.zeros((scene.count, 1))], 1).astype(np.float32))
             self.rot.write(scene.rotations.astype(np.float32))
-            self.sh.write(scene.sh.astype(np.float32))
+            # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
+            self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
         self.prepared = Buffer(c, n * 64, "prepared")
         self.tile_count = Buffer(c, n * 4, "tile_count")
         self.depth_key = Buffer(c, n * 4, "depth_key")
