@@ -103,7 +103,7 @@ class SplatRenderer:
         if f.get("tiles") != total_tiles or f.get("pixels") != total_pixels:
             for b in f.get("buffers", ()):
                 b.destroy()
-            ranges = Buffer(self.ctx, total_tiles * 8, "ranges")
+            ranges = Buffer(self.ctx, (total_tiles + 1) * 8, "ranges")  # + the missed-tile key's run
             image = Buffer(self.ctx, total_pixels * 16, "image")
             views = Buffer(self.ctx, max(view_bytes, 6 * 80), "views")
             self._frame = {"tiles": total_tiles, "pixels": total_pixels, "ranges": ranges, "image": image,
@@ -151,12 +151,14 @@ class SplatRenderer:
                              [self.depth_key, self.depth_val, self.tile_count, self.offsets], groups(n, 256, c),
                              pack("I", n))
                 total_buf, _ = self.scanner.record(rec, self.offsets, n)
-                rec.dispatch(c.pipeline("gs_emit", 11, 28),
+                rec.dispatch(c.pipeline("gs_emit", 12, 32),
                              [self.pos_op, self.scale, self.rot, fr["views"], self.depth_key, self.depth_val,
-                              self.offsets, total_buf, self.inst_key, self.inst_val, self.count], groups(n, 256, c),
-                             pack("fffIfII", *o, n, batch.pixel_angle, self.capacity, nv))
+                              self.offsets, total_buf, self.inst_key, self.inst_val, self.count, self.prepared],
+                             groups(n, 256, c), pack("fffIfIII", *o, n, batch.pixel_angle, self.capacity, nv,
+                                                     total_tiles))
                 rec.timestamp("emit")
-                bits = max(1, int(np.ceil(np.log2(max(2, total_tiles)))))
+                # tile ids run to total_tiles inclusive: that one is the key of instances whose tile was missed
+                bits = max(1, int(total_tiles).bit_length())
                 self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, bits)
                 rec.timestamp("sort_tiles")
                 rec.dispatch(c.pipeline("gs_ranges", 3, 0), [self.inst_key, self.count, fr["ranges"]],
