@@ -44,8 +44,10 @@ class Buffer:
                 self.memory = vk.vkAllocateMemory(ctx.device, mai, None)
             except Exception:
                 continue
-            self.host_visible = bool(ctx.memory_properties.memoryTypes[mtype].propertyFlags
-                                     & vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT)
+            mflags = ctx.memory_properties.memoryTypes[mtype].propertyFlags
+            self.host_visible = bool(mflags & vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT)
+            # Reading uncached mapped memory (a GPU's BAR window) crawls; such buffers read through a cached copy.
+            self.host_cached = bool(mflags & vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT)
             break
         else:
             vk.vkDestroyBuffer(ctx.device, self.handle, None)
@@ -72,9 +74,9 @@ class Buffer:
         dt = np.dtype(dtype)
         n = (self.nbytes - offset) // dt.itemsize if count is None else int(count)
         nbytes = n * dt.itemsize
-        if self._map is not None:
+        if self._map is not None and self.host_cached:
             return np.frombuffer(self._map, dtype=dt, count=n, offset=offset).copy()
-        staging = Buffer._staging(self.ctx, nbytes)
+        staging = Buffer._staging(self.ctx, nbytes, cached=True)
         with Recorder(self.ctx) as rec:
             rec.copy(self, staging, nbytes, src_offset=offset)
         out = np.frombuffer(staging._map, dtype=dt, count=n).copy()
@@ -82,7 +84,7 @@ class Buffer:
         return out
 
     @staticmethod
-    def _staging(ctx: VulkanContext, nbytes: int) -> "Buffer":
+    def _staging(ctx: VulkanContext, nbytes: int, cached: bool = False) -> "Buffer":
         b = Buffer.__new__(Buffer)
         vk = ctx.vk
         b.ctx, b.name, b.serial, b.nbytes = ctx, "staging", next(_serial), max(int(nbytes), 16)
@@ -91,10 +93,15 @@ class Buffer:
         b.handle = vk.vkCreateBuffer(ctx.device, bci, None)
         req = vk.vkGetBufferMemoryRequirements(ctx.device, b.handle)
         flags = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
-        mai = vk.VkMemoryAllocateInfo(allocationSize=req.size, memoryTypeIndex=ctx.memory_type(req.memoryTypeBits, flags))
+        try:
+            mtype = ctx.memory_type(req.memoryTypeBits, flags | (vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT if cached else 0))
+        except RuntimeError:
+            mtype = ctx.memory_type(req.memoryTypeBits, flags)
+        mai = vk.VkMemoryAllocateInfo(allocationSize=req.size, memoryTypeIndex=mtype)
         b.memory = vk.vkAllocateMemory(ctx.device, mai, None)
         vk.vkBindBufferMemory(ctx.device, b.handle, b.memory, 0)
         b.host_visible = True
+        b.host_cached = cached
         b._map = vk.vkMapMemory(ctx.device, b.memory, 0, b.nbytes, 0)
         return b
 
