@@ -8,21 +8,18 @@
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 layout(local_size_x = 256) in;
-layout(std430, binding = 0) readonly buffer PosOp { vec4 pos_op[]; };
-layout(std430, binding = 1) readonly buffer Scale { vec4 scale[]; };
-layout(std430, binding = 2) readonly buffer Rot { vec4 rot[]; };
-layout(std430, binding = 3) readonly buffer Views { View views[]; };
-layout(std430, binding = 4) readonly buffer DepthKey { uint depth_key[]; };
-layout(std430, binding = 5) readonly buffer DepthVal { uint depth_val[]; };
-layout(std430, binding = 6) readonly buffer Offsets { uint offsets[]; };
-layout(std430, binding = 7) readonly buffer Total { uint total[]; };
-layout(std430, binding = 8) writeonly buffer InstKey { uint inst_key[]; };
-layout(std430, binding = 9) writeonly buffer InstVal { uint inst_val[]; };
-layout(std430, binding = 10) writeonly buffer Count { uint count[]; };  // [0] kept instances, [1] all instances
-layout(std430, binding = 11) readonly buffer Prepared { vec4 prepared[]; };
-layout(push_constant) uniform P { vec3 origin; uint n; float pixel_angle; uint capacity; uint n_views; uint n_tiles; } p;
+layout(std430, binding = 0) readonly buffer Views { View views[]; };
+layout(std430, binding = 1) readonly buffer DepthKey { uint depth_key[]; };
+layout(std430, binding = 2) readonly buffer DepthVal { uint depth_val[]; };
+layout(std430, binding = 3) readonly buffer Offsets { uint offsets[]; };
+layout(std430, binding = 4) readonly buffer Total { uint total[]; };
+layout(std430, binding = 5) writeonly buffer InstKey { uint inst_key[]; };
+layout(std430, binding = 6) writeonly buffer InstVal { uint inst_val[]; };
+layout(std430, binding = 7) writeonly buffer Count { uint count[]; };  // [0] kept instances, [1] all instances
+layout(std430, binding = 8) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = 9) readonly buffer Rects { uvec2 rects[]; };  // from gs_preprocess
+layout(push_constant) uniform P { uint n; uint capacity; uint n_views; uint n_tiles; } p;
 
-const uint MAX_VIEWS = 6u;
 shared uvec2 s_rect[256u * MAX_VIEWS];  // (x0 | y0 << 16, x1 | y1 << 16) in tiles; x0 == x1 when untouched
 shared uint s_start[256];
 shared uint s_splat[256];
@@ -90,16 +87,8 @@ void main() {
     if (j < p.n && depth_key[j] != 0xFFFFFFFFu) {
         uint i = depth_val[j];
         s_splat[t] = i;
-        vec4 po = pos_op[i];
-        footprint_quadric(i, 2.0 * log(255.0 * po.w), s_g0[t], s_g1[t]);
-        vec3 mu = po.xyz - p.origin;
-        float dist = uintBitsToFloat(depth_key[j]);
-        mat3 cov = cut_covariance(quat_to_mat(rot[i]), dilated_scale2(scale[i].xyz, dist, p.pixel_angle),
-                                  2.0 * log(255.0 * po.w));
-        for (uint v = 0u; v < p.n_views; ++v) {
-            uvec4 rc;
-            if (view_rect(views[v], mu, cov, rc)) s_rect[t * MAX_VIEWS + v] = uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16));
-        }
+        footprint_quadric(i, 2.0 * log(255.0 * prepared[4u * i + 3u].w), s_g0[t], s_g1[t]);
+        for (uint v = 0u; v < p.n_views; ++v) s_rect[t * MAX_VIEWS + v] = rects[i * MAX_VIEWS + v];
     }
     barrier();
     uint end = j0 + 256u < p.n ? offsets[j0 + 256u] : all_instances;

@@ -13,6 +13,7 @@ layout(std430, binding = 5) writeonly buffer Prepared { vec4 prepared[]; };
 layout(std430, binding = 6) writeonly buffer TileCount { uint tile_count[]; };
 layout(std430, binding = 7) writeonly buffer DepthKey { uint depth_key[]; };
 layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
+layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // per splat and view, for gs_emit
 layout(push_constant) uniform P { vec3 origin; uint n; float pixel_angle; float near; uint sh_k; uint n_views; } p;
 
 const float C0 = 0.28209479177387814, C1 = 0.4886025119029199;
@@ -64,7 +65,9 @@ void main() {
     uint count = 0u;
     for (uint v = 0u; v < p.n_views; ++v) {
         uvec4 rc;
-        if (view_rect(views[v], mu, cov, rc)) count += (rc.z - rc.x) * (rc.w - rc.y);
+        bool hit = view_rect(views[v], mu, cov, rc);
+        if (hit) count += (rc.z - rc.x) * (rc.w - rc.y);
+        rects[i * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
     }
     if (count == 0u) return;
     vec3 inv = inversesqrt(s2);
@@ -75,5 +78,5 @@ void main() {
     prepared[4u * i + 2u] = vec4(w2, ol.z);
     prepared[4u * i + 3u] = vec4(sh_color(i, mu / dist), po.w);
     tile_count[i] = count;
-    depth_key[i] = floatBitsToUint(dist);
+    depth_key[i] = floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
 }

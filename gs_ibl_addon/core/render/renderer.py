@@ -23,6 +23,8 @@ from .gpu_sort import RadixSorter, Scanner
 from .splat_math import DEFAULT_NEAR
 from .views import TILE, ViewBatch
 
+DEPTH_KEY_BITS = 24  # distance float bits >> 8 (DEPTH_KEY_SHIFT in shaders/splat_common.glsl)
+
 
 @dataclass
 class RenderResult:
@@ -74,6 +76,7 @@ class SplatRenderer:
         self.tile_count = Buffer(c, n * 4, "tile_count")
         self.depth_key = Buffer(c, n * 4, "depth_key")
         self.depth_val = Buffer(c, n * 4, "depth_val")
+        self.rects = Buffer(c, n * 6 * 8, "rects")  # tile rectangle per splat and view (up to six)
         self.offsets = Buffer(c, n * 4, "offsets")
         self.count = Buffer(c, 16, "count")
         self.n_count = Buffer(c, 16, "n_count")
@@ -140,22 +143,21 @@ class SplatRenderer:
             rec.fill(fr["image"], 0, total_tiles and fr["pixels"] * 16)
             rec.timestamp("clear")
             if n:
-                rec.dispatch(c.pipeline("gs_preprocess", 9, 32),
+                rec.dispatch(c.pipeline("gs_preprocess", 10, 32),
                              [self.pos_op, self.scale, self.rot, self.sh, fr["views"], self.prepared, self.tile_count,
-                              self.depth_key, self.depth_val], groups(n, 256, c),
+                              self.depth_key, self.depth_val, self.rects], groups(n, 256, c),
                              pack("fffIffII", *o, n, batch.pixel_angle, self.near, self.sh_k, nv))
                 rec.timestamp("preprocess")
-                self.depth_sorter.record(rec, self.depth_key, self.depth_val, self.n_count, 0, 32)
+                self.depth_sorter.record(rec, self.depth_key, self.depth_val, self.n_count, 0, DEPTH_KEY_BITS)
                 rec.timestamp("sort_depth")
                 rec.dispatch(c.pipeline("gs_gather_counts", 4, 4),
                              [self.depth_key, self.depth_val, self.tile_count, self.offsets], groups(n, 256, c),
                              pack("I", n))
                 total_buf, _ = self.scanner.record(rec, self.offsets, n)
-                rec.dispatch(c.pipeline("gs_emit", 12, 32),
-                             [self.pos_op, self.scale, self.rot, fr["views"], self.depth_key, self.depth_val,
-                              self.offsets, total_buf, self.inst_key, self.inst_val, self.count, self.prepared],
-                             groups(n, 256, c), pack("fffIfIII", *o, n, batch.pixel_angle, self.capacity, nv,
-                                                     total_tiles))
+                rec.dispatch(c.pipeline("gs_emit", 10, 16),
+                             [fr["views"], self.depth_key, self.depth_val, self.offsets, total_buf, self.inst_key,
+                              self.inst_val, self.count, self.prepared, self.rects],
+                             groups(n, 256, c), pack("IIII", n, self.capacity, nv, total_tiles))
                 rec.timestamp("emit")
                 # tile ids run to total_tiles inclusive: that one is the key of instances whose tile was missed
                 bits = max(1, int(total_tiles).bit_length())
@@ -171,7 +173,7 @@ class SplatRenderer:
         return rec.timings_ms
 
     def close(self) -> None:
-        for name in ("pos_op", "scale", "rot", "sh", "prepared", "tile_count", "depth_key", "depth_val", "offsets",
+        for name in ("pos_op", "scale", "rot", "sh", "prepared", "tile_count", "depth_key", "depth_val", "rects", "offsets",
                      "count", "n_count", "inst_key", "inst_val"):
             getattr(self, name).destroy()
         for b in self._frame.get("buffers", ()):
