@@ -50,7 +50,9 @@ def main() -> None:
         upload_s = time.perf_counter() - t
         for face in [int(x) for x in args.faces.split(",")]:
             batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
-            for _ in range(2):
+            # warm up for a second: GPU clocks ramp after the idle seconds of building the scene on the CPU
+            t_warm = time.perf_counter()
+            while time.perf_counter() - t_warm < 1.0:
                 renderer.render(batch, timestamps=True)
             runs = [renderer.render(batch, timestamps=True) for _ in range(args.repeats)]
             med = {s: statistics.median(r.timings_ms.get(s, 0.0) for r in runs) for s in STAGES}
