@@ -9,7 +9,7 @@ need=()
 command -v glslc >/dev/null || need+=(glslc)
 [ -e /usr/share/vulkan/icd.d/lvp_icd.x86_64.json ] || [ -e /usr/share/vulkan/icd.d/lvp_icd.json ] || \
   ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1 || need+=(mesa-vulkan-drivers)
-ldconfig -p | grep -q libvulkan.so.1 || need+=(libvulkan1)
+ldconfig -p | grep libvulkan.so.1 >/dev/null || need+=(libvulkan1)  # not grep -q: SIGPIPE under pipefail
 command -v spirv-val >/dev/null || need+=(spirv-tools)
 if [ ${#need[@]} -gt 0 ]; then
   echo "[setup] installing system packages: ${need[*]}"
