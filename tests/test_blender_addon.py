@@ -69,9 +69,12 @@ def test_register_unregister_leaves_nothing_behind():
                        if isinstance(getattr(bpy.app.handlers, k), list)}
     menus = (bpy.types.TOPBAR_MT_file_import, bpy.types.VIEW3D_MT_add)
     menus_before = [_draw_funcs(m) for m in menus]
+    from gs_ibl_addon.blender import bake, overlay
     for _ in range(2):  # twice: a second register after unregister must work too
         gs_ibl_addon.register()
         assert all(cls.is_registered for cls in registration._CLASSES)
+        assert bake.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
+        assert overlay._handle is not None and hasattr(bpy.types.Scene, "gs_ibl_overlay")
         assert _op_exists("gs_ibl.import_splats") and _op_exists("gs_ibl.bake_probe")
         assert hasattr(bpy.types.Object, "gs_ibl_probe")
         assert len(_draw_funcs(bpy.types.TOPBAR_MT_file_import)) == len(menus_before[0]) + 1
@@ -79,9 +82,12 @@ def test_register_unregister_leaves_nothing_behind():
     assert not any(cls.is_registered for cls in registration._CLASSES)
     for idname in ("import_splats", "add_probe", "bake_probe", "restore_world"):
         assert not _op_exists("gs_ibl." + idname), idname
-    for name in ("GSIBL_FH_splats", "GSIBL_PT_panel", "GSIBL_ProbeSettings"):
+    for name in ("GSIBL_FH_splats", "GSIBL_PT_panel", "GSIBL_ProbeSettings", "GSIBL_OverlaySettings"):
         assert not hasattr(bpy.types, name), name
-    assert not hasattr(bpy.types.Object, "gs_ibl_probe")
+    assert not hasattr(bpy.types.Object, "gs_ibl_probe") and not hasattr(bpy.types.Scene, "gs_ibl_overlay")
+    assert bake.on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post
+    assert not bpy.app.timers.is_registered(bake.run_pending)
+    assert overlay._handle is None  # draw_handler_remove was called with the handle draw_handler_add gave
     for m in menus:  # Blender may keep its own draw wrapper; none of ours may remain
         assert not [f for f in _draw_funcs(m) if f.__module__.startswith("gs_ibl_addon")]
     assert len(_draw_funcs(menus[0])) == len(menus_before[0])
@@ -222,13 +228,13 @@ def test_world_never_overwrites_user_world_and_restores(blender):
 
 def test_apply_probe_images_and_strength_update(blender):
     from gs_ibl_addon.blender import world as gw
-    from gs_ibl_addon.blender.panel import apply_probe_images
+    from gs_ibl_addon.blender.bake import apply_probe_images
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
     assert probe.name == "GS-IBL Probe" and probe.gs_ibl_probe.is_probe
     rad = np.random.default_rng(1).uniform(0, 1, (16, 32, 3)).astype(np.float32)
     irr = np.full((8, 16, 3), 0.25, np.float32)
-    w = apply_probe_images(bpy.context, probe, rad, irr)
+    w = apply_probe_images(bpy.context.scene, probe, rad, irr)
     assert bpy.context.scene.world == w
     group = bpy.data.node_groups["GS-IBL Irradiance"]
     np.testing.assert_allclose(gw.image_latlong_pixels(group.nodes["GS-IBL Irradiance Image"].image), irr)
@@ -263,56 +269,10 @@ def test_bake_reports_clear_error_without_splats(blender):
         bpy.ops.gs_ibl.bake_probe()
 
 
-def test_bake_without_core_baker_reports_clearly(blender):
-    try:
-        from gs_ibl_addon.blender.panel import _import_bake_probe
-        _import_bake_probe()
-        pytest.skip("core bake_probe exists: the end-to-end test covers the bake")
-    except ImportError:
-        pass
-    from gs_ibl_addon.blender.splat_object import create_splat_object
-    create_splat_object(bpy.context, random_scene(10), "S")
-    bpy.ops.gs_ibl.add_probe(place="CURSOR")
-    worlds = len(bpy.data.worlds)
-    with pytest.raises(RuntimeError, match="bake_probe"):
-        bpy.ops.gs_ibl.bake_probe()
-    assert len(bpy.data.worlds) == worlds
-
-
-def test_bake_probe_end_to_end(blender):
-    """Runs once the core's bake_probe exists: a uniform grey shell of splats lights the World grey."""
-    try:
-        from gs_ibl_addon.blender.panel import _import_bake_probe
-        _import_bake_probe()
-    except ImportError:
-        pytest.skip("core bake_probe not written yet")
-    from gs_ibl_addon.blender.splat_object import create_splat_object
-    from gs_ibl_addon.core.scene import rgb_to_sh_dc
-    # a dense shell of opaque grey splats around the origin, radius 5
-    n = 20000
-    d = np.random.default_rng(3).normal(size=(n, 3))
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    grey = 0.6
-    sh = np.zeros((n, 1, 3), np.float32)
-    sh[:, 0] = rgb_to_sh_dc(np.full(3, grey))
-    q = np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1))
-    shell = SplatScene((5 * d).astype(np.float32), np.full((n, 3), 0.3, np.float32), q, np.full(n, 0.99, np.float32),
-                       sh, source="shell")
-    splats = create_splat_object(bpy.context, shell, "shell")
-    bpy.ops.gs_ibl.add_probe(place="CURSOR")
-    probe = bpy.context.active_object
-    probe.gs_ibl_probe.splats = splats
-    probe.gs_ibl_probe.face_size = 32
-    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
-    from gs_ibl_addon.blender import world as gw
-    irr = gw.image_latlong_pixels(bpy.data.node_groups["GS-IBL Irradiance"].nodes["GS-IBL Irradiance Image"].image)
-    np.testing.assert_allclose(irr.mean((0, 1)), grey, rtol=0.05)
-
-
 def test_probe_result_cubes_become_latlong_images(blender):
     """The bake writes a core ProbeResult (cubes) as lat-long images in Blender's mapping."""
     from gs_ibl_addon.blender import world as gw
-    from gs_ibl_addon.blender.panel import _latlong, apply_probe_images
+    from gs_ibl_addon.blender.bake import apply_probe_images, result_latlong
     from gs_ibl_addon.core.cubemap import latlong_directions
     from gs_ibl_addon.core.probe import ProbeResult
     from gs_ibl_addon.core.probe.reference import cube_from_function
@@ -325,13 +285,13 @@ def test_probe_result_cubes_become_latlong_images(blender):
 
     result = ProbeResult(radiance=cube_from_function(radiance, 64).astype(np.float32),
                          irradiance=cube_from_function(irradiance, 16).astype(np.float32))
-    rad = _latlong(result, "radiance", 64)
-    irr = _latlong(result, "irradiance", 16)
+    rad = result_latlong(result, "radiance", 64)
+    irr = result_latlong(result, "irradiance", 16)
     assert rad.shape == (64, 128, 3) and irr.shape == (16, 32, 3)
     np.testing.assert_allclose(rad, radiance(latlong_directions(128, 64).reshape(-1, 3)).reshape(64, 128, 3),
                                atol=2e-3)
     np.testing.assert_allclose(irr, irradiance(latlong_directions(32, 16).reshape(-1, 3)).reshape(16, 32, 3),
                                atol=1e-2)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
-    w = apply_probe_images(bpy.context, bpy.context.active_object, rad, irr)
+    w = apply_probe_images(bpy.context.scene, bpy.context.active_object, rad, irr)
     np.testing.assert_allclose(gw.image_latlong_pixels(w.node_tree.nodes["GS-IBL Radiance"].image), rad)

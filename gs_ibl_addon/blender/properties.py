@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from .splat_object import is_splat_object
 
@@ -34,12 +34,15 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
         items=[("AUTO", "Auto", "Choose from the tolerance: SH projection when it is accurate enough, else convolution"),
                ("SH", "Spherical Harmonics", "Project the radiance onto 9 SH coefficients (fast, smooth)"),
                ("CONV", "Cosine Convolution", "Exact cosine-weighted integral per irradiance texel"),
-               ("BOX", "Box Filter", "Box-filtered mip chain (fast approximation)")],
+               ("BOX", "Box Filter", "Box-filtered mip chain (fast approximation)"),
+               ("EXACT", "Exact", "Brute-force integral over every radiance texel (slow; a reference)")],
         default="AUTO")
-    face_size: IntProperty(name="Face Size", default=64, min=4, max=2048,
-                           description="Resolution of each of the six radiance faces rendered from the probe")
-    irradiance_size: IntProperty(name="Irradiance Size", default=32, min=4, max=1024,
-                                 description="Height of the irradiance lat-long map (its width is twice that)")
+    face_size: IntProperty(name="Face Size", default=0, min=0, max=2048,
+                           description="Resolution of each of the six radiance faces rendered from the probe "
+                                       "(0: chosen from the tolerance)")
+    irradiance_size: IntProperty(name="Irradiance Size", default=16, min=4, max=512,
+                                 description="Face size of the irradiance cube; its lat-long image is 4x as wide "
+                                             "and 2x as high")
     tolerance: FloatProperty(name="Tolerance", default=0.01, min=1e-4, max=0.5, precision=3,
                              description="Relative irradiance error allowed when choosing sizes and method")
     strength: FloatProperty(name="Strength", default=1.0, min=0.0, soft_max=10.0, update=_strength_changed,
@@ -51,14 +54,38 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                            "is remembered and can be restored)")
     pack_images: BoolProperty(name="Pack Images", default=True,
                               description="Keep baked images inside the .blend; off: save EXR files next to it")
+    auto_update: BoolProperty(name="Update When Moved", default=False,
+                              description="Re-bake when the probe or its splat object is moved (throttled)")
+    update_interval: FloatProperty(name="Update Interval", default=1.0, min=0.0, soft_max=10.0, unit="TIME_ABSOLUTE",
+                                   description="Seconds between automatic re-bakes at most")
+    # Shown after a bake (read-only in the panel): what the last bake did.
+    last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"})
 
 
-CLASSES = (GSIBL_ProbeSettings,)
+def _overlay_changed(self, context) -> None:
+    from . import overlay
+    overlay.settings_changed(self, context)
+
+
+class GSIBL_OverlaySettings(bpy.types.PropertyGroup):
+    show: BoolProperty(name="Show Splats", default=False, update=_overlay_changed,
+                       description="Draw the splats (rendered by GS-IBL's renderer from the view) in 3D Viewports; "
+                                   "they are drawn behind meshes and are not part of F12 renders")
+    resolution_scale: FloatProperty(name="Resolution", default=0.5, min=0.1, max=1.0, subtype="FACTOR",
+                                    update=_overlay_changed,
+                                    description="Fraction of the viewport's resolution the splats are rendered at")
+    exposure: FloatProperty(name="Exposure", default=0.0, soft_min=-10.0, soft_max=10.0, update=_overlay_changed,
+                            description="Stops of brightness applied to the splats in the viewport only")
+
+
+CLASSES = (GSIBL_ProbeSettings, GSIBL_OverlaySettings)
 
 
 def register_properties() -> None:
     bpy.types.Object.gs_ibl_probe = PointerProperty(type=GSIBL_ProbeSettings)
+    bpy.types.Scene.gs_ibl_overlay = PointerProperty(type=GSIBL_OverlaySettings)
 
 
 def unregister_properties() -> None:
+    del bpy.types.Scene.gs_ibl_overlay
     del bpy.types.Object.gs_ibl_probe

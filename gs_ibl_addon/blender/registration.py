@@ -1,9 +1,10 @@
-"""Registers every Blender class, property and menu entry of the extension, and removes them all again."""
+"""Registers every Blender class, property, menu entry, handler and draw handler of the extension, and removes
+them all again."""
 from __future__ import annotations
 
 import bpy
 
-from . import importer, panel, properties
+from . import bake, importer, overlay, panel, properties
 
 _CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES)
 _MENUS = (*importer.MENUS, *panel.MENUS)
@@ -15,9 +16,13 @@ def register() -> None:
     properties.register_properties()
     for menu, fn in _MENUS:
         menu.append(fn)
+    bake.register_handlers()
+    overlay.register_overlay()
 
 
 def unregister() -> None:
+    overlay.unregister_overlay()
+    bake.unregister_handlers()
     for menu, fn in reversed(_MENUS):
         menu.remove(fn)
     properties.unregister_properties()

@@ -199,6 +199,8 @@ def irradiance_group(image: bpy.types.Image) -> bpy.types.ShaderNodeTree:
     if tree is None:
         tree = bpy.data.node_groups.new(IRRADIANCE_GROUP, "ShaderNodeTree")
         tree[MARKER] = "irradiance"
+        # No material uses it until the user adds it: without a fake user it would vanish on save.
+        tree.use_fake_user = True
         _build_irradiance_tree(tree)
     tree.nodes["GS-IBL Irradiance Image"].image = image
     return tree

@@ -1,0 +1,183 @@
+"""Baking a probe into Blender: probe properties -> core.bake.bake_probe -> images, World, node group.
+
+Used by the Bake operator, by headless scripts (``bpy.ops.gs_ibl.bake_probe()`` or ``bake_into_world``) and by
+the "Update When Moved" handler, which re-bakes a probe when it or its splat object moves, at most once per
+``update_interval`` seconds (a depsgraph_update_post handler notes what moved; a timer does the bake).
+"""
+from __future__ import annotations
+
+import math
+import time
+from typing import Callable
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+
+from ..core.bake import ProbeSettings, bake_probe
+from ..core.probe.latlong import cube_to_latlong
+from . import world as gw
+from .properties import is_probe
+from .splat_object import is_splat_object, scene_from_object
+
+METHODS = {"AUTO": "auto", "SH": "sh", "CONV": "conv", "BOX": "box", "EXACT": "exact"}
+HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
+
+
+def probe_settings(props) -> ProbeSettings:
+    """The core's settings from a probe's properties (Object.gs_ibl_probe)."""
+    return ProbeSettings(method=METHODS[props.method], face_size=int(props.face_size),
+                         irradiance_size=int(props.irradiance_size), tolerance=float(props.tolerance))
+
+
+def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,
+                active: bpy.types.Object | None = None) -> bpy.types.Object | None:
+    """The probe's splat object, else the active one, else the only one in the scene."""
+    if probe is not None and probe.gs_ibl_probe.splats is not None:
+        return probe.gs_ibl_probe.splats
+    if is_splat_object(active):
+        return active
+    found = [o for o in scene.objects if is_splat_object(o)]
+    return found[0] if len(found) == 1 else None
+
+
+def result_latlong(result, kind: str, height: int) -> np.ndarray:
+    """(height, 2*height, 3) lat-long of a ProbeResult's ``kind`` cube ("radiance" or "irradiance")."""
+    cube = np.asarray(getattr(result, kind), np.float32)[..., :3]
+    return cube_to_latlong(cube, 2 * height, height)
+
+
+def apply_probe_images(scene: bpy.types.Scene, probe: bpy.types.Object, radiance: np.ndarray,
+                       irradiance: np.ndarray | None) -> bpy.types.World:
+    """Write baked lat-long maps into our images, World and irradiance node group, per the probe's settings."""
+    s = probe.gs_ibl_probe
+    rad_img = gw.latlong_image("radiance", radiance, pack=s.pack_images)
+    if irradiance is not None:
+        gw.irradiance_group(gw.latlong_image("irradiance", irradiance, pack=s.pack_images))
+    # The camera keeps what it saw before we first took over the World.
+    previous = scene.get(gw.PREVIOUS_WORLD)
+    if not isinstance(previous, bpy.types.World):
+        previous = scene.world if scene.world is not None and scene.world.get(gw.MARKER) != "world" else None
+    world = gw.build_world(rad_img, s.strength, s.keep_background, previous)
+    if s.assign_world:
+        gw.use_world(scene, world)
+    return world
+
+
+def summary(result, seconds: float) -> tuple[list[str], str | None]:
+    """(lines saying what the bake did and how long each part took, hole warning or None)."""
+    t = result.timings_ms
+    render_ms = t.get("render_total", sum(v for k, v in t.items() if k.startswith("render_")))
+    filter_ms = sum(v for k, v in t.items() if not k.startswith("render_") and k != "bake_wall")
+    st = result.settings
+    method = st.get("method", "?")
+    how = f"method {method}"
+    if st.get("method_requested") == "auto" and st.get("sh_error_estimate") is not None:
+        err, tol = st["sh_error_estimate"], st.get("tolerance", 0.0)
+        how = f"auto chose {method} (SH error {100 * err:.2f}% {'<=' if err <= tol else '>'} {100 * tol:.2f}%)"
+    face = st.get("face_size", np.asarray(result.radiance).shape[1])
+    lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
+             f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
+    warning = None
+    if result.hole_fraction > HOLE_WARNING:
+        warning = (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of directions have no splat "
+                   "(they light meshes black: move the probe inside the splats or fill the gaps)")
+    return lines, warning
+
+
+def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy.types.Object | None = None,
+                    progress: Callable[[str, float], None] | None = None):
+    """Bake ``probe`` from ``splats`` (default: the probe's) and write the result into Blender.
+
+    Returns (ProbeResult, one-line report, hole warning or None). Raises ValueError/RuntimeError/OSError with a
+    message meant for the user.
+    """
+    if not is_probe(probe):
+        raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
+    splats = splats or find_splats(scene, probe)
+    if splats is None:
+        raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
+    t0 = time.perf_counter()
+    splat_scene = scene_from_object(splats)
+    result = bake_probe(splat_scene, np.array(probe.matrix_world.translation, np.float64),
+                        probe_settings(probe.gs_ibl_probe), progress=progress)
+    face = np.asarray(result.radiance).shape[1]
+    irr_face = np.asarray(result.irradiance).shape[1]
+    # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
+    radiance = result_latlong(result, "radiance", max(2 * face, 32))
+    irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
+    apply_probe_images(scene, probe, radiance, irradiance)
+    lines, warning = summary(result, time.perf_counter() - t0)
+    probe.gs_ibl_probe.last_report = "\n".join(lines + ([warning] if warning else []))
+    return result, ", ".join(lines), warning
+
+
+# ---------------------------------------------------------------------------------------------- update when moved
+
+_pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
+_last_bake = -math.inf  # time.monotonic() of the last automatic bake
+last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
+
+
+def throttle_delay(last: float, interval: float, now: float) -> float:
+    """Seconds to wait before the next automatic bake so that bakes are at least ``interval`` apart."""
+    return max(0.0, last + interval - now)
+
+
+def _moved_names(depsgraph) -> set[str]:
+    return {u.id.original.name for u in depsgraph.updates
+            if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    """Notes auto-updating probes whose probe or splat object moved, and schedules one throttled re-bake."""
+    moved = _moved_names(depsgraph)
+    if not moved:
+        return
+    interval = None
+    for obj in scene.objects:
+        if not is_probe(obj) or not obj.gs_ibl_probe.auto_update:
+            continue
+        splats = find_splats(scene, obj)
+        if obj.name in moved or (splats is not None and splats.name in moved):
+            _pending.add((scene.name, obj.name))
+            iv = obj.gs_ibl_probe.update_interval
+            interval = iv if interval is None else min(interval, iv)
+    if interval is not None and not bpy.app.timers.is_registered(run_pending):
+        bpy.app.timers.register(run_pending, first_interval=throttle_delay(_last_bake, interval, time.monotonic()))
+
+
+def run_pending() -> None:
+    """Timer: re-bake every probe noted by on_depsgraph_update. Errors go to the console and the probe's report."""
+    global _last_bake, last_auto_error
+    jobs = sorted(_pending)
+    _pending.clear()
+    for scene_name, probe_name in jobs:
+        scene = bpy.data.scenes.get(scene_name)
+        probe = scene.objects.get(probe_name) if scene is not None else None
+        if probe is None or not is_probe(probe):
+            continue
+        try:
+            _, text, warning = bake_into_world(scene, probe)
+            last_auto_error = None
+            print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
+        except (ValueError, RuntimeError, OSError) as e:
+            last_auto_error = f"{probe_name}: {e}"
+            probe.gs_ibl_probe.last_report = f"Automatic re-bake failed:\n{e}"
+            print(f"GS-IBL (update when moved): {last_auto_error}")
+    _last_bake = time.monotonic()
+    return None  # one-shot; the handler registers it again when something moves
+
+
+def register_handlers() -> None:
+    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+
+
+def unregister_handlers() -> None:
+    while on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    if bpy.app.timers.is_registered(run_pending):
+        bpy.app.timers.unregister(run_pending)
+    _pending.clear()

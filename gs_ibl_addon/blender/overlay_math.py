@@ -1,0 +1,172 @@
+"""The viewport overlay's logic without bpy: viewport matrices -> a ViewBatch -> the splat image to draw.
+
+Blender's 3D view gives ``region_3d.view_matrix`` (world -> view: x right, y up, looking down -z) and
+``window_matrix`` (OpenGL projection). Our renderer takes a pinhole with a symmetric frustum and orthonormal axes,
+so an off-centre projection (camera shift, a zoomed camera view) is rendered as the smallest symmetric frustum
+that covers it, with the same pixel size, and drawn as a quad at the NDC rectangle where that frustum lands;
+the GPU clips what lies outside the region. An orthographic view is approximated by a pinhole far behind the
+view (ORTHO_DISTANCE times the view's half width: sizes at depth z shrink by about z / that distance).
+Everything here takes plain 4x4 numpy matrices, so it is tested without a window.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.image_io import linear_to_srgb
+from ..core.render.views import View, ViewBatch
+from ..core.scene import SplatScene
+
+ORTHO_DISTANCE = 100.0
+
+
+@dataclass(frozen=True)
+class OverlayView:
+    batch: ViewBatch
+    ndc_rect: tuple[float, float, float, float]  # (x0, y0, x1, y1): where the image's corners land, y up
+    perspective: bool
+
+
+def _axes(view_matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(eye, right, down, forward) in world space from a world -> view matrix."""
+    c = np.linalg.inv(np.asarray(view_matrix, np.float64))
+    unit = [c[:3, k] / np.linalg.norm(c[:3, k]) for k in range(3)]
+    return c[:3, 3].copy(), unit[0], -unit[1], -unit[2]
+
+
+def _symmetric(lo: float, hi: float, pixels: float) -> tuple[float, int]:
+    """Half extent and pixel count of the smallest symmetric interval covering [lo, hi] with the same pixel size."""
+    px = (hi - lo) / pixels
+    n = max(1, int(math.ceil(2.0 * max(abs(lo), abs(hi)) / px - 1e-6)))
+    return 0.5 * n * px, n
+
+
+def overlay_view(view_matrix, window_matrix, width: int, height: int, scale: float = 1.0) -> OverlayView:
+    """The pinhole the overlay renders for a viewport region of ``width`` x ``height`` pixels.
+
+    ``scale`` (0, 1] renders at that fraction of the region's resolution (the quad is stretched back over it).
+    """
+    v = np.asarray(view_matrix, np.float64)
+    p = np.asarray(window_matrix, np.float64)
+    if v.shape != (4, 4) or p.shape != (4, 4):
+        raise ValueError(f"view and window matrices must be 4x4, got {v.shape} and {p.shape}")
+    if width < 1 or height < 1 or not 0 < scale <= 1:
+        raise ValueError(f"bad region size {width}x{height} or resolution scale {scale}")
+    eye, right, down, forward = _axes(v)
+    w_px, h_px = max(1.0, width * scale), max(1.0, height * scale)
+    perspective = abs(p[3, 3]) < 1e-9
+    if perspective:
+        # ndc_x = P00 X - P02 for a point (X, Y, -1) of view space: the tangent plane at distance 1
+        def tan_of(ndc, axis):
+            return (ndc + p[axis, 2]) / p[axis, axis]
+        shift = (p[0, 2], p[1, 2])
+        origin = eye
+        to_tan = 1.0
+    else:
+        # ndc_x = P00 x + P03 for a point at view-space x: the view's half width in scene units at any depth
+        def tan_of(ndc, axis):
+            return (ndc - p[axis, 3]) / p[axis, axis]
+        half = max(abs(tan_of(-1, 0)), abs(tan_of(1, 0)), abs(tan_of(-1, 1)), abs(tan_of(1, 1)))
+        dist = ORTHO_DISTANCE * half
+        origin = eye - dist * forward
+        to_tan = 1.0 / dist
+        shift = (-p[0, 3], -p[1, 3])
+    (l, r), (b, t) = [(tan_of(-1.0, a) * to_tan, tan_of(1.0, a) * to_tan) for a in (0, 1)]
+    tan_x, nx = _symmetric(l, r, w_px)
+    tan_y, ny = _symmetric(b, t, h_px)
+    view = View(forward, right, down, tan_x, tan_y, nx, ny)
+    batch = ViewBatch(np.asarray(origin, np.float64), (view,), 2.0 * tan_x / nx)
+    # Where +-tan lands in NDC: the inverse of tan_of.
+    sx, sy = p[0, 0] / to_tan, p[1, 1] / to_tan
+    rect = (-sx * tan_x - shift[0], -sy * tan_y - shift[1], sx * tan_x - shift[0], sy * tan_y - shift[1])
+    return OverlayView(batch, tuple(float(x) for x in rect), perspective)
+
+
+def to_display(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Premultiplied linear RGBA -> premultiplied RGBA with sRGB-encoded colour, clipped to [0, 1].
+
+    The viewport's image shader decodes sRGB to the framebuffer's linear space, so premultiplied blending there
+    composites the splats' linear light over the scene; colours above 1 clip (no view transform is applied).
+    """
+    img = np.asarray(image, np.float32)
+    a = img[..., 3:4]
+    rgb = img[..., :3] * np.float32(2.0 ** exposure)
+    colour = np.where(a > 1e-6, rgb / np.maximum(a, 1e-6), 0.0)
+    out = np.empty_like(img)
+    out[..., :3] = linear_to_srgb(np.clip(colour, 0.0, 1.0) * a)
+    out[..., 3:] = np.clip(a, 0.0, 1.0)
+    return out
+
+
+@dataclass
+class OverlayImage:
+    rgba: np.ndarray  # (H, W, 4) premultiplied linear RGBA, row 0 at the top
+    view: OverlayView
+    render_ms: float
+
+
+class SplatOverlay:
+    """One splat object's GPU renderer (scene uploaded once) and its last image per viewport.
+
+    ``image`` re-renders only when the matrices, the region size or the scale changed; ``renders`` counts renders.
+    """
+
+    def __init__(self, scene: SplatScene, renderer=None) -> None:
+        if renderer is None:
+            from ..core.render.renderer import SplatRenderer
+            renderer = SplatRenderer(scene)
+        self.renderer = renderer
+        self.renders = 0
+        self._last: dict[object, tuple[bytes, OverlayImage]] = {}
+
+    def image(self, view_matrix, window_matrix, width: int, height: int, scale: float = 1.0,
+              slot: object = 0) -> OverlayImage:
+        key = (np.asarray(view_matrix, np.float64).tobytes() + np.asarray(window_matrix, np.float64).tobytes()
+               + np.array([width, height, scale], np.float64).tobytes())
+        last = self._last.get(slot)
+        if last is not None and last[0] == key:
+            return last[1]
+        ov = overlay_view(view_matrix, window_matrix, width, height, scale)
+        res = self.renderer.render(ov.batch)
+        self.renders += 1
+        img = OverlayImage(res.images[0], ov, res.wall_ms)
+        self._last[slot] = (key, img)
+        return img
+
+    def close(self) -> None:
+        self._last.clear()
+        close = getattr(self.renderer, "close", None)
+        if close is not None:
+            close()
+
+
+def perspective_matrix(fov_x_deg: float, width: int, height: int, near: float = 0.1, far: float = 100.0,
+                       shift_x: float = 0.0, shift_y: float = 0.0) -> np.ndarray:
+    """An OpenGL projection like Blender's window_matrix: horizontal field of view, optional shift (in units of
+    the larger image side, as Blender's camera shift)."""
+    tx = math.tan(math.radians(fov_x_deg) / 2.0)
+    ty = tx * height / width
+    span = 2.0 * max(tx, ty)
+    cx, cy = shift_x * span, shift_y * span
+    l, r, b, t = -tx + cx, tx + cx, -ty + cy, ty + cy
+    m = np.zeros((4, 4))
+    m[0, 0], m[0, 2] = 2.0 / (r - l), (r + l) / (r - l)
+    m[1, 1], m[1, 2] = 2.0 / (t - b), (t + b) / (t - b)
+    m[2, 2], m[2, 3] = -(far + near) / (far - near), -2.0 * far * near / (far - near)
+    m[3, 2] = -1.0
+    return m
+
+
+def look_at_view_matrix(position, look_at, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    """World -> view matrix (x right, y up, looking down -z) of a camera at ``position`` looking at ``look_at``."""
+    o = np.asarray(position, np.float64)
+    f = np.asarray(look_at, np.float64) - o
+    f /= np.linalg.norm(f)
+    r = np.cross(f, np.asarray(up, np.float64))
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    c = np.identity(4)
+    c[:3, 0], c[:3, 1], c[:3, 2], c[:3, 3] = r, u, -f, o
+    return np.linalg.inv(c)
