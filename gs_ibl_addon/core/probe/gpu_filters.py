@@ -4,8 +4,11 @@
   gpu_sh_irradiance     -> sh_project.sh_irradiance (order 2)    shaders/probe_sh_irradiance.comp
   gpu_cosine_convolve   -> convolve.cosine_convolve              shaders/probe_convolve.comp
   gpu_box_irradiance    -> box.box_irradiance                    shaders/probe_downsample.comp + probe_cube_read.comp
+  gpu_exact_irradiance  -> reference.exact_irradiance of          shaders/probe_downsample.comp + probe_integrate.comp
+                           box.downsample_cube^k (downsample_to)
 
-Cubes travel as packed float32 RGB (alpha is split off first: holes are black, as in numpy). The SH
+Cubes travel as packed float32 RGB (alpha is split off first: holes are black, as in numpy). Every filter takes
+a numpy cube or a GpuCube (``upload_cube``): several filters of one cube then share one upload. The SH
 reduction runs per workgroup on the GPU; the last few dozen group partials are added on the host in
 float64. Solid angles come from core.cubemap (float64, uploaded as float32), never recomputed in GLSL.
 Each function returns (result, timings_ms) with GPU timestamps per stage where the device has them.
@@ -33,29 +36,67 @@ def _rgb32(cube: np.ndarray) -> np.ndarray:
 
 
 def _upload(ctx, data: np.ndarray, name: str) -> Buffer:
-    b = Buffer(ctx, data.nbytes, name)
-    b.write(np.ascontiguousarray(data, np.float32))
+    a = np.ascontiguousarray(data, np.float32)
+    b = Buffer(ctx, a.nbytes, name)
+    b.write(a)
     return b
+
+
+class GpuCube:
+    """A radiance cube uploaded once (packed float32 RGB, holes black); pass it to any filter here instead of
+    the numpy cube to skip the per-call upload. ``close()`` frees it."""
+
+    def __init__(self, cube: np.ndarray, ctx=None) -> None:
+        self.ctx = ctx or get_context()
+        rgb = _rgb32(cube)
+        self.size = int(rgb.shape[1])
+        self.buffer = _upload(self.ctx, rgb, "probe-radiance")
+
+    def close(self) -> None:
+        self.buffer.destroy()
+
+
+def upload_cube(cube: np.ndarray, ctx=None) -> GpuCube:
+    return GpuCube(cube, ctx)
+
+
+def _source(cube, ctx) -> tuple[object, Buffer, int, bool]:
+    """(ctx, buffer, face size, owned): owned buffers are the caller's to destroy."""
+    if isinstance(cube, GpuCube):
+        return cube.ctx, cube.buffer, cube.size, False
+    ctx = ctx or get_context()
+    rgb = _rgb32(cube)
+    return ctx, _upload(ctx, rgb, "probe-radiance"), int(rgb.shape[1]), True
+
+
+def _downsample(ctx, rec: Recorder, src: Buffer, n: int, target: int, keep: list[Buffer]) -> tuple[Buffer, int]:
+    """Record 2x2 solid-angle downsampling steps (box.downsample_cube) while the face is above target and even."""
+    down = ctx.pipeline("probe_downsample", 3, 4)
+    cur, buf = n, src
+    while cur > target and cur % 2 == 0:
+        omega = _upload(ctx, cubemap.texel_solid_angles(cur), f"probe-omega-{cur}")
+        dst = Buffer(ctx, 6 * (cur // 2) ** 2 * 3 * 4, f"probe-mip-{cur // 2}")
+        rec.dispatch(down, [buf, omega, dst], groups(6 * (cur // 2) ** 2, 64, ctx), pack("I", cur))
+        keep += [omega, dst]
+        buf, cur = dst, cur // 2
+    return buf, cur
 
 
 def _read_cube(buf: Buffer, size: int) -> np.ndarray:
     return buf.read(np.float32, 6 * size * size * 3).reshape(6, size, size, 3).astype(np.float64)
 
 
-def gpu_sh_project(cube: np.ndarray, ctx=None) -> tuple[np.ndarray, dict[str, float]]:
-    """Order-2 SH coefficients (9, 3) of a radiance cube on the GPU."""
-    ctx = ctx or get_context()
-    rgb = _rgb32(cube)
-    n = rgb.shape[1]
+def gpu_sh_project(cube, ctx=None) -> tuple[np.ndarray, dict[str, float]]:
+    """Order-2 SH coefficients (9, 3) of a radiance cube (numpy or GpuCube) on the GPU."""
+    ctx, src, n, owned = _source(cube, ctx)
     n_groups = max(1, min(SH_GROUPS_MAX, -(-6 * n * n // 256)))
-    src = _upload(ctx, rgb, "probe-radiance")
     omega = _upload(ctx, cubemap.texel_solid_angles(n), "probe-omega")
     part = Buffer(ctx, n_groups * 27 * 4, "probe-sh-partial")
     with Recorder(ctx, timestamps=True) as rec:
         rec.dispatch(ctx.pipeline("probe_sh_project", 3, 8), [src, omega, part], n_groups, pack("II", n, n_groups))
         rec.timestamp("sh_project")
     coeffs = part.read(np.float32, n_groups * 27).reshape(n_groups, 9, 3).astype(np.float64).sum(axis=0)
-    for b in (src, omega, part):
+    for b in (omega, part) + ((src,) if owned else ()):
         b.destroy()
     return coeffs, rec.timings_ms
 
@@ -80,50 +121,77 @@ def gpu_sh_irradiance(coeffs: np.ndarray, size: int, window: str = "none", windo
     return irr, rec.timings_ms
 
 
-def gpu_cosine_convolve(cube: np.ndarray, size: int, phi_steps: int = 64, theta_steps: int = 16,
+def gpu_cosine_convolve(cube, size: int, phi_steps: int = 64, theta_steps: int = 16,
                         ctx=None) -> tuple[np.ndarray, dict[str, float]]:
     """Cosine-convolved irradiance cube (6, size, size, 3) of E/pi on the GPU (see convolve.cosine_convolve)."""
-    ctx = ctx or get_context()
     if phi_steps < 1 or theta_steps < 1:
         raise ValueError(f"convolution needs at least one step per angle, got phi={phi_steps} theta={theta_steps}")
-    rgb = _rgb32(cube)
-    src = _upload(ctx, rgb, "probe-radiance")
+    ctx, src, n, owned = _source(cube, ctx)
     out = Buffer(ctx, 6 * size * size * 3 * 4, "probe-irradiance")
     with Recorder(ctx, timestamps=True) as rec:
         rec.dispatch(ctx.pipeline("probe_convolve", 2, 16), [src, out], groups(6 * size * size, 64, ctx),
-                     pack("IIII", rgb.shape[1], size, phi_steps, theta_steps))
+                     pack("IIII", n, size, phi_steps, theta_steps))
         rec.timestamp("convolve")
     irr = _read_cube(out, size)
-    src.destroy()
+    if owned:
+        src.destroy()
     out.destroy()
     return irr, rec.timings_ms
 
 
-def gpu_box_irradiance(cube: np.ndarray, size: int, level_size: int | None = None,
+def gpu_box_irradiance(cube, size: int, level_size: int | None = None,
                        ctx=None) -> tuple[np.ndarray, dict[str, float]]:
     """Thesis box filter on the GPU: 2x2 solid-angle downsampling to level_size, then a bilinear read by normal."""
-    ctx = ctx or get_context()
-    rgb = _rgb32(cube)
-    n = rgb.shape[1]
+    n = cube.size if isinstance(cube, GpuCube) else np.shape(cube)[1]
     level_size = size if level_size is None else level_size
     if level_size < 1 or n % level_size or (n // level_size) & (n // level_size - 1):
         raise ValueError(f"box filter: level size {level_size} must be the face size {n} divided by a power of 2")
-    keep = [_upload(ctx, rgb, "probe-radiance")]
-    down = ctx.pipeline("probe_downsample", 3, 4)
+    ctx, src, n, owned = _source(cube, ctx)
+    keep: list[Buffer] = [src] if owned else []
     with Recorder(ctx, timestamps=True) as rec:
-        cur = n
-        while cur > level_size:
-            omega = _upload(ctx, cubemap.texel_solid_angles(cur), f"probe-omega-{cur}")
-            dst = Buffer(ctx, 6 * (cur // 2) ** 2 * 3 * 4, f"probe-mip-{cur // 2}")
-            rec.dispatch(down, [keep[-1], omega, dst], groups(6 * (cur // 2) ** 2, 64, ctx), pack("I", cur))
-            keep += [omega, dst]
-            cur //= 2
+        small, cur = _downsample(ctx, rec, src, n, level_size, keep)
         rec.timestamp("downsample")
         out = Buffer(ctx, 6 * size * size * 3 * 4, "probe-irradiance")
         keep.append(out)
-        rec.dispatch(ctx.pipeline("probe_cube_read", 2, 8), [keep[-2], out], groups(6 * size * size, 64, ctx),
+        rec.dispatch(ctx.pipeline("probe_cube_read", 2, 8), [small, out], groups(6 * size * size, 64, ctx),
                      pack("II", cur, size))
         rec.timestamp("read")
+    irr = _read_cube(out, size)
+    for b in keep:
+        b.destroy()
+    return irr, rec.timings_ms
+
+
+def integration_size(face_size: int, downsample_to: int | None) -> int:
+    """Face size the exact integral runs at: halved while above downsample_to and even (None: no downsampling)."""
+    n = int(face_size)
+    if downsample_to is not None:
+        if downsample_to < 1:
+            raise ValueError(f"exact irradiance: downsample_to must be >= 1 or None, got {downsample_to}")
+        while n > downsample_to and n % 2 == 0:
+            n //= 2
+    return n
+
+
+def gpu_exact_irradiance(cube, size: int, downsample_to: int | None = 32,
+                         ctx=None) -> tuple[np.ndarray, dict[str, float]]:
+    """Exact irradiance cube (6, size, size, 3) of E/pi on the GPU: the cube is box-downsampled (solid-angle
+    weighted, power-preserving) to downsample_to per face, then every texel is integrated for every output
+    normal. numpy reference: reference.exact_irradiance(box.downsample_cube^k(cube), face_directions(size))."""
+    ctx, src, n, owned = _source(cube, ctx)
+    keep: list[Buffer] = [src] if owned else []
+    k = integration_size(n, downsample_to)
+    texels = np.concatenate([cubemap.face_directions(k).reshape(-1, 3),
+                             np.tile(cubemap.texel_solid_angles(k).reshape(-1) / math.pi, 6)[:, None]], 1)
+    tex = _upload(ctx, texels, "probe-texels")
+    out = Buffer(ctx, 6 * size * size * 3 * 4, "probe-irradiance")
+    keep += [tex, out]
+    with Recorder(ctx, timestamps=True) as rec:
+        small, cur = _downsample(ctx, rec, src, n, k, keep)
+        rec.timestamp("downsample")
+        rec.dispatch(ctx.pipeline("probe_integrate", 3, 8), [small, tex, out], groups(6 * size * size, 1, ctx),
+                     pack("II", cur, size))
+        rec.timestamp("integrate")
     irr = _read_cube(out, size)
     for b in keep:
         b.destroy()
