@@ -25,7 +25,7 @@ shared uint s_start[256];
 shared uint s_splat[256];
 shared vec4 s_g0[256], s_g1[256];  // footprint quadric G (symmetric) and a flag: see footprint_quadric()
 
-// The rays d that see the splat with alpha >= 1/255 satisfy m(d) <= c, i.e. d^T G d <= 0 with
+// The rays d that see the splat with alpha >= alpha_min satisfy m(d) <= c, i.e. d^T G d <= 0 with
 // G = W^T ((|o'|^2 - c) I - o' o'^T) W (splat_math.py: m = |o' x Wd|^2 / |Wd|^2). c is inflated a little so float
 // rounding never culls a tile that the raster would light. For splats tiny against their distance the quadric
 // loses precision; they cover a tile or two anyway, so they keep their rectangle (flag 1).
@@ -87,7 +87,7 @@ void main() {
     if (j < p.n && depth_key[j] != 0xFFFFFFFFu) {
         uint i = depth_val[j];
         s_splat[t] = i;
-        footprint_quadric(i, 2.0 * log(255.0 * prepared[4u * i + 3u].w), s_g0[t], s_g1[t]);
+        footprint_quadric(i, 2.0 * log(prepared[4u * i + 3u].w / views[0].fwd.w), s_g0[t], s_g1[t]);
         for (uint v = 0u; v < p.n_views; ++v) s_rect[t * MAX_VIEWS + v] = rects[i * MAX_VIEWS + v];
     }
     barrier();

@@ -14,7 +14,10 @@ layout(std430, binding = 6) writeonly buffer TileCount { uint tile_count[]; };
 layout(std430, binding = 7) writeonly buffer DepthKey { uint depth_key[]; };
 layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
 layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // per splat and view, for gs_emit
-layout(push_constant) uniform P { vec3 origin; uint n; float pixel_angle; float near; uint sh_k; uint n_views; } p;
+layout(push_constant) uniform P {
+    vec3 origin; uint n; float pixel_angle; float near; uint sh_k; uint n_views;
+    uint energy_preserving;  // 1: the dilation keeps each splat's integral (probes); 0: 3DGS's look (views)
+} p;
 
 const float C0 = 0.28209479177387814, C1 = 0.4886025119029199;
 
@@ -57,10 +60,24 @@ void main() {
     vec4 po = pos_op[i];
     vec3 mu = po.xyz - p.origin;
     float dist = length(mu);
-    float cutoff = 2.0 * log(255.0 * po.w);
-    if (!(dist > p.near) || !(cutoff > 0.0)) return;
+    vec3 sc = scale[i].xyz;
+    vec3 s2 = dilated_scale2(sc, dist, p.pixel_angle);
     mat3 R = quat_to_mat(rot[i]);
-    vec3 s2 = dilated_scale2(scale[i].xyz, dist, p.pixel_angle);
+    float opacity = po.w;
+    if (p.energy_preserving != 0u) {
+        // The footprint seen along u is the covariance projected on the plane normal to u; the dilation adds
+        // delta^2 there. Keep its integral: opacity * sqrt(det / det'), with det = u^T adj(Sigma) u.
+        vec3 u = mu / dist;
+        vec3 c = vec3(dot(u, R[0]), dot(u, R[1]), dot(u, R[2]));
+        c *= c;
+        vec3 q = sc * sc;
+        float det = c.x * q.y * q.z + c.y * q.x * q.z + c.z * q.x * q.y;
+        float tr = dot(q, vec3(1.0) - c);
+        float dl = s2.x - q.x;  // delta^2
+        opacity *= sqrt(det / max(det + dl * tr + dl * dl, 1e-38));
+    }
+    float cutoff = 2.0 * log(opacity / views[0].fwd.w);
+    if (!(dist > p.near) || !(cutoff > 0.0)) return;
     mat3 cov = cut_covariance(R, s2, cutoff);
     uint count = 0u;
     for (uint v = 0u; v < p.n_views; ++v) {
@@ -76,7 +93,7 @@ void main() {
     prepared[4u * i + 0u] = vec4(w0, ol.x);
     prepared[4u * i + 1u] = vec4(w1, ol.y);
     prepared[4u * i + 2u] = vec4(w2, ol.z);
-    prepared[4u * i + 3u] = vec4(sh_color(i, mu / dist), po.w);
+    prepared[4u * i + 3u] = vec4(sh_color(i, mu / dist), opacity);
     tile_count[i] = count;
     depth_key[i] = floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
 }

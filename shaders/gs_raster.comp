@@ -11,7 +11,7 @@ layout(std430, binding = 3) readonly buffer Prepared { vec4 prepared[]; };
 layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };
 layout(push_constant) uniform P { uint n_views; uint total_tiles; } p;
 
-const float ALPHA_MIN = 1.0 / 255.0, ALPHA_MAX = 0.99, T_MIN = 1e-4;
+const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
 shared uint s_done;
 
@@ -21,6 +21,7 @@ void main() {
     uint v = 0u;
     for (uint k = 1u; k < p.n_views; ++k) if (g >= views[k].dims.w) v = k;
     View vw = views[v];
+    float alpha_min = vw.fwd.w;
     uint local_tile = g - vw.dims.w;
     uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
     uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
@@ -55,7 +56,7 @@ void main() {
             vec3 cr = cross(ol, dl);
             float m = dot(cr, cr) / dot(dl, dl);
             float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
-            if (alpha < ALPHA_MIN) continue;
+            if (alpha < alpha_min) continue;
             float test_T = T * (1.0 - alpha);
             if (test_T < T_MIN) { done = true; break; }
             color += T * alpha * s_col[k].rgb;

@@ -4,7 +4,7 @@
 struct View {
     vec4 right_tanx;   // right (xyz), tan of the half width
     vec4 down_tany;    // down (xyz), tan of the half height
-    vec4 fwd;          // forward (xyz)
+    vec4 fwd;          // forward (xyz), the batch's alpha_min (w: contributions below it are skipped)
     uvec4 dims;        // width, height, tiles_x, first tile of this view in the batch
     uvec4 extra;       // first pixel of this view in the output, tiles_y
 };
@@ -66,7 +66,7 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
     return true;
 }
 
-// The ellipsoid beyond which the splat's alpha falls below 1/255: cutoff * Sigma'.
+// The ellipsoid beyond which the splat's alpha falls below alpha_min: cutoff * Sigma'.
 mat3 cut_covariance(mat3 rot, vec3 s2, float cutoff) {
     mat3 rs = mat3(rot[0] * s2.x, rot[1] * s2.y, rot[2] * s2.z);
     return cutoff * (rs * transpose(rot));

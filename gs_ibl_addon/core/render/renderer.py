@@ -42,7 +42,7 @@ def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
         f = np.zeros(20, np.float32)
         f[0:3], f[3] = v.right, v.tan_x
         f[4:7], f[7] = v.down, v.tan_y
-        f[8:11] = v.forward
+        f[8:11], f[11] = v.forward, batch.alpha_min
         u = f.view(np.uint32)
         u[12:16] = (v.width, v.height, tx, tile_base)
         u[16:20] = (pixel_base, ty, 0, 0)
@@ -143,10 +143,11 @@ class SplatRenderer:
             rec.fill(fr["image"], 0, total_tiles and fr["pixels"] * 16)
             rec.timestamp("clear")
             if n:
-                rec.dispatch(c.pipeline("gs_preprocess", 10, 32),
+                rec.dispatch(c.pipeline("gs_preprocess", 10, 36),
                              [self.pos_op, self.scale, self.rot, self.sh, fr["views"], self.prepared, self.tile_count,
                               self.depth_key, self.depth_val, self.rects], groups(n, 256, c),
-                             pack("fffIffII", *o, n, batch.pixel_angle, self.near, self.sh_k, nv))
+                             pack("fffIffIII", *o, n, batch.pixel_angle, self.near, self.sh_k, nv,
+                                  int(batch.energy_preserving)))
                 rec.timestamp("preprocess")
                 self.depth_sorter.record(rec, self.depth_key, self.depth_val, self.n_count, 0, DEPTH_KEY_BITS)
                 rec.timestamp("sort_depth")

@@ -6,7 +6,12 @@ a property of the ray alone, so a splat reads the same on both cube faces of an 
 at any field of view where the EWA local-affine approximation of 3DGS is not. It equals 3DGS at the image centre.
 
 3DGS's anti-aliasing dilation (+0.3 px^2 on the 2D covariance) becomes an isotropic 3D variance of the same
-screen size at the splat's distance: delta = sqrt(0.3) * pixel_angle * distance, without opacity compensation.
+screen size at the splat's distance: delta = sqrt(0.3) * pixel_angle * distance. For a view meant to look like the
+trained scene the opacity is left alone, as 3DGS does. For a probe, whose images are integrated into light, the
+dilation is energy preserving: the footprint a ray sees is the covariance projected on the plane normal to the
+viewing direction u (its determinant there is u^T adj(Sigma) u), the dilation adds delta^2 in that plane, and the
+opacity is scaled by sqrt(det / det') so the footprint's integral stays put. A small bright splat seen by a coarse
+probe face keeps its power instead of growing with the pixel size; a thin disk seen face-on is left alone.
 """
 from __future__ import annotations
 
@@ -18,7 +23,10 @@ from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
 
 DILATION_PX2 = 0.3
-ALPHA_MIN = 1.0 / 255.0
+ALPHA_MIN = 1.0 / 255.0  # 3DGS: contributions below this are skipped (views)
+# Probes keep far smaller contributions: energy-preserving dilation dims splats much smaller than a texel, and
+# dropping each below 1/255 would lose their light wholesale at small face sizes.
+PROBE_ALPHA_MIN = 1e-4
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
 DEFAULT_NEAR = 0.01
@@ -30,13 +38,14 @@ class PreparedSplats:
     origin_local: np.ndarray  # (N, 3): W (origin - mu)
     color: np.ndarray  # (N, 3) SH colour toward the splat from the origin
     opacity: np.ndarray  # (N,)
-    cutoff: np.ndarray  # (N,) m beyond which alpha < ALPHA_MIN: 2 ln(255 * opacity)
+    cutoff: np.ndarray  # (N,) m beyond which alpha < alpha_min: 2 ln(opacity / alpha_min)
     distance: np.ndarray  # (N,) from the origin; the sort key
     cov_cut: np.ndarray  # (N, 3, 3): cutoff * Sigma', the ellipsoid whose projection bounds the splat
-    alive: np.ndarray  # (N,) bool: in front of the near distance and able to reach ALPHA_MIN
+    alive: np.ndarray  # (N,) bool: in front of the near distance and able to reach alpha_min
 
 
-def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: float = DEFAULT_NEAR) -> PreparedSplats:
+def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: float = DEFAULT_NEAR,
+            energy_preserving: bool = False, alpha_min: float = ALPHA_MIN) -> PreparedSplats:
     mu = scene.positions.astype(np.float64) - np.asarray(origin, np.float64)
     dist = np.linalg.norm(mu, axis=1)
     rot = quat_to_matrix(scene.rotations)
@@ -48,7 +57,13 @@ def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: flo
     dirs = mu / np.maximum(dist, 1e-30)[:, None]
     color = eval_sh_color(scene.sh, dirs)
     op = scene.opacities.astype(np.float64)
-    cutoff = 2.0 * np.log(np.maximum(255.0 * op, 1e-30))
+    if energy_preserving:
+        q = scene.scales.astype(np.float64) ** 2
+        c = np.einsum("ni,nik->nk", mu / np.maximum(dist, 1e-30)[:, None], rot) ** 2  # (u . R_k)^2
+        det = c[:, 0] * q[:, 1] * q[:, 2] + c[:, 1] * q[:, 0] * q[:, 2] + c[:, 2] * q[:, 0] * q[:, 1]
+        tr = np.sum(q * (1 - c), 1)
+        op = op * np.sqrt(det / np.maximum(det + delta2 * tr + delta2 ** 2, 1e-300))
+    cutoff = 2.0 * np.log(np.maximum(op / alpha_min, 1e-30))
     cov = np.einsum("nij,nj,nkj->nik", rot, s2, rot)
     alive = (dist > near) & (cutoff > 0)
     return PreparedSplats(whiten, origin_local, color, op, cutoff, dist, cov * np.maximum(cutoff, 0)[:, None, None],
@@ -63,3 +78,14 @@ def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice, dirs: np.ndarr
     cr = np.cross(ol, dl)
     m = np.sum(cr * cr, -1) / np.sum(dl * dl, -1)
     return m, np.sum(ol * dl, -1) < 0
+
+
+DEPTH_KEY_SHIFT = 8  # as in shaders/splat_common.glsl
+
+
+def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
+    """The GPU's sort keys: float32 distance bits without their low 8 bits. Splats whose distances agree to 3e-5
+    tie and keep storage order, on the GPU (stable radix sort) and here (stable argsort) alike."""
+    mu = scene.positions.astype(np.float32) - np.asarray(origin, np.float32)
+    dist = np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
+    return dist.view(np.uint32) >> DEPTH_KEY_SHIFT

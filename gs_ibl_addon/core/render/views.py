@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cubemap import FACE_BASES
+from .splat_math import ALPHA_MIN, PROBE_ALPHA_MIN
 
 TILE = 16
 
@@ -43,12 +44,19 @@ class ViewBatch:
     origin: np.ndarray
     views: tuple[View, ...]
     pixel_angle: float  # radians per pixel at the view centre; sets the anti-aliasing dilation
+    energy_preserving: bool = False  # probes: dilation keeps each splat's integral (render/splat_math.py)
+
+    @property
+    def alpha_min(self) -> float:
+        """Contributions below this alpha are skipped: 3DGS's 1/255 for views, far less for probes."""
+        return PROBE_ALPHA_MIN if self.energy_preserving else ALPHA_MIN
 
     @staticmethod
-    def cubemap(origin, face_size: int) -> "ViewBatch":
+    def cubemap(origin, face_size: int, energy_preserving: bool = True) -> "ViewBatch":
+        """The six faces of a probe; their images are light to integrate, so the dilation preserves energy."""
         views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
                       for f in range(6))
-        return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size)
+        return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving)
 
     @staticmethod
     def pinhole(position, look_at, fov_deg: float, width: int, height: int, up=(0.0, 0.0, 1.0)) -> "ViewBatch":
