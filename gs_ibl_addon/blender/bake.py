@@ -72,9 +72,11 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     st = result.settings
     method = st.get("method", "?")
     how = f"method {method}"
-    if st.get("method_requested") == "auto" and st.get("sh_error_estimate") is not None:
-        err, tol = st["sh_error_estimate"], st.get("tolerance", 0.0)
-        how = f"auto chose {method} (SH error {100 * err:.2f}% {'<=' if err <= tol else '>'} {100 * tol:.2f}%)"
+    trials = [t for t in st.get("face_size_trials", []) if t.get("change") is not None]
+    if trials:
+        steps = ", ".join(f"{t['face_size']}: {100 * t['change']:.2f}%" for t in trials)
+        verdict = "converged" if st.get("converged") else "NOT converged at the size limit"
+        how = f"{method}; face size by irradiance change ({steps}) {verdict}"
     face = st.get("face_size", np.asarray(result.radiance).shape[1])
     lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
              f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
