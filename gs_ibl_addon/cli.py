@@ -174,12 +174,15 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--probe", nargs=3, type=float, metavar=("X", "Y", "Z"),
                    help="probe position (default: the splats' opacity-weighted centre of mass)")
     q.add_argument("--method", default="auto", choices=["auto", "sh", "conv", "box", "exact"],
-                   help="irradiance filter: auto (SH when its measured error on this probe is within the "
-                        "tolerance, else exact integration), sh (9 SH coefficients), conv (cosine convolution, "
-                        "the thesis's method), box (box-filtered mips, fast and rough), exact (texel integral)")
-    q.add_argument("--face-size", type=int, default=0, help="radiance face size (default: chosen from --tolerance)")
+                   help="irradiance filter: auto (= exact, the most accurate at the same cost), exact (every "
+                        "texel integrated with its exact solid angle), sh (9 SH coefficients: rings near small "
+                        "bright sources), conv (cosine convolution, the thesis's method), box (box-filtered "
+                        "mips, fast and rough); docs/accuracy.md compares them")
+    q.add_argument("--face-size", type=int, default=0,
+                   help="radiance face size (default 0: start at 32 and double until the irradiance changes by "
+                        "less than --tolerance)")
     q.add_argument("--irradiance-size", type=int, default=16, help="irradiance cube face size (default 16)")
-    q.add_argument("--tolerance", type=float, default=0.01, help="relative irradiance error allowed (default 0.01)")
+    q.add_argument("--tolerance", type=float, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
     q.add_argument("--glossy", action="store_true", help="also write GGX prefiltered radiance (ggx_*.exr)")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
