@@ -25,12 +25,12 @@ shared uint s_start[256];
 shared uint s_splat[256];
 shared vec4 s_g0[256], s_g1[256];  // footprint quadric G (symmetric) and a flag: see footprint_quadric()
 
-// The rays d that see the splat with alpha >= alpha_min satisfy m(d) <= c, i.e. d^T G d <= 0 with
+// The rays d inside the splat's footprint satisfy m(d) <= c, i.e. d^T G d <= 0 with
 // G = W^T ((|o'|^2 - c) I - o' o'^T) W (splat_math.py: m = |o' x Wd|^2 / |Wd|^2). c is inflated a little so float
 // rounding never culls a tile that the raster would light. For splats tiny against their distance the quadric
 // loses precision; they cover a tile or two anyway, so they keep their rectangle (flag 1).
 void footprint_quadric(uint i, float cutoff, out vec4 g0, out vec4 g1) {
-    vec4 a = prepared[4u * i], b = prepared[4u * i + 1u], e = prepared[4u * i + 2u];
+    vec4 a = prepared[PREP * i], b = prepared[PREP * i + 1u], e = prepared[PREP * i + 2u];
     vec3 ol = vec3(a.w, b.w, e.w);
     float c = cutoff * 1.02 + 1e-3;
     float oo = dot(ol, ol);
@@ -87,7 +87,7 @@ void main() {
     if (j < p.n && depth_key[j] != 0xFFFFFFFFu) {
         uint i = depth_val[j];
         s_splat[t] = i;
-        footprint_quadric(i, 2.0 * log(prepared[4u * i + 3u].w / views[0].fwd.w), s_g0[t], s_g1[t]);
+        footprint_quadric(i, prepared[PREP * i + 4u].x, s_g0[t], s_g1[t]);
         for (uint v = 0u; v < p.n_views; ++v) s_rect[t * MAX_VIEWS + v] = rects[i * MAX_VIEWS + v];
     }
     barrier();

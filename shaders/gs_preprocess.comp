@@ -76,7 +76,8 @@ void main() {
         float dl = s2.x - q.x;  // delta^2
         opacity *= sqrt(det / max(det + dl * tr + dl * dl, 1e-38));
     }
-    float cutoff = 2.0 * log(opacity / views[0].fwd.w);
+    // The footprint is 3DGS's (alpha of the undimmed splat >= 1/255), whatever the energy-preserving dimming.
+    float cutoff = 2.0 * log(255.0 * po.w);
     if (!(dist > p.near) || !(cutoff > 0.0)) return;
     mat3 cov = cut_covariance(R, s2, cutoff);
     uint count = 0u;
@@ -90,10 +91,11 @@ void main() {
     vec3 inv = inversesqrt(s2);
     vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
     vec3 ol = -vec3(dot(w0, mu), dot(w1, mu), dot(w2, mu));
-    prepared[4u * i + 0u] = vec4(w0, ol.x);
-    prepared[4u * i + 1u] = vec4(w1, ol.y);
-    prepared[4u * i + 2u] = vec4(w2, ol.z);
-    prepared[4u * i + 3u] = vec4(sh_color(i, mu / dist), opacity);
+    prepared[PREP * i + 0u] = vec4(w0, ol.x);
+    prepared[PREP * i + 1u] = vec4(w1, ol.y);
+    prepared[PREP * i + 2u] = vec4(w2, ol.z);
+    prepared[PREP * i + 3u] = vec4(sh_color(i, mu / dist), opacity);
+    prepared[PREP * i + 4u] = vec4(cutoff, 0.0, 0.0, 0.0);
     tile_count[i] = count;
     depth_key[i] = floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
 }

@@ -13,6 +13,7 @@ layout(push_constant) uniform P { uint n_views; uint total_tiles; } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
+shared float s_cut[256];
 shared uint s_done;
 
 void main() {
@@ -21,7 +22,6 @@ void main() {
     uint v = 0u;
     for (uint k = 1u; k < p.n_views; ++k) if (g >= views[k].dims.w) v = k;
     View vw = views[v];
-    float alpha_min = vw.fwd.w;
     uint local_tile = g - vw.dims.w;
     uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
     uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
@@ -43,8 +43,9 @@ void main() {
         uint j = start + lid;
         if (j < range.y) {
             uint i = inst_val[j];
-            s_w0[lid] = prepared[4u * i]; s_w1[lid] = prepared[4u * i + 1u];
-            s_w2[lid] = prepared[4u * i + 2u]; s_col[lid] = prepared[4u * i + 3u];
+            s_w0[lid] = prepared[PREP * i]; s_w1[lid] = prepared[PREP * i + 1u];
+            s_w2[lid] = prepared[PREP * i + 2u]; s_col[lid] = prepared[PREP * i + 3u];
+            s_cut[lid] = prepared[PREP * i + 4u].x;
         }
         barrier();
         if (s_done == 256u) break;
@@ -55,8 +56,8 @@ void main() {
             if (dot(ol, dl) >= 0.0) continue;  // the closest approach lies behind the origin
             vec3 cr = cross(ol, dl);
             float m = dot(cr, cr) / dot(dl, dl);
+            if (m > s_cut[k]) continue;  // outside the footprint (3DGS: alpha < 1/255)
             float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
-            if (alpha < alpha_min) continue;
             float test_T = T * (1.0 - alpha);
             if (test_T < T_MIN) { done = true; break; }
             color += T * alpha * s_col[k].rgb;

@@ -4,13 +4,15 @@
 struct View {
     vec4 right_tanx;   // right (xyz), tan of the half width
     vec4 down_tany;    // down (xyz), tan of the half height
-    vec4 fwd;          // forward (xyz), the batch's alpha_min (w: contributions below it are skipped)
+    vec4 fwd;          // forward (xyz)
     uvec4 dims;        // width, height, tiles_x, first tile of this view in the batch
     uvec4 extra;       // first pixel of this view in the output, tiles_y
 };
 
 const uint TILE = 16u;
 const uint MAX_VIEWS = 6u;
+// vec4s per prepared splat: three rows of W with the origin in the splat frame, colour + opacity, footprint cutoff
+const uint PREP = 5u;
 // Depth keys drop the low 8 mantissa bits of the distance (relative precision 3e-5): three 8-bit sort passes
 // instead of four, and an order only splats within 0.003% of the same distance can swap.
 const uint DEPTH_KEY_SHIFT = 8u;
@@ -66,7 +68,7 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
     return true;
 }
 
-// The ellipsoid beyond which the splat's alpha falls below alpha_min: cutoff * Sigma'.
+// The ellipsoid beyond which the splat's alpha falls below 1/255: cutoff * Sigma'.
 mat3 cut_covariance(mat3 rot, vec3 s2, float cutoff) {
     mat3 rs = mat3(rot[0] * s2.x, rot[1] * s2.y, rot[2] * s2.z);
     return cutoff * (rs * transpose(rot));

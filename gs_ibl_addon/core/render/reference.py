@@ -1,7 +1,7 @@
 """A plain numpy splat renderer: the same maths as the GPU path, readable, for small scenes and tests.
 
 No tiles: every live splat is tested against every pixel, front to back by distance from the origin, with the
-GPU's rules (alpha clamp, skip below the batch's alpha_min, stop when transmittance would fall below 1e-4).
+GPU's rules (alpha clamp, nothing outside a splat's footprint, stop when transmittance would fall below 1e-4).
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from .views import ViewBatch
 
 def render_reference(scene: SplatScene, batch: ViewBatch, near: float = DEFAULT_NEAR, chunk: int = 64) -> list[np.ndarray]:
     """One (H, W, 4) float32 image per view: premultiplied linear RGB and alpha = 1 - transmittance."""
-    p = prepare(scene, batch.origin, batch.pixel_angle, near, batch.energy_preserving, batch.alpha_min)
+    p = prepare(scene, batch.origin, batch.pixel_angle, near, batch.energy_preserving)
     order = np.argsort(depth_keys(scene, batch.origin), kind="stable")
     order = order[p.alive[order]]
     images = []
@@ -28,7 +28,7 @@ def render_reference(scene: SplatScene, batch: ViewBatch, near: float = DEFAULT_
             idx = order[start:start + chunk]
             m, ahead = ray_mahalanobis(p, idx, dirs)
             alpha = np.minimum(ALPHA_MAX, p.opacity[idx, None] * np.exp(-0.5 * m))
-            alpha = np.where(ahead & (alpha >= batch.alpha_min), alpha, 0.0)
+            alpha = np.where(ahead & (m <= p.cutoff[idx, None]), alpha, 0.0)
             for k in range(len(idx)):  # compositing is sequential per splat; pixels stay vectorised
                 a = np.where(done, 0.0, alpha[k])
                 test_t = trans * (1.0 - a)

@@ -42,7 +42,7 @@ def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
         f = np.zeros(20, np.float32)
         f[0:3], f[3] = v.right, v.tan_x
         f[4:7], f[7] = v.down, v.tan_y
-        f[8:11], f[11] = v.forward, batch.alpha_min
+        f[8:11] = v.forward
         u = f.view(np.uint32)
         u[12:16] = (v.width, v.height, tx, tile_base)
         u[16:20] = (pixel_base, ty, 0, 0)
@@ -72,7 +72,7 @@ class SplatRenderer:
             self.rot.write(scene.rotations.astype(np.float32))
             # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
             self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
-        self.prepared = Buffer(c, n * 64, "prepared")
+        self.prepared = Buffer(c, n * 80, "prepared")  # PREP = 5 vec4 per splat (shaders/splat_common.glsl)
         self.tile_count = Buffer(c, n * 4, "tile_count")
         self.depth_key = Buffer(c, n * 4, "depth_key")
         self.depth_val = Buffer(c, n * 4, "depth_val")

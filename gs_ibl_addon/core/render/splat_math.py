@@ -23,10 +23,7 @@ from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
 
 DILATION_PX2 = 0.3
-ALPHA_MIN = 1.0 / 255.0  # 3DGS: contributions below this are skipped (views)
-# Probes keep far smaller contributions: energy-preserving dilation dims splats much smaller than a texel, and
-# dropping each below 1/255 would lose their light wholesale at small face sizes.
-PROBE_ALPHA_MIN = 1e-4
+ALPHA_MIN = 1.0 / 255.0  # 3DGS: a splat's footprint ends where its alpha falls below this
 ALPHA_MAX = 0.99
 T_MIN = 1e-4
 DEFAULT_NEAR = 0.01
@@ -38,14 +35,14 @@ class PreparedSplats:
     origin_local: np.ndarray  # (N, 3): W (origin - mu)
     color: np.ndarray  # (N, 3) SH colour toward the splat from the origin
     opacity: np.ndarray  # (N,)
-    cutoff: np.ndarray  # (N,) m beyond which alpha < alpha_min: 2 ln(opacity / alpha_min)
+    cutoff: np.ndarray  # (N,) footprint: m <= 2 ln(255 * opacity of the file), kept when dimming for energy
     distance: np.ndarray  # (N,) from the origin; the sort key
     cov_cut: np.ndarray  # (N, 3, 3): cutoff * Sigma', the ellipsoid whose projection bounds the splat
-    alive: np.ndarray  # (N,) bool: in front of the near distance and able to reach alpha_min
+    alive: np.ndarray  # (N,) bool: beyond the near distance, with a footprint
 
 
 def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: float = DEFAULT_NEAR,
-            energy_preserving: bool = False, alpha_min: float = ALPHA_MIN) -> PreparedSplats:
+            energy_preserving: bool = False) -> PreparedSplats:
     mu = scene.positions.astype(np.float64) - np.asarray(origin, np.float64)
     dist = np.linalg.norm(mu, axis=1)
     rot = quat_to_matrix(scene.rotations)
@@ -57,13 +54,14 @@ def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: flo
     dirs = mu / np.maximum(dist, 1e-30)[:, None]
     color = eval_sh_color(scene.sh, dirs)
     op = scene.opacities.astype(np.float64)
+    # The footprint stays 3DGS's (undimmed alpha >= 1/255): a splat dimmed for energy keeps its extent and its light
+    cutoff = 2.0 * np.log(np.maximum(op / ALPHA_MIN, 1e-30))
     if energy_preserving:
         q = scene.scales.astype(np.float64) ** 2
         c = np.einsum("ni,nik->nk", mu / np.maximum(dist, 1e-30)[:, None], rot) ** 2  # (u . R_k)^2
         det = c[:, 0] * q[:, 1] * q[:, 2] + c[:, 1] * q[:, 0] * q[:, 2] + c[:, 2] * q[:, 0] * q[:, 1]
         tr = np.sum(q * (1 - c), 1)
         op = op * np.sqrt(det / np.maximum(det + delta2 * tr + delta2 ** 2, 1e-300))
-    cutoff = 2.0 * np.log(np.maximum(op / alpha_min, 1e-30))
     cov = np.einsum("nij,nj,nkj->nik", rot, s2, rot)
     alive = (dist > near) & (cutoff > 0)
     return PreparedSplats(whiten, origin_local, color, op, cutoff, dist, cov * np.maximum(cutoff, 0)[:, None, None],

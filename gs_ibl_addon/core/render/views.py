@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cubemap import FACE_BASES
-from .splat_math import ALPHA_MIN, PROBE_ALPHA_MIN
 
 TILE = 16
 
@@ -45,11 +44,6 @@ class ViewBatch:
     views: tuple[View, ...]
     pixel_angle: float  # radians per pixel at the view centre; sets the anti-aliasing dilation
     energy_preserving: bool = False  # probes: dilation keeps each splat's integral (render/splat_math.py)
-
-    @property
-    def alpha_min(self) -> float:
-        """Contributions below this alpha are skipped: 3DGS's 1/255 for views, far less for probes."""
-        return PROBE_ALPHA_MIN if self.energy_preserving else ALPHA_MIN
 
     @staticmethod
     def cubemap(origin, face_size: int, energy_preserving: bool = True) -> "ViewBatch":
