@@ -1,6 +1,9 @@
 #version 450
 // One workgroup per 16x16 tile of any view: front-to-back compositing of the tile's splats, each evaluated along
 // the pixel's ray, in batches staged through shared memory; stops when every pixel of the tile is opaque.
+// Small images have few tiles, too few to fill a GPU: then each tile's list is cut into `chunks` consecutive
+// pieces composited by separate workgroups into (colour, transmittance) partials, which gs_merge.comp joins in
+// order (front-to-back compositing is associative).
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 layout(local_size_x = 16, local_size_y = 16) in;
@@ -8,8 +11,8 @@ layout(std430, binding = 0) readonly buffer Views { View views[]; };
 layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
 layout(std430, binding = 2) readonly buffer InstVal { uint inst_val[]; };
 layout(std430, binding = 3) readonly buffer Prepared { vec4 prepared[]; };
-layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };
-layout(push_constant) uniform P { uint n_views; uint total_tiles; } p;
+layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks > 1: partials, chunk-major
+layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
@@ -17,8 +20,9 @@ shared float s_cut[256];
 shared uint s_done;
 
 void main() {
-    uint g = linear_group();
-    if (g >= p.total_tiles) return;  // uniform per workgroup
+    uint wg = linear_group();
+    if (wg >= p.total_tiles * p.chunks) return;  // uniform per workgroup
+    uint g = wg % p.total_tiles, chunk = wg / p.total_tiles;
     uint v = 0u;
     for (uint k = 1u; k < p.n_views; ++k) if (g >= views[k].dims.w) v = k;
     View vw = views[v];
@@ -30,7 +34,10 @@ void main() {
     float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
     vec3 d = vw.fwd.xyz + s * vw.right_tanx.xyz + t * vw.down_tany.xyz;
 
-    uvec2 range = ranges[g];
+    uvec2 whole = ranges[g];
+    uint len = whole.y - whole.x;
+    uint q = len / p.chunks, rem = len % p.chunks;  // chunk c starts at c*q + min(c, rem): no overflow
+    uvec2 range = whole.x + uvec2(chunk * q + min(chunk, rem), (chunk + 1u) * q + min(chunk + 1u, rem));
     uint lid = gl_LocalInvocationIndex;
     bool done = !inside;
     vec3 color = vec3(0.0);
@@ -58,11 +65,16 @@ void main() {
             float m = dot(cr, cr) / dot(dl, dl);
             if (m > s_cut[k]) continue;  // outside the footprint (3DGS: alpha < 1/255)
             float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
-            float test_T = T * (1.0 - alpha);
-            if (test_T < T_MIN) { done = true; break; }
             color += T * alpha * s_col[k].rgb;
-            T = test_T;
+            T *= 1.0 - alpha;
+            // Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then composes chunk by chunk, and a
+            // nearly opaque last splat does not leave up to 1% of transmittance behind.
+            if (T < T_MIN) { done = true; break; }
         }
     }
-    if (inside) image[vw.extra.x + py * vw.dims.x + px] = vec4(color, 1.0 - T);
+    uint pixel = vw.extra.x + py * vw.dims.x + px;
+    if (inside) {
+        if (p.chunks == 1u) image[pixel] = vec4(color, 1.0 - T);
+        else image[chunk * p.total_pixels + pixel] = vec4(color, T);
+    }
 }

@@ -1,7 +1,7 @@
 """A plain numpy splat renderer: the same maths as the GPU path, readable, for small scenes and tests.
 
 No tiles: every live splat is tested against every pixel, front to back by distance from the origin, with the
-GPU's rules (alpha clamp, nothing outside a splat's footprint, stop when transmittance would fall below 1e-4).
+GPU's rules (alpha clamp, nothing outside a splat's footprint, a pixel finished once transmittance < 1e-4).
 """
 from __future__ import annotations
 
@@ -31,12 +31,9 @@ def render_reference(scene: SplatScene, batch: ViewBatch, near: float = DEFAULT_
             alpha = np.where(ahead & (m <= p.cutoff[idx, None]), alpha, 0.0)
             for k in range(len(idx)):  # compositing is sequential per splat; pixels stay vectorised
                 a = np.where(done, 0.0, alpha[k])
-                test_t = trans * (1.0 - a)
-                stop = (test_t < T_MIN) & (a > 0)
-                done |= stop
-                a = np.where(stop, 0.0, a)
                 color += (trans * a)[:, None] * p.color[idx[k]][None, :]
-                trans = np.where(stop, trans, trans * (1.0 - a))
+                trans = trans * (1.0 - a)
+                done |= trans < T_MIN  # the splat crossing T_MIN counts, then the pixel is finished
             if done.all():
                 break
         img = np.concatenate([color, (1.0 - trans)[:, None]], 1).reshape(view.height, view.width, 4)

@@ -23,6 +23,16 @@ from .gpu_sort import RadixSorter, Scanner
 from .splat_math import DEFAULT_NEAR
 from .views import TILE, ViewBatch
 
+# Raster workgroups wanted in flight: a 32^2 cubemap has only 24 tiles, so each tile's list is split into chunks
+# composited in parallel (gs_raster.comp / gs_merge.comp) until about this many workgroups run.
+RASTER_TARGET_GROUPS = 1024
+MAX_RASTER_CHUNKS = 32
+
+
+def raster_chunks(total_tiles: int) -> int:
+    return int(min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, total_tiles))))
+
+
 DEPTH_KEY_BITS = 24  # distance float bits >> 8 (DEPTH_KEY_SHIFT in shaders/splat_common.glsl)
 
 
@@ -109,8 +119,11 @@ class SplatRenderer:
             ranges = Buffer(self.ctx, (total_tiles + 1) * 8, "ranges")  # + the missed-tile key's run
             image = Buffer(self.ctx, total_pixels * 16, "image")
             views = Buffer(self.ctx, max(view_bytes, 6 * 80), "views")
+            chunks = raster_chunks(total_tiles)
+            partial = Buffer(self.ctx, total_pixels * 16 * chunks if chunks > 1 else 16, "raster-partials")
             self._frame = {"tiles": total_tiles, "pixels": total_pixels, "ranges": ranges, "image": image,
-                           "views": views, "buffers": (ranges, image, views)}
+                           "views": views, "chunks": chunks, "partial": partial,
+                           "buffers": (ranges, image, views, partial)}
 
     def render(self, batch: ViewBatch, timestamps: bool = False) -> RenderResult:
         t0 = time.perf_counter()
@@ -167,9 +180,14 @@ class SplatRenderer:
                 rec.dispatch(c.pipeline("gs_ranges", 3, 0), [self.inst_key, self.count, fr["ranges"]],
                              groups(self.capacity, 256, c))
                 rec.timestamp("ranges")
-            rec.dispatch(c.pipeline("gs_raster", 5, 8),
-                         [fr["views"], fr["ranges"], self.inst_val, self.prepared, fr["image"]],
-                         groups(total_tiles, 1, c), pack("II", nv, total_tiles))
+            chunks, npx = fr["chunks"], fr["pixels"]
+            rec.dispatch(c.pipeline("gs_raster", 5, 16),
+                         [fr["views"], fr["ranges"], self.inst_val, self.prepared,
+                          fr["partial"] if chunks > 1 else fr["image"]],
+                         groups(total_tiles * chunks, 1, c), pack("IIII", nv, total_tiles, chunks, npx))
+            if chunks > 1:
+                rec.dispatch(c.pipeline("gs_merge", 2, 8), [fr["partial"], fr["image"]], groups(npx, 256, c),
+                             pack("II", chunks, npx))
             rec.timestamp("raster")
         return rec.timings_ms
 
