@@ -1,8 +1,9 @@
 #version 450
 // One (tile, splat) instance per tile each splat touches, written in depth order; a stable sort by tile then keeps
-// front-to-back order inside every tile. A workgroup takes 256 depth-sorted splats, keeps their tile rectangles in
-// shared memory, and spreads all their instances over its 256 threads, so one splat covering thousands of tiles
-// does not leave the other threads idle. Instances past the capacity are dropped and reported.
+// front-to-back order inside every tile. One thread per instance: the thread finds the splat owning its slot by a
+// binary search of the depth-ordered prefix sums, so the work is even however unevenly the tiles are spread (the
+// nearest splats, which cover whole faces, all sit at the front of the depth order). Instances past the capacity
+// are dropped and reported.
 // The tile rectangle bounds the splat's footprint; a tile inside it that the footprint misses (a long diagonal
 // splat's corners) gets the key `n_tiles`, one past the last tile, so the sort moves it out of every tile's run.
 #extension GL_GOOGLE_include_directive : require
@@ -20,26 +21,19 @@ layout(std430, binding = 8) readonly buffer Prepared { vec4 prepared[]; };
 layout(std430, binding = 9) readonly buffer Rects { uvec2 rects[]; };  // from gs_preprocess
 layout(push_constant) uniform P { uint n; uint capacity; uint n_views; uint n_tiles; } p;
 
-shared uvec2 s_rect[256u * MAX_VIEWS];  // (x0 | y0 << 16, x1 | y1 << 16) in tiles; x0 == x1 when untouched
-shared uint s_start[256];
-shared uint s_splat[256];
-shared vec4 s_g0[256], s_g1[256];  // footprint quadric G (symmetric) and a flag: see footprint_quadric()
-
 // The rays d inside the splat's footprint satisfy m(d) <= c, i.e. d^T G d <= 0 with
 // G = W^T ((|o'|^2 - c) I - o' o'^T) W (splat_math.py: m = |o' x Wd|^2 / |Wd|^2). c is inflated a little so float
 // rounding never culls a tile that the raster would light. For splats tiny against their distance the quadric
-// loses precision; they cover a tile or two anyway, so they keep their rectangle (flag 1).
-void footprint_quadric(uint i, float cutoff, out vec4 g0, out vec4 g1) {
+// loses precision; they cover a tile or two anyway, so they keep their whole rectangle (returns false).
+bool footprint_quadric(uint i, out mat3 g) {
     vec4 a = prepared[PREP * i], b = prepared[PREP * i + 1u], e = prepared[PREP * i + 2u];
     vec3 ol = vec3(a.w, b.w, e.w);
-    float c = cutoff * 1.02 + 1e-3;
+    float c = prepared[PREP * i + 4u].x * 1.02 + 1e-3;
     float oo = dot(ol, ol);
-    if (oo > 1e4 * c) { g0 = vec4(0.0); g1 = vec4(0.0, 0.0, 1.0, 0.0); return; }
+    if (oo > 1e4 * c) return false;
     mat3 wt = mat3(a.xyz, b.xyz, e.xyz);  // columns = rows of W, i.e. W^T
-    mat3 k = mat3(oo - c) - outerProduct(ol, ol);
-    mat3 g = wt * k * transpose(wt);
-    g0 = vec4(g[0][0], g[0][1], g[0][2], g[1][1]);
-    g1 = vec4(g[1][2], g[2][2], 0.0, 0.0);
+    g = wt * (mat3(oo - c) - outerProduct(ol, ol)) * transpose(wt);
+    return true;
 }
 
 float qmin_1d(float a, float b, float c, float lo, float hi) {  // min of a x^2 + 2 b x + c over [lo, hi]
@@ -49,10 +43,7 @@ float qmin_1d(float a, float b, float c, float lo, float hi) {  // min of a x^2 
 }
 
 // Does the footprint reach a pixel centre of tile (tx, ty) of view v?
-bool tile_touched(uint s, View vw, uint tx, uint ty) {
-    vec4 g0 = s_g0[s], g1 = s_g1[s];
-    if (g1.z != 0.0) return true;
-    mat3 g = mat3(g0.x, g0.y, g0.z, g0.y, g0.w, g1.x, g0.z, g1.x, g1.y);
+bool tile_touched(mat3 g, View vw, uint tx, uint ty) {
     vec3 r = vw.right_tanx.xyz, dn = vw.down_tany.xyz, f = vw.fwd.xyz;
     vec3 gr = g * r, gd = g * dn, gf = g * f;
     float A = dot(r, gr), B = dot(dn, gd), C = dot(r, gd), D = dot(r, gf), E = dot(dn, gf), F = dot(f, gf);
@@ -76,43 +67,30 @@ bool tile_touched(uint s, View vw, uint tx, uint ty) {
 }
 
 void main() {
-    uint t = gl_LocalInvocationID.x;
-    uint j0 = linear_group() * 256u;
-    uint j = j0 + t;
+    uint q = linear_group() * 256u + gl_LocalInvocationID.x;
     uint all_instances = total[0];
-    if (j == 0u) { count[0] = min(all_instances, p.capacity); count[1] = all_instances; }
-    if (j0 >= p.n) return;  // uniform per workgroup
-    s_start[t] = j < p.n ? offsets[j] : all_instances;
-    for (uint v = 0u; v < MAX_VIEWS; ++v) s_rect[t * MAX_VIEWS + v] = uvec2(0u);
-    if (j < p.n && depth_key[j] != 0xFFFFFFFFu) {
-        uint i = depth_val[j];
-        s_splat[t] = i;
-        footprint_quadric(i, prepared[PREP * i + 4u].x, s_g0[t], s_g1[t]);
-        for (uint v = 0u; v < p.n_views; ++v) s_rect[t * MAX_VIEWS + v] = rects[i * MAX_VIEWS + v];
+    if (q == 0u) { count[0] = min(all_instances, p.capacity); count[1] = all_instances; }
+    if (q >= min(all_instances, p.capacity)) return;
+    // the owner of slot q: the last splat (in depth order) whose first slot is <= q; empty splats share a start
+    // with their successor and so are never the last
+    uint lo = 0u, hi = p.n - 1u;
+    while (lo < hi) {
+        uint mid = (lo + hi + 1u) >> 1;
+        if (offsets[mid] <= q) lo = mid; else hi = mid - 1u;
     }
-    barrier();
-    uint end = j0 + 256u < p.n ? offsets[j0 + 256u] : all_instances;
-    for (uint q = s_start[0] + t; q < end; q += 256u) {
-        // the splat owning instance q: the last one whose first instance is <= q (empty ranges share a start)
-        uint lo = 0u, hi = 255u;
-        while (lo < hi) {
-            uint mid = (lo + hi + 1u) >> 1;
-            if (s_start[mid] <= q) lo = mid; else hi = mid - 1u;
+    uint i = depth_val[lo];
+    uint r = q - offsets[lo];
+    for (uint v = 0u; v < p.n_views; ++v) {
+        uvec2 pr = rects[i * MAX_VIEWS + v];
+        uint x0 = pr.x & 0xFFFFu, y0 = pr.x >> 16, w = (pr.y & 0xFFFFu) - x0, h = (pr.y >> 16) - y0;
+        if (r < w * h) {
+            uint tx = x0 + r % w, ty = y0 + r / w;
+            mat3 g;
+            bool hit = !footprint_quadric(i, g) || tile_touched(g, views[v], tx, ty);
+            inst_key[q] = hit ? views[v].dims.w + ty * views[v].dims.z + tx : p.n_tiles;
+            inst_val[q] = i;
+            return;
         }
-        uint r = q - s_start[lo];
-        for (uint v = 0u; v < p.n_views; ++v) {
-            uvec2 pr = s_rect[lo * MAX_VIEWS + v];
-            uint x0 = pr.x & 0xFFFFu, y0 = pr.x >> 16, w = (pr.y & 0xFFFFu) - x0, h = (pr.y >> 16) - y0;
-            if (r < w * h) {
-                if (q < p.capacity) {
-                    uint tx = x0 + r % w, ty = y0 + r / w;
-                    bool hit = tile_touched(lo, views[v], tx, ty);
-                    inst_key[q] = hit ? views[v].dims.w + ty * views[v].dims.z + tx : p.n_tiles;
-                    inst_val[q] = s_splat[lo];
-                }
-                break;
-            }
-            r -= w * h;
-        }
+        r -= w * h;
     }
 }

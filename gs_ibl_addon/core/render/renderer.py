@@ -171,7 +171,7 @@ class SplatRenderer:
                 rec.dispatch(c.pipeline("gs_emit", 10, 16),
                              [fr["views"], self.depth_key, self.depth_val, self.offsets, total_buf, self.inst_key,
                               self.inst_val, self.count, self.prepared, self.rects],
-                             groups(n, 256, c), pack("IIII", n, self.capacity, nv, total_tiles))
+                             groups(self.capacity, 256, c), pack("IIII", n, self.capacity, nv, total_tiles))
                 rec.timestamp("emit")
                 # tile ids run to total_tiles inclusive: that one is the key of instances whose tile was missed
                 bits = max(1, int(total_tiles).bit_length())
