@@ -32,9 +32,16 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=10)
     ap.add_argument("--sh-degree", type=int, default=3)
     ap.add_argument("--extent", type=float, default=5.0, help="half size of the box of splats around the probe")
+    ap.add_argument("--max-chunks", type=int, help="override the raster's chunk limit (experiments)")
+    ap.add_argument("--target-groups", type=int, help="override the raster's workgroup target (experiments)")
     ap.add_argument("--csv", default=os.path.join(os.path.dirname(__file__), "..", "docs", "bench", "renderer.csv"))
     args = ap.parse_args()
     ctx = get_context()
+    import gs_ibl_addon.core.render.renderer as renderer_module
+    if args.max_chunks:
+        renderer_module.MAX_RASTER_CHUNKS = args.max_chunks
+    if args.target_groups:
+        renderer_module.RASTER_TARGET_GROUPS = args.target_groups
     date = datetime.date.today().isoformat()
     print(f"device: {ctx.device_name}, date {date}, SH degree {args.sh_degree}, median of {args.repeats}")
     print("| splats | face | instances | " + " | ".join(STAGES) + " | wall ms |")
