@@ -24,8 +24,11 @@ from .splat_math import DEFAULT_NEAR
 from .views import TILE, ViewBatch
 
 # Raster workgroups wanted in flight: a 32^2 cubemap has only 24 tiles, so each tile's list is split into chunks
-# composited in parallel (gs_raster.comp / gs_merge.comp) until about this many workgroups run.
-RASTER_TARGET_GROUPS = 1024
+# composited in parallel (gs_raster.comp / gs_merge.comp) until about this many workgroups run. Chunks cost the
+# early termination of pixels that turn opaque in an earlier chunk: on an H200 (docs/benchmarks.md) splitting
+# 24 tiles 32 ways halved a 1M-splat 32^2 probe's raster time, while splitting 96 tiles 10 ways made 64^2 slower.
+# 256 splits only where tiles are very few.
+RASTER_TARGET_GROUPS = 256
 MAX_RASTER_CHUNKS = 32
 
 
