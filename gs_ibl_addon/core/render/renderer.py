@@ -23,16 +23,19 @@ from .gpu_sort import RadixSorter, Scanner
 from .splat_math import DEFAULT_NEAR
 from .views import TILE, ViewBatch
 
-# Raster workgroups wanted in flight: a 32^2 cubemap has only 24 tiles, so each tile's list is split into chunks
-# composited in parallel (gs_raster.comp / gs_merge.comp) until about this many workgroups run. Chunks cost the
-# early termination of pixels that turn opaque in an earlier chunk: on an H200 (docs/benchmarks.md) splitting
-# 24 tiles 32 ways halved a 1M-splat 32^2 probe's raster time, while splitting 96 tiles 10 ways made 64^2 slower.
-# 256 splits only where tiles are very few.
-RASTER_TARGET_GROUPS = 256
+# A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles each tile's list
+# is split into chunks composited in parallel (gs_raster.comp / gs_merge.comp), up to RASTER_TARGET_GROUPS
+# workgroups. Chunks give up the early termination of pixels that turned opaque in an earlier chunk, so they only
+# pay where tiles are very few: on an H200, for 1M splats, 32 chunks took a 32^2 probe's raster from 2.0 to 1.1 ms,
+# while 2 to 10 chunks made 64^2 slower than one pass (0.76 ms) (docs/benchmarks.md).
+RASTER_TARGET_GROUPS = 1024
 MAX_RASTER_CHUNKS = 32
+CHUNK_BELOW_TILES = 64
 
 
 def raster_chunks(total_tiles: int) -> int:
+    if total_tiles >= CHUNK_BELOW_TILES:
+        return 1
     return int(min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, total_tiles))))
 
 
