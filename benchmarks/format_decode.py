@@ -45,7 +45,8 @@ print(json.dumps(out))
 """
 
 
-def _child(path: str, traced: bool) -> dict:
+def measure(path: str, traced: bool) -> dict:
+    """Decode ``path`` with read_scene in a fresh process: wall time, count, peak RSS delta (and tracemalloc peak)."""
     env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
     res = subprocess.run([sys.executable, "-c", CHILD, path, "1" if traced else "0"], env=env,
                          capture_output=True, text=True, check=True)
@@ -78,10 +79,10 @@ def main() -> None:
         path = stem + suffix.get(name, f".{name.replace(' ', '')}.spz")
         write(path)
         size = os.path.getsize(path)
-        runs = [_child(path, traced=False) for _ in range(args.repeat)]
+        runs = [measure(path, traced=False) for _ in range(args.repeat)]
         best = min(runs, key=lambda r: r["wall_s"])
         rss = max(r["rss_delta_kib"] for r in runs) * 1024
-        traced = _child(path, traced=True)["traced_peak_bytes"]
+        traced = measure(path, traced=True)["traced_peak_bytes"]
         print(f"{name:15s} {best['count']} splats  file {size / 2**20:7.1f} MiB  decode {best['wall_s']:6.2f} s  "
               f"peak RSS +{rss / 2**20:6.0f} MiB  tracemalloc peak {traced / 2**20:6.0f} MiB  "
               f"scene {best['scene_bytes'] / 2**20:5.0f} MiB", flush=True)

@@ -7,21 +7,21 @@ The scene is benchmarks/renderer_bench.py's (random splats around the probe, shr
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import os
 import statistics
 import sys
-import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from bench_common import append_csv, bench_scene, warm_up  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from gs_ibl_addon.core.probe import filter_probe  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
-from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
 
 
 def main() -> None:
@@ -36,15 +36,12 @@ def main() -> None:
     print("| splats | face | render ms | filter ms (exact, 16²) | probe ms |")
     print("|---|---|---|---|---|")
     for n in [int(x) for x in args.counts.split(",")]:
-        scene = random_scene(n, seed=1, sh_degree=3, extent=5.0)
-        scene.scales *= min(1.0, (50_000 / n) ** 0.5)
+        scene = bench_scene(n)
         r = SplatRenderer(scene)
         for face in [int(x) for x in args.faces.split(",")]:
             batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
-            t_warm = time.perf_counter()
-            while time.perf_counter() - t_warm < 1.0:
-                cube = np.stack(r.render(batch).images)
-                filter_probe(cube, 16, method="exact", roughness=None, use_gpu=True, vk_context=r.ctx)
+            warm_up(lambda: filter_probe(np.stack(r.render(batch).images), 16, method="exact", roughness=None,
+                                         use_gpu=True, vk_context=r.ctx))
             rend, filt = [], []
             for _ in range(args.repeats):
                 res = r.render(batch, timestamps=True)
@@ -57,14 +54,7 @@ def main() -> None:
             rows.append({"device": r.ctx.device_name, "date": date, "splats": n, "face": face,
                          "render_ms": round(mr, 4), "filter_ms": round(mf, 4), "probe_ms": round(mr + mf, 4)})
         r.close()
-    os.makedirs(os.path.dirname(args.csv), exist_ok=True)
-    new = not os.path.exists(args.csv)
-    with open(args.csv, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        if new:
-            w.writeheader()
-        w.writerows(rows)
-
+    append_csv(args.csv, rows)
 
 if __name__ == "__main__":
     main()

@@ -8,7 +8,6 @@ above 50k splats the splats shrink as 1/sqrt(count), as a denser capture of the 
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime
 import os
 import statistics
@@ -16,10 +15,12 @@ import sys
 import time
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from bench_common import append_csv, bench_scene, warm_up  # noqa: E402
 
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
-from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
 from gs_ibl_addon.core.vk import get_context  # noqa: E402
 
 STAGES = ["preprocess", "sort_depth", "emit", "sort_tiles", "ranges", "raster", "total"]
@@ -49,18 +50,12 @@ def main() -> None:
     rows = []
     for n in [int(x) for x in args.counts.split(",")]:
         t = time.perf_counter()
-        scene = random_scene(n, seed=1, sh_degree=args.sh_degree, extent=args.extent)
-        # Trained captures are surfaces: more splats means smaller ones (size ~ 1/sqrt(count)), so overlap per
-        # pixel stays realistic instead of growing with the count. 50k splats keep random_scene's sizes.
-        scene.scales *= min(1.0, (50_000 / n) ** 0.5)
+        scene = bench_scene(n, args.sh_degree, args.extent)
         renderer = SplatRenderer(scene)
         upload_s = time.perf_counter() - t
         for face in [int(x) for x in args.faces.split(",")]:
             batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
-            # warm up for a second: GPU clocks ramp after the idle seconds of building the scene on the CPU
-            t_warm = time.perf_counter()
-            while time.perf_counter() - t_warm < 1.0:
-                renderer.render(batch, timestamps=True)
+            warm_up(lambda: renderer.render(batch, timestamps=True))
             runs = [renderer.render(batch, timestamps=True) for _ in range(args.repeats)]
             med = {s: statistics.median(r.timings_ms.get(s, 0.0) for r in runs) for s in STAGES}
             wall = statistics.median(r.wall_ms for r in runs)
@@ -71,14 +66,7 @@ def main() -> None:
                          "instances": inst, **{f"{s}_ms": round(med[s], 4) for s in STAGES}, "wall_ms": round(wall, 2),
                          "setup_s": round(upload_s, 2)})
         renderer.close()
-    os.makedirs(os.path.dirname(args.csv), exist_ok=True)
-    new = not os.path.exists(args.csv)
-    with open(args.csv, "a", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        if new:
-            w.writeheader()
-        w.writerows(rows)
-
+    append_csv(args.csv, rows)
 
 if __name__ == "__main__":
     main()

@@ -31,20 +31,20 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                             description="Splat object whose light this probe captures")
     method: EnumProperty(
         name="Method",
-        items=[("AUTO", "Auto", "Choose from the tolerance: SH projection when it is accurate enough, else convolution"),
-               ("SH", "Spherical Harmonics", "Project the radiance onto 9 SH coefficients (fast, smooth)"),
-               ("CONV", "Cosine Convolution", "Exact cosine-weighted integral per irradiance texel"),
+        items=[("AUTO", "Auto", "Exact integral; with Face Size 0 the faces grow until the irradiance meets the tolerance"),
+               ("SH", "Spherical Harmonics", "9 SH coefficients (fast, smooth; rings next to small bright lights)"),
+               ("CONV", "Cosine Convolution", "Sampled cosine-weighted integral per irradiance texel (the thesis's method; noisy)"),
                ("BOX", "Box Filter", "Box-filtered mip chain (fast approximation)"),
-               ("EXACT", "Exact", "Brute-force integral over every radiance texel (slow; a reference)")],
+               ("EXACT", "Exact", "Integral over every radiance texel with its exact solid angle (GPU; the most accurate)")],
         default="AUTO")
     face_size: IntProperty(name="Face Size", default=0, min=0, max=2048,
                            description="Resolution of each of the six radiance faces rendered from the probe "
-                                       "(0: chosen from the tolerance)")
+                                       "(0: doubled from 32 until the irradiance changes by less than the tolerance)")
     irradiance_size: IntProperty(name="Irradiance Size", default=16, min=4, max=512,
                                  description="Face size of the irradiance cube; its lat-long image is 4x as wide "
                                              "and 2x as high")
     tolerance: FloatProperty(name="Tolerance", default=0.01, min=1e-4, max=0.5, precision=3,
-                             description="Relative irradiance error allowed when choosing sizes and method")
+                             description="Relative irradiance change that ends the face-size search (Face Size 0)")
     strength: FloatProperty(name="Strength", default=1.0, min=0.0, soft_max=10.0, update=_strength_changed,
                             description="Multiplier of the probe's light in the World")
     keep_background: BoolProperty(name="Keep Background", default=True,

@@ -1,0 +1,41 @@
+"""What the GPU benchmarks share: their scene, a warm-up, and appending rows to a CSV."""
+from __future__ import annotations
+
+import csv
+import os
+import sys
+import time
+from typing import Callable
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+
+from gs_ibl_addon.core.scene import SplatScene  # noqa: E402
+from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
+
+
+def bench_scene(n: int, sh_degree: int = 3, extent: float = 5.0) -> SplatScene:
+    """random_scene filling a box around the origin. Trained captures are surfaces: more splats means smaller ones
+    (size ~ 1/sqrt(count)), so overlap per pixel stays realistic instead of growing with the count; 50k splats
+    keep random_scene's sizes."""
+    scene = random_scene(n, seed=1, sh_degree=sh_degree, extent=extent)
+    scene.scales *= min(1.0, (50_000 / n) ** 0.5)
+    return scene
+
+
+def warm_up(step: Callable[[], object], seconds: float = 1.0) -> None:
+    """Run ``step`` for a while: GPU clocks ramp after the idle seconds of building a scene on the CPU."""
+    t = time.perf_counter()
+    while time.perf_counter() - t < seconds:
+        step()
+
+
+def append_csv(path: str, rows: list[dict]) -> None:
+    if not rows:
+        return
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    new = not os.path.exists(path)
+    with open(path, "a", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        if new:
+            w.writeheader()
+        w.writerows(rows)
