@@ -1,11 +1,12 @@
 """Synthetic scenes: counts, finiteness, colours equal to their radiance function, coverage and holes checked with
-the numpy ray-Gaussian compositing reference (trace_rays)."""
+the renderer's numpy reference along rays (composite_rays)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 from gs_ibl_addon.core import synthetic as syn
+from gs_ibl_addon.core.render.reference import composite_rays
 from gs_ibl_addon.core.scene import SH_C0, SplatScene, quat_to_matrix
 
 FIELDS = ("positions", "scales", "rotations", "opacities", "sh")
@@ -93,7 +94,7 @@ def test_shell_splats_are_thin_disks_tangent_to_the_sphere():
 @pytest.mark.parametrize("n, centre", [(2000, (0.0, 0.0, 0.0)), (5000, (3.0, -1.0, 2.0))])
 def test_shell_has_no_holes_from_centre(n, centre):
     s = syn.shell_scene(syn.radiance_functions()["walls"], n, radius=4.0, center=centre)
-    _, alpha = syn.trace_rays(s, centre, random_dirs(600, n))
+    _, alpha = composite_rays(s, centre, random_dirs(600, n))
     assert alpha.min() > 0.99, alpha.min()
 
 
@@ -102,8 +103,9 @@ def test_shell_renders_its_radiance_from_centre():
     sky = syn.SkyGradient()
     s = syn.shell_scene(sky, 4000, radius=3.0)
     d = random_dirs(300, 7)
-    rgb, alpha = syn.trace_rays(s, (0, 0, 0), d)
-    np.testing.assert_allclose(rgb / alpha[:, None], sky(d), rtol=0.03)
+    rgb, alpha = composite_rays(s, (0, 0, 0), d)
+    # a ray's colour blends the few splats overlapping it, weighted by their front-to-back order: within 3.5%
+    np.testing.assert_allclose(rgb / alpha[:, None], sky(d), rtol=0.035)
 
 
 def test_shell_scales_to_millions_of_splats():
@@ -133,7 +135,7 @@ def test_room_holes_where_said():
     wall = covered & (dist > 3 * room.sigma)
     hole = ~covered & (dist > 4 * room.sigma)
     assert hole[:160].all() and wall[160:].mean() > 0.8
-    _, alpha = syn.trace_rays(s, p, d)
+    _, alpha = composite_rays(s, p, d)
     assert alpha[wall].min() > 0.99
     assert alpha[hole].max() < 0.01
     assert (~covered[160:]).sum() < 40  # random directions mostly meet walls
@@ -147,7 +149,7 @@ def test_room_covered_geometry():
     np.testing.assert_array_equal(room.covered(p, d), [False, True, True, True, False, True])
     closed = syn.room_scene(window=None, skylight=None)
     assert closed.covered(p, random_dirs(200, 1)).all()
-    _, alpha = syn.trace_rays(closed.scene, p, random_dirs(200, 1))
+    _, alpha = composite_rays(closed.scene, p, random_dirs(200, 1))
     assert alpha.min() > 0.99
 
 
@@ -184,7 +186,7 @@ def test_sample_environment():
     # Seen from a probe in the room, every direction meets something: the window looks onto the bright panel.
     probe = (0.0, 0.5, 1.2)
     d = random_dirs(200, 9)
-    col, alpha = syn.trace_rays(s, probe, d)
+    col, alpha = composite_rays(s, probe, d)
     assert alpha.min() > 0.99
-    win_rgb, _ = syn.trace_rays(s, (0.0, 0.0, 1.6), np.array([[1.0, 0.0, 0.0], [1.0, 0.3, 0.1]]))
+    win_rgb, _ = composite_rays(s, (0.0, 0.0, 1.6), np.array([[1.0, 0.0, 0.0], [1.0, 0.3, 0.1]]))
     assert win_rgb.min() > 4.0  # daylight through the window

@@ -7,8 +7,7 @@
 - ``room_scene``: a box-shaped room with openings (window, skylight) and a function saying which directions are holes.
 - ``random_scene``: random splats in realistic ranges, fast for millions.
 - ``sample_environment``: the small bundled demo environment (a room with coloured walls, a bright window, objects).
-- ``trace_rays``: a plain numpy reference that composites splats along rays with the ray-Gaussian maximum
-  (the known-answer check for coverage and colour).
+Coverage and colour along rays are checked with render.reference.composite_rays, the renderer's numpy reference.
 
 All scenes are SH degree 0 unless said otherwise (``scene.with_sh_degree`` pads), Z is up, units are metres.
 """
@@ -19,8 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from .scene import SplatScene, quat_to_matrix, rgb_to_sh_dc
-from .sh import eval_sh_color
+from .scene import SplatScene, rgb_to_sh_dc
 
 RadianceFn = Callable[[np.ndarray], np.ndarray]
 
@@ -340,48 +338,3 @@ def sample_environment() -> SplatScene:
         _sphere_object((1.2, -1.5, 0.4), 0.4, (0.1, 0.35, 0.8), spacing * 0.6),  # on the floor
     ]
     return concat([room, sky, lamp, *objects], "<sample environment>")
-
-
-# ---------------------------------------------------------------------------------------------------------------
-# Reference compositing along rays
-
-def trace_rays(scene: SplatScene, origin: np.ndarray, dirs: np.ndarray,
-               max_alpha: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Composite ``scene`` along rays from ``origin`` (plain numpy, float64): returns (rgb (M, 3), alpha (M,)).
-
-    Each splat contributes alpha = opacity * exp(-0.5 * min_t (o + t d - mu)^T Sigma^-1 (o + t d - mu)) (the
-    ray-Gaussian maximum, as 3D-GRT and StopThePop-style renderers use), only where that maximum lies in front
-    (t > 0), clamped to ``max_alpha``; splats are blended front to back in order of that t. Colour is the splat's SH
-    evaluated toward the direction from ``origin`` to the splat centre. Dense over splats: for tests (<~50k splats).
-    """
-    o = np.asarray(origin, np.float64)
-    d = _unit(np.asarray(dirs, np.float64).reshape(-1, 3))
-    r = quat_to_matrix(scene.rotations)
-    inv_s2 = 1.0 / scene.scales.astype(np.float64) ** 2
-    a = np.einsum("nij,nj,nkj->nik", r, inv_s2, r)  # Sigma^-1 = R S^-2 R^T
-    v = o - scene.positions.astype(np.float64)  # (N, 3)
-    av = np.einsum("nij,nj->ni", a, v)
-    vav = np.einsum("ni,ni->n", v, av)
-    iu = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)]
-    a6 = np.stack([a[:, i, j] * (1.0 if i == j else 2.0) for i, j in iu], 0)  # (6, N): d^T A d = dd6 @ a6
-    to_splat = -v
-    colour = eval_sh_color(scene.sh, _unit(np.where(np.abs(to_splat).sum(1, keepdims=True) > 0, to_splat, 1.0)))
-    opa = scene.opacities.astype(np.float64)
-    rgb = np.zeros((len(d), 3))
-    alpha = np.zeros(len(d))
-    chunk = max(1, 1_000_000 // max(1, scene.count))  # rays per step: bounds the (rays, splats) temporaries
-    for s in range(0, len(d), chunk):
-        dc = d[s:s + chunk]
-        dd6 = np.stack([dc[:, i] * dc[:, j] for i, j in iu], -1)
-        dad = dd6 @ a6  # (m, N)
-        dav = dc @ av.T
-        t = -dav / dad
-        m = np.maximum(vav[None] - dav * dav / dad, 0.0)
-        al = np.where(t > 0, np.minimum(opa[None] * np.exp(-0.5 * m), max_alpha), 0.0)
-        order = np.argsort(np.where(al > 0, t, np.inf), axis=1)
-        al = np.take_along_axis(al, order, 1)
-        trans = np.cumprod(np.concatenate([np.ones((len(dc), 1)), 1.0 - al[:, :-1]], 1), 1)
-        w = trans * al
-        rgb[s:s + chunk] = np.einsum("mn,mnc->mc", w, colour[order])
-        alpha[s:s + chunk] = 1.0 - trans[:, -1] * (1.0 - al[:, -1])
-    return rgb, alpha
