@@ -254,19 +254,6 @@ class Recorder:
         vk.vkCmdDispatch(self.cmd, gx, gy, 1)
         self._barrier()
 
-    def dispatch_indirect(self, pipeline: Pipeline, buffers: Sequence[Buffer], args: Buffer, offset: int = 0,
-                          push: bytes = b"") -> None:
-        vk = self.vk
-        vk.vkCmdBindPipeline(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle)
-        sets = [pipeline.descriptor_set(buffers)]
-        vk.vkCmdBindDescriptorSets(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout, 0, 1, sets, 0, None)
-        if pipeline.push_size:
-            raw = vk.ffi.new("char[]", bytes(push).ljust(pipeline.push_size, b"\0"))
-            vk.vkCmdPushConstants(self.cmd, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, pipeline.push_size, raw)
-            del raw
-        vk.vkCmdDispatchIndirect(self.cmd, args.handle, offset)
-        self._barrier()
-
     def fill(self, buffer: Buffer, value: int = 0, nbytes: int | None = None) -> None:
         size = buffer.nbytes if nbytes is None else (int(nbytes) + 3) // 4 * 4
         self.vk.vkCmdFillBuffer(self.cmd, buffer.handle, 0, size, value & 0xFFFFFFFF)
