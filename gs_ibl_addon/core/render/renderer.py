@@ -21,7 +21,7 @@ from ..vk import Buffer, Recorder, get_context
 from ..vk.compute import groups, pack
 from .gpu_sort import RadixSorter, Scanner
 from .splat_math import DEFAULT_NEAR
-from .views import TILE, ViewBatch
+from .views import ViewBatch
 
 # A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles each tile's list
 # is split into chunks composited in parallel (gs_raster.comp / gs_merge.comp), up to RASTER_TARGET_GROUPS
