@@ -2,8 +2,9 @@
 
 Tolerance for every comparison: max |gpu - numpy| <= 2e-5 x max |numpy|. The GPU works in float32 (a texel
 direction, a bilinear weight, a sum of up to 6*64^2 terms); measured worst 3.5e-6 (convolution of the
-bright-patch cube), others ~2e-7 (exact integration: 2.6e-7). Anything beyond is a logic difference (a wrong face, tap or weight),
-which shows up as errors of order 1e-2 and more.
+bright-patch cube), others ~2e-7 (exact integration: 2.6e-7; GGX prefilter: <= 9.5e-7, the roughness-0 level of the
+bright-patch cube). Anything beyond is a logic difference (a wrong face, tap or weight), which shows up as errors
+of order 1e-2 and more.
 """
 import numpy as np
 import pytest
@@ -11,6 +12,8 @@ import pytest
 from gs_ibl_addon.core import cubemap
 from gs_ibl_addon.core.probe import (box_irradiance, cosine_convolve, exact_irradiance_cube, filter_probe,
                                      project_cube, sh_irradiance)
+from gs_ibl_addon.core.probe.box import downsample_cube
+from gs_ibl_addon.core.probe.ggx import ggx_prefilter
 from gs_ibl_addon.core.probe.reference import bright_patch_environment, cube_from_function, smooth_environment
 from gs_ibl_addon.core.vk import VulkanUnavailable, get_context
 
@@ -149,5 +152,65 @@ def test_uploaded_cube_serves_several_filters(ctx, gpu):
         close(gpu.gpu_exact_irradiance(up, 8, 8)[0], exact_irradiance_cube(cube, 8, 8))
         close(gpu.gpu_box_irradiance(up, 8, 4)[0], box_irradiance(cube, 8, 4))
         close(gpu.gpu_sh_project(up)[0], project_cube(cube, 2))
+        glossy, _ = gpu.gpu_ggx_prefilter(up, (0.0, 0.5), (8, 4), 32)
+        for a, b in zip(glossy, ggx_prefilter(cube, (0.0, 0.5), (8, 4), 32)):
+            close(a, b)
     finally:
         up.close()
+
+
+@pytest.mark.parametrize("name,samples", [("random", 256), ("random", 64), ("patch", 64), ("smooth", 64)])
+def test_ggx_prefilter(ctx, gpu, name, samples):
+    # Default roughness levels and sizes (32^2 cubes: 32, 16, 8, 4, 4; the 8^2 random one: 8, 4, 4, 4, 4). Both
+    # paths use ggx.ggx_samples' table, so they differ only by float32 arithmetic in the shader.
+    cube = CUBES[name]()
+    out, timings = gpu.gpu_ggx_prefilter(cube, samples=samples, ctx=ctx)
+    ref = ggx_prefilter(cube, samples=samples)
+    assert [o.shape for o in out] == [r.shape for r in ref]
+    for a, b in zip(out, ref):
+        close(a, b)
+    assert "ggx" in timings or not ctx.timestamps_supported
+
+
+def test_ggx_prefilter_odd_chain_sizes_and_bias(ctx, gpu):
+    # A 12^2 cube's chain stops at 3^2 (three mips); explicit sizes that are not powers of two; lod bias -100
+    # (no mip filtering: every read at lod 0) and +3 (reads clamped at the last mip).
+    cube = np.random.default_rng(7).random((6, 12, 12, 3)) * 5
+    for bias in (-100.0, 1.0, 3.0):
+        out, _ = gpu.gpu_ggx_prefilter(cube, (0.0, 0.3, 1.0), (5, 12, 3), 48, bias, ctx=ctx)
+        for a, b in zip(out, ggx_prefilter(cube, (0.0, 0.3, 1.0), (5, 12, 3), 48, bias)):
+            close(a, b)
+
+
+@pytest.mark.parametrize("name", ["random", "patch"])
+def test_ggx_roughness_zero_is_the_radiance(ctx, gpu, name):
+    # Roughness 0 reads the radiance at the output's mip: the cube itself at full size, its box-downsampled copy
+    # at half size. Roughness 1e-3 is a lobe 1e-3 degrees wide read at lod 0: within 1e-4 of the cube (numpy gives
+    # the same 4.3e-5 on the patch's sharp edge).
+    cube = CUBES[name]()
+    n = cube.shape[1]
+    same, half, tiny = gpu.gpu_ggx_prefilter(cube, (0.0, 0.0, 1e-3), (n, n // 2, n), 64, ctx=ctx)[0]
+    close(same, cube)
+    close(half, downsample_cube(cube))
+    assert np.max(np.abs(tiny - cube)) <= 1e-4 * np.max(np.abs(cube))
+
+
+def test_ggx_rejects_bad_sizes(ctx, gpu):
+    with pytest.raises(ValueError, match="2 roughness levels but 1 sizes"):
+        gpu.gpu_ggx_prefilter(CUBES["random"](), (0.0, 0.5), (4,), ctx=ctx)
+    with pytest.raises(ValueError, match="samples"):
+        gpu.gpu_ggx_prefilter(CUBES["random"](), (0.5,), (4,), 0, ctx=ctx)
+
+
+def test_filter_probe_runs_ggx_on_gpu(ctx):
+    cube = np.concatenate([CUBES["patch"](), np.ones((6, 32, 32, 1))], -1)
+    cube[4, 10:20, 10:20] = 0.0  # a hole (premultiplied: black, alpha 0), the same on both paths
+    kw = dict(irradiance_size=4, method="box", box_level_size=4, roughness=(0.0, 0.4, 1.0), ggx_samples=32)
+    a = filter_probe(cube, use_gpu=True, vk_context=ctx, **kw)
+    b = filter_probe(cube, use_gpu=False, **kw)
+    assert [p.shape for p in a.prefiltered] == [(6, 32, 32, 3), (6, 16, 16, 3), (6, 8, 8, 3)]
+    for x, y in zip(a.prefiltered, b.prefiltered):
+        close(x, y)
+    assert a.roughness == b.roughness == [0.0, 0.4, 1.0]
+    assert a.settings["stage_devices"]["ggx"] == "gpu" and b.settings["stage_devices"]["ggx"] == "cpu"
+    assert a.timings_ms["ggx"] > 0

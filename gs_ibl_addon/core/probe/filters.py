@@ -2,8 +2,8 @@
 
 ``use_gpu=False`` runs the numpy implementations (the references). ``use_gpu=True`` uploads the cube once and runs
 every stage that has a Vulkan version on the GPU (gpu_filters: SH order 2 projection and evaluation, cosine
-convolution, box, exact); SH of another order and the GGX maps stay in numpy. Timings are in milliseconds: GPU
-stages report GPU timestamps (``timings_ms['irradiance']`` = the filter's GPU time, with per-stage detail under
+convolution, box, exact, GGX prefiltered maps); SH of another order stays in numpy. Timings are in milliseconds:
+GPU stages report GPU timestamps (``timings_ms['irradiance']`` = the filter's GPU time, with per-stage detail under
 ``irradiance.<stage>``), numpy stages wall time; ``settings['stage_devices']`` says which ran where.
 """
 from __future__ import annotations
@@ -50,9 +50,11 @@ def filter_probe(radiance: np.ndarray, irradiance_size: int = 16, method: str = 
         return out
 
     rgb, hole = split_alpha(radiance)
+    rough = None if roughness is None else tuple(roughness)
     if use_gpu:
-        coeffs, irr = _filter_gpu(rgb, irradiance_size, method, sh_order, sh_window, phi_steps, theta_steps,
-                                  box_level_size, downsample_to, vk_context, timings, devices, timed)
+        coeffs, irr, pre = _filter_gpu(rgb, irradiance_size, method, sh_order, sh_window, phi_steps, theta_steps,
+                                       box_level_size, downsample_to, rough, ggx_samples, vk_context, timings,
+                                       devices, timed)
     else:
         coeffs = timed("sh_project", project_cube, rgb, sh_order)
         normals = cubemap.face_directions(irradiance_size)
@@ -64,7 +66,7 @@ def filter_probe(radiance: np.ndarray, irradiance_size: int = 16, method: str = 
             irr = timed("irradiance", box_irradiance, rgb, irradiance_size, box_level_size)
         else:
             irr = timed("irradiance", exact_irradiance_cube, rgb, irradiance_size, downsample_to)
-    pre = [] if roughness is None else timed("ggx", ggx_prefilter, rgb, tuple(roughness), None, ggx_samples)
+        pre = [] if rough is None else timed("ggx", ggx_prefilter, rgb, rough, None, ggx_samples)
     settings = {"method": method, "irradiance_size": irradiance_size, "sh_order": sh_order, "sh_window": sh_window,
                 "phi_steps": phi_steps, "theta_steps": theta_steps, "box_level_size": box_level_size,
                 "downsample_to": downsample_to, "ggx_samples": ggx_samples, "radiance_face_size": int(rgb.shape[1]),
@@ -76,7 +78,8 @@ def filter_probe(radiance: np.ndarray, irradiance_size: int = 16, method: str = 
 
 
 def _filter_gpu(rgb, size, method, sh_order, sh_window, phi_steps, theta_steps, box_level_size, downsample_to,
-                ctx, timings, devices, timed) -> tuple[np.ndarray, np.ndarray]:
+                roughness, ggx_samples, ctx, timings, devices,
+                timed) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     from . import gpu_filters as g  # Vulkan is imported only when the GPU path is asked for
 
     t0 = time.perf_counter()
@@ -105,6 +108,7 @@ def _filter_gpu(rgb, size, method, sh_order, sh_window, phi_steps, theta_steps, 
             irr = gpu("irradiance", g.gpu_box_irradiance, cube, size, box_level_size)
         else:
             irr = gpu("irradiance", g.gpu_exact_irradiance, cube, size, downsample_to)
+        pre = [] if roughness is None else gpu("ggx", g.gpu_ggx_prefilter, cube, roughness, None, ggx_samples)
     finally:
         cube.close()
-    return coeffs, irr
+    return coeffs, irr, pre

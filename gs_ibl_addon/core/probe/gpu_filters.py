@@ -6,11 +6,13 @@
   gpu_box_irradiance    -> box.box_irradiance                    shaders/probe_downsample.comp + probe_cube_read.comp
   gpu_exact_irradiance  -> reference.exact_irradiance of          shaders/probe_downsample.comp + probe_integrate.comp
                            box.downsample_cube^k (downsample_to)
+  gpu_ggx_prefilter     -> ggx.ggx_prefilter                      shaders/probe_downsample.comp + probe_ggx.comp
 
 Cubes travel as packed float32 RGB (alpha is split off first: holes are black, as in numpy). Every filter takes
 a numpy cube or a GpuCube (``upload_cube``): several filters of one cube then share one upload. The SH
 reduction runs per workgroup on the GPU; the last few dozen group partials are added on the host in
-float64. Solid angles come from core.cubemap (float64, uploaded as float32), never recomputed in GLSL.
+float64. Solid angles come from core.cubemap (float64, uploaded as float32), never recomputed in GLSL; likewise
+the GGX sample table (directions, weights, mip lods) comes from ggx.ggx_samples, so both paths share one sequence.
 Each function returns (result, timings_ms) with GPU timestamps per stage where the device has them.
 """
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 from .. import cubemap
 from ..vk import Buffer, Recorder, get_context
 from ..vk.compute import groups, pack
+from .ggx import DEFAULT_ROUGHNESS, ggx_samples
 from .sampling import split_alpha
 from .sh_project import cosine_lobe_coefficients, window_factors
 
@@ -196,3 +199,79 @@ def gpu_exact_irradiance(cube, size: int, downsample_to: int | None = 32,
     for b in keep:
         b.destroy()
     return irr, rec.timings_ms
+
+
+def _mip_chain(ctx, rec: Recorder, src: Buffer, n: int, keep: list[Buffer]) -> tuple[Buffer, int]:
+    """Record box.mip_chain into one buffer (level after level, packed RGB): (buffer, number of levels)."""
+    sizes = [n]
+    while sizes[-1] > 1 and sizes[-1] % 2 == 0:
+        sizes.append(sizes[-1] // 2)
+    chain = Buffer(ctx, sum(6 * s * s * 3 * 4 for s in sizes), "probe-mip-chain")
+    keep.append(chain)
+    rec.copy(src, chain, 6 * n * n * 3 * 4)
+    down = ctx.pipeline("probe_downsample", 3, 4)
+    cur, offset = src, 6 * n * n * 3 * 4
+    for child, parent in zip(sizes, sizes[1:]):
+        omega = _upload(ctx, cubemap.texel_solid_angles(child), f"probe-omega-{child}")
+        dst = Buffer(ctx, 6 * parent * parent * 3 * 4, f"probe-mip-{parent}")
+        rec.dispatch(down, [cur, omega, dst], groups(6 * parent * parent, 64, ctx), pack("I", child))
+        rec.copy(dst, chain, dst.nbytes, 0, offset)
+        keep += [omega, dst]
+        cur, offset = dst, offset + dst.nbytes
+    return chain, len(sizes)
+
+
+def ggx_tables(roughness: tuple[float, ...], sizes: tuple[int, ...], samples: int, base: int, lod_bias: float
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Inputs of probe_ggx.comp: samples (S, 4) = (local light dir, N.L / sum N.L), lods (S,), and per roughness
+    level (face size, first output texel, first sample, sample count) (L, 4), all levels concatenated."""
+    samp, lods, levels = [], [], []
+    texel = first = 0
+    for r, m in zip(roughness, sizes):
+        if r <= 0.0:  # a mirror, as ggx_prefilter_level: the radiance at the mip whose texels match the output's
+            local, w, lod = np.array([[0.0, 0.0, 1.0]]), np.ones(1), np.array([max(0.0, math.log2(base / m))])
+        else:
+            local, w, lod = ggx_samples(r, samples, base, lod_bias)
+        samp.append(np.concatenate([local, (w / w.sum())[:, None]], 1))
+        lods.append(lod)
+        levels.append((m, texel, first, len(w)))
+        texel += 6 * m * m
+        first += len(w)
+    return np.concatenate(samp), np.concatenate(lods), np.array(levels, np.uint32)
+
+
+def gpu_ggx_prefilter(cube, roughness: tuple[float, ...] = DEFAULT_ROUGHNESS, sizes: tuple[int, ...] | None = None,
+                      samples: int = 256, lod_bias: float = 1.0, ctx=None
+                      ) -> tuple[list[np.ndarray], dict[str, float]]:
+    """GGX prefiltered radiance on the GPU, one (6, size, size, 3) cube per roughness (see ggx.ggx_prefilter:
+    same samples, mip lods and default sizes); every level in one dispatch."""
+    n = cube.size if isinstance(cube, GpuCube) else np.shape(cube)[1]
+    roughness = tuple(float(r) for r in roughness)
+    if sizes is None:
+        sizes = tuple(max(4, n >> k) for k in range(len(roughness)))
+    if len(sizes) != len(roughness):
+        raise ValueError(f"GGX prefilter: {len(roughness)} roughness levels but {len(sizes)} sizes")
+    if not roughness:
+        return [], {}
+    if samples < 1 or min(sizes) < 1:
+        raise ValueError(f"GGX prefilter: needs samples >= 1 and face sizes >= 1, got {samples} and {sizes}")
+    samp, lods, levels = ggx_tables(roughness, tuple(int(m) for m in sizes), samples, n, lod_bias)
+    ctx, src, n, owned = _source(cube, ctx)
+    keep: list[Buffer] = [src] if owned else []
+    total = int(sum(6 * m * m for m in sizes))
+    sb, lb = _upload(ctx, samp, "probe-ggx-samples"), _upload(ctx, lods, "probe-ggx-lods")
+    vb = Buffer(ctx, levels.nbytes, "probe-ggx-levels")
+    vb.write(levels)
+    out = Buffer(ctx, total * 3 * 4, "probe-ggx")
+    keep += [sb, lb, vb, out]
+    with Recorder(ctx, timestamps=True) as rec:
+        chain, n_mips = _mip_chain(ctx, rec, src, n, keep)
+        rec.timestamp("mips")
+        rec.dispatch(ctx.pipeline("probe_ggx", 5, 16), [chain, sb, lb, vb, out], groups(total, 1, ctx),
+                     pack("IIII", n, n_mips, len(sizes), total))
+        rec.timestamp("ggx")
+    flat = out.read(np.float32, total * 3).reshape(total, 3).astype(np.float64)
+    for b in keep:
+        b.destroy()
+    cubes = [flat[first:first + 6 * m * m].reshape(6, m, m, 3) for m, first in levels[:, :2].astype(np.int64)]
+    return cubes, rec.timings_ms
