@@ -52,6 +52,17 @@ def test_auto_face_size_stops_when_the_irradiance_has_converged():
     assert sun.settings["face_size"] >= sky.settings["face_size"]
 
 
+def test_glossy_bake_adds_ggx_levels(sky_shell):
+    r = bake_probe(sky_shell, [0, 0, 0], ProbeSettings(face_size=32, irradiance_size=8, glossy=True))
+    assert len(r.prefiltered) == len(r.roughness) >= 4 and r.roughness[0] == 0.0
+    # roughness 0 is the radiance itself; the roughest level of a smooth sky is close to its irradiance
+    np.testing.assert_allclose(r.prefiltered[0], r.radiance[..., :3], atol=1e-5)
+    rough = sample_cube_bilinear(r.prefiltered[-1], cubemap.face_directions(8))
+    irr = sample_cube_bilinear(r.irradiance, cubemap.face_directions(8))
+    assert relative_rms(rough, irr) < 0.1
+    assert r.timings_ms["ggx"] > 0
+
+
 def test_bake_command_writes_the_files(tmp_path, sky_shell, capsys):
     ply = tmp_path / "sky.ply"
     write_ply(ply, sky_shell)

@@ -16,6 +16,8 @@ from typing import Callable
 import numpy as np
 
 from .probe import ProbeResult, filter_probe
+from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
+from .probe.gpu_filters import gpu_ggx_prefilter
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
@@ -66,7 +68,6 @@ def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings |
     t0 = time.perf_counter()
     say(f"uploading {scene.count:,} splats", 0.0)
     r = renderer or SplatRenderer(scene)
-    roughness = (0.25, 0.5, 0.75, 1.0) if s.glossy else None
 
     def probe_at(face: int) -> ProbeResult:
         res = r.render(ViewBatch.cubemap(pos, face), timestamps=True)
@@ -95,12 +96,11 @@ def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings |
             result = finer
             if change <= s.tolerance:
                 break
-    if roughness:
+    if s.glossy:
         say("prefiltering glossy maps", 0.85)
-        glossy = filter_probe(np.asarray(result.radiance), irradiance_size=s.irradiance_size, method=method,
-                              roughness=roughness, use_gpu=True, vk_context=r.ctx)
-        result.prefiltered, result.roughness = glossy.prefiltered, glossy.roughness
-        result.timings_ms["ggx"] = glossy.timings_ms.get("ggx", 0.0)
+        result.prefiltered, ggx_ms = gpu_ggx_prefilter(np.asarray(result.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
+        result.roughness = list(GLOSSY_ROUGHNESS)
+        result.timings_ms["ggx"] = ggx_ms.get("total", 0.0)
     result.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
                             "face_size_trials": trials, "converged": (not trials) or
                             (trials[-1]["change"] is not None and trials[-1]["change"] <= s.tolerance),
