@@ -8,7 +8,9 @@ and then zipped by, in order of preference:
     2. the same builder shipped inside the bpy module (bl_pkg/cli/blender_ext.py), run with this Python
     3. a plain zipfile writer that honours the manifest's [build] paths_exclude_pattern
 Wheels named in the manifest are taken from a cache folder (default build/wheel-cache, or GS_IBL_WHEEL_CACHE);
-only a wheel missing there is fetched, with `pip download` for that wheel's exact Python/platform tags.
+only a wheel missing there is fetched, with `pip download` for that wheel's exact Python/platform tags, so a second
+build downloads nothing. The default output is one zip for every platform (Blender installs only the wheels for its
+own platform and Python); --split-platforms makes one zip per platform instead (for extensions.blender.org).
 Compiled shaders (gs_ibl_addon/shaders/*.spv) travel with the package; the GLSL in the repo's shaders/ does not.
 """
 from __future__ import annotations
@@ -44,6 +46,49 @@ def _wheel_tags(filename: str) -> tuple[str, str, str, str, list[str]]:
     return name, version, py, abi, plat.split(".")
 
 
+# wheel platform tag (its machine part) -> Blender's platform names; the OS part is matched by prefix below.
+_MACHINES = {"x86_64": "x64", "amd64": "x64", "aarch64": "arm64", "arm64": "arm64"}
+_SYSTEMS = (("manylinux", "linux"), ("musllinux", "linux"), ("linux", "linux"), ("macosx", "macos"), ("win", "windows"))
+
+
+def blender_platforms(filename: str) -> set[str]:
+    """Blender platforms ("linux-x64", "macos-arm64", ...) a wheel file serves; {"any"} for a pure-Python wheel.
+
+    Same answer as Blender's own blender_platforms_from_wheel_platform (a test compares them).
+    """
+    out: set[str] = set()
+    for tag in _wheel_tags(filename)[4]:
+        if tag == "any":
+            out.add("any")
+            continue
+        system = next((b for w, b in _SYSTEMS if tag.startswith(w)), None)
+        if system is None:
+            raise SystemExit(f"{filename}: unknown wheel platform tag {tag!r}")
+        if system == "macos" and tag.endswith("_universal2"):
+            out |= {"macos-x64", "macos-arm64"}
+            continue
+        machine = next((b for w, b in _MACHINES.items() if tag.endswith("_" + w)), tag.rpartition("_")[2])
+        out.add(f"{system}-{machine}")
+    return out
+
+
+def check_wheels(manifest: dict) -> None:
+    """Each compiled wheel serves a declared platform, and each declared platform gets every compiled package."""
+    platforms = set(manifest.get("platforms", []))
+    served: dict[str, set[str]] = {}
+    for rel in manifest.get("wheels", []):
+        name = Path(rel).name
+        plats = blender_platforms(name) - {"any"}
+        if plats and platforms and not plats & platforms:
+            raise SystemExit(f"{MANIFEST.name}: {name} is for {sorted(plats)}, none of platforms = {sorted(platforms)}")
+        if plats:
+            served.setdefault(_wheel_tags(name)[0], set()).update(plats)
+    for package, plats in served.items():
+        if platforms - plats:
+            raise SystemExit(f"{MANIFEST.name}: no {package} wheel for {sorted(platforms - plats)}: add one to "
+                             "wheels or drop the platform")
+
+
 def fetch_wheel(filename: str, cache: Path) -> Path:
     """The wheel from the cache, downloaded first (exactly that file's tags) if it is not there."""
     target = cache / filename
@@ -77,6 +122,7 @@ def stage(stage_dir: Path, cache: Path, manifest: dict) -> None:
         shutil.rmtree(stage_dir)
     shutil.copytree(PACKAGE, stage_dir, ignore=_ignore_build_junk)
     shutil.copy2(MANIFEST, stage_dir / "blender_manifest.toml")
+    check_wheels(manifest)
     for rel in manifest.get("wheels", []):
         rel_path = Path(rel)
         src = fetch_wheel(rel_path.name, cache)
@@ -140,30 +186,44 @@ def bpy_builder() -> Path | None:
     return None
 
 
-def build(out: Path, cache: Path, method: str = "auto", blender: str | None = None) -> tuple[Path, str]:
+def build(out: Path, cache: Path, method: str = "auto", blender: str | None = None,
+          split_platforms: bool = False) -> tuple[Path, str]:
+    """Build the zip ``out``; with ``split_platforms``, one zip per declared platform instead, named
+    ``<out stem>-<platform>.zip`` beside ``out`` (Blender's own naming; list them with split_outputs)."""
     manifest = read_manifest()
     build_dir = ROOT / "build" / "extension"
     stage_dir = build_dir / "stage"
     stage(stage_dir, cache, manifest)
     out.parent.mkdir(parents=True, exist_ok=True)
-    if out.exists():
-        out.unlink()
+    for old in [out] + split_outputs(out, manifest):
+        if old.exists():
+            old.unlink()
+    split = ["--split-platforms"] if split_platforms else []
     blender = blender or shutil.which("blender")
     if method in ("auto", "blender") and blender:
         subprocess.run([blender, "--factory-startup", "--command", "extension", "build", "--source-dir", str(stage_dir),
-                        "--output-filepath", str(out)], check=True)
+                        "--output-filepath", str(out), *split], check=True)
         return out, "blender"
     if method == "blender":
         raise SystemExit("no Blender binary: pass --blender PATH or put `blender` on PATH")
     builder = bpy_builder() if method in ("auto", "bpy") else None
     if builder is not None:
         subprocess.run([sys.executable, str(builder), "build", "--source-dir", str(stage_dir),
-                        "--output-filepath", str(out)], check=True)
+                        "--output-filepath", str(out), *split], check=True)
         return out, "bpy"
     if method == "bpy":
         raise SystemExit("the bpy module is not installed in this Python")
+    if split_platforms:
+        # Blender's builder also rewrites each zip's manifest ([build.generated]); not worth re-implementing.
+        raise SystemExit("--split-platforms needs Blender's builder: a Blender binary or the bpy module")
     zip_plain(stage_dir, out, manifest)
     return out, "zipfile"
+
+
+def split_outputs(out: Path, manifest: dict | None = None) -> list[Path]:
+    """The per-platform zips a split build of ``out`` writes (gs_ibl.zip -> gs_ibl-linux_x64.zip, ...)."""
+    manifest = manifest or read_manifest()
+    return [out.with_name(f"{out.stem}-{p.replace('-', '_')}{out.suffix}") for p in manifest.get("platforms", [])]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -173,14 +233,17 @@ def main(argv: list[str] | None = None) -> int:
                     default=Path(os.environ.get("GS_IBL_WHEEL_CACHE", ROOT / "build" / "wheel-cache")))
     ap.add_argument("--method", choices=("auto", "blender", "bpy", "zipfile"), default="auto")
     ap.add_argument("--blender", help="path of a Blender binary to build with")
+    ap.add_argument("--split-platforms", action="store_true",
+                    help="one zip per platform (for extensions.blender.org) instead of one zip for all")
     ap.add_argument("--no-shaders", action="store_true", help="do not run scripts/build_shaders.py first")
     args = ap.parse_args(argv)
     if not args.no_shaders and (ROOT / "scripts" / "build_shaders.py").is_file():
         subprocess.run([sys.executable, str(ROOT / "scripts" / "build_shaders.py")], check=True)
     manifest = read_manifest()
     out = args.output or ROOT / "build" / f"{manifest['id']}-{manifest['version']}.zip"
-    path, how = build(out.resolve(), args.wheel_cache.resolve(), args.method, args.blender)
-    print(f"[build] {path} ({how}, {path.stat().st_size / 1e6:.2f} MB)")
+    path, how = build(out.resolve(), args.wheel_cache.resolve(), args.method, args.blender, args.split_platforms)
+    for p in split_outputs(path, manifest) if args.split_platforms else [path]:
+        print(f"[build] {p} ({how}, {p.stat().st_size / 1e6:.2f} MB)")
     return 0
 
 

@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import zipfile
+from pathlib import Path
 
 import pytest
 
@@ -51,14 +52,21 @@ def test_both_builders_ship_the_same_files(tmp_path):
         assert set(za.namelist()) == set(zb.namelist())
 
 
-def test_exclude_matcher_agrees_with_blenders():
+def _blender_ext():
+    """Blender's extension builder module (bl_pkg/cli/blender_ext.py) from the bpy module."""
     builder = be.bpy_builder()
     if builder is None:
         pytest.skip("bpy module not installed")
-    spec = importlib.util.spec_from_file_location("blender_ext", builder)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["blender_ext"] = mod
-    spec.loader.exec_module(mod)
+    if "blender_ext" not in sys.modules:
+        spec = importlib.util.spec_from_file_location("blender_ext", builder)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules["blender_ext"] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules["blender_ext"]
+
+
+def test_exclude_matcher_agrees_with_blenders():
+    mod = _blender_ext()
     patterns = be.read_manifest()["build"]["paths_exclude_pattern"] + ["/shaders/*.comp", "docs/"]
     matcher = mod.PathPatternMatch(patterns)
     paths = ["__init__.py", "__pycache__/", "core/__pycache__/", "core/__pycache__/x.pyc", "core/scene.py", "x.pyc",
@@ -67,6 +75,107 @@ def test_exclude_matcher_agrees_with_blenders():
     for p in paths:
         is_dir = p.endswith("/")
         assert be.excluded(p.rstrip("/"), is_dir, patterns) == matcher.test_path(p), p
+
+
+# The Pythons Blender bundles: 3.11 in 4.2-5.0, 3.13 from 5.1. Intel Macs end with 4.5 LTS (so: no cp313 there).
+PYTHONS = {"cp311", "cp313"}
+NOT_SHIPPED = {("macos-x64", "cp313")}
+
+
+def _cffi_pairs(names) -> list[tuple[str, str]]:
+    """(Blender platform, python tag) for every cffi wheel among zip entry names; a universal2 wheel counts twice."""
+    pairs = []
+    for n in names:
+        if n.startswith("wheels/cffi-"):
+            base = os.path.basename(n)
+            pairs += [(p, be._wheel_tags(base)[2]) for p in sorted(be.blender_platforms(base))]
+    return pairs
+
+
+def test_zip_has_one_cffi_wheel_per_platform_and_python(tmp_path):
+    """Every declared platform gets exactly one cffi wheel per Blender Python, and nothing else is compiled."""
+    manifest = be.read_manifest()
+    platforms = manifest["platforms"]
+    assert {"linux-x64", "windows-x64", "macos-arm64", "macos-x64"} <= set(platforms)
+    out, how = be.build(tmp_path / "gs_ibl.zip", Path(CACHE), "auto")
+    with zipfile.ZipFile(out) as z:
+        names = z.namelist()
+    pairs = _cffi_pairs(names)
+    expected = {(p, py) for p in platforms for py in PYTHONS} - NOT_SHIPPED
+    assert sorted(pairs) == sorted(expected)  # sorted lists, not sets: a duplicate wheel fails too
+    compiled = [n for n in names if n.startswith("wheels/") and not n.endswith("-none-any.whl")]
+    assert all(n.startswith("wheels/cffi-") for n in compiled), compiled
+    size = out.stat().st_size
+    print(f"\n[zip] {out.name} ({how}): {size / 1e6:.2f} MB, {len(pairs)} cffi wheels for {len(platforms)} platforms")
+    assert size < 4e6  # one zip for all platforms stays small (measured 2.75 MB)
+
+
+def test_platform_mapping_agrees_with_blenders():
+    """Our wheel -> Blender platform mapping (used to check the manifest) is Blender's own."""
+    mod = _blender_ext()
+    tags = ["manylinux2014_x86_64.manylinux_2_17_x86_64", "manylinux_2_28_aarch64", "musllinux_1_2_x86_64",
+            "linux_x86_64", "win_amd64", "win_arm64", "macosx_11_0_arm64", "macosx_10_13_x86_64",
+            "macosx_10_9_universal2"]
+    names = [f"x-1-cp311-cp311-{t}.whl" for t in tags] + [os.path.basename(w) for w in be.read_manifest()["wheels"]]
+    for name in names:
+        plat = name[:-4].split("-")[-1]
+        ours = be.blender_platforms(name)
+        if plat == "any":
+            assert ours == {"any"}
+            continue
+        theirs = set()
+        for t in plat.split("."):
+            theirs |= set(mod.blender_platforms_from_wheel_platform(t))
+        assert ours == theirs, name
+
+
+def test_manifest_check_names_a_missing_platform():
+    manifest = be.read_manifest()
+    bad = dict(manifest, wheels=[w for w in manifest["wheels"] if "win_amd64" not in w])
+    with pytest.raises(SystemExit, match=r"no cffi wheel for \['windows-x64'\]"):
+        be.check_wheels(bad)
+    alien = dict(manifest, platforms=["linux-x64"], wheels=[w for w in manifest["wheels"] if "x86_64" in w])
+    with pytest.raises(SystemExit, match="macos-x64"):
+        be.check_wheels(alien)
+    be.check_wheels(manifest)
+
+
+def test_second_build_downloads_nothing(tmp_path, monkeypatch):
+    """After one build every wheel comes from the cache: pip is never run again."""
+    be.build(tmp_path / "first.zip", Path(CACHE), "zipfile")  # fills the cache if this is a fresh checkout
+    real_run = subprocess.run
+
+    def no_pip(cmd, *a, **kw):
+        assert "pip" not in cmd, f"downloaded again: {cmd}"
+        return real_run(cmd, *a, **kw)
+    monkeypatch.setattr(be.subprocess, "run", no_pip)
+    out, _ = be.build(tmp_path / "second.zip", Path(CACHE), "zipfile")
+    assert out.is_file()
+
+
+def test_split_platforms_one_valid_zip_each(tmp_path):
+    """--split-platforms: one zip per platform, holding only that platform's cffi wheels, each accepted by Blender."""
+    builder = be.bpy_builder()
+    if builder is None:
+        pytest.skip("bpy module not installed")
+    manifest = be.read_manifest()
+    out, _ = be.build(tmp_path / "gs_ibl.zip", Path(CACHE), "bpy", split_platforms=True)
+    assert not out.exists()
+    zips = be.split_outputs(out)
+    sizes = {}
+    for platform, zpath in zip(manifest["platforms"], zips):
+        with zipfile.ZipFile(zpath) as z:
+            names = z.namelist()
+            generated = z.read("blender_manifest.toml").decode()
+        expected = {(platform, py) for py in PYTHONS} - NOT_SHIPPED
+        assert sorted(_cffi_pairs(names)) == sorted(expected), platform
+        assert {"wheels/vulkan-1.3.275.1-py3-none-any.whl", "wheels/pycparser-3.12-py3-none-any.whl"} <= set(names)
+        assert f'platforms = ["{platform}"]' in generated
+        r = subprocess.run([sys.executable, str(builder), "validate", str(zpath)], capture_output=True, text=True,
+                           timeout=120)
+        assert r.returncode == 0, r.stdout + r.stderr
+        sizes[platform] = zpath.stat().st_size
+    print("\n[zip] split:", ", ".join(f"{p} {s / 1e6:.2f} MB" for p, s in sizes.items()))
 
 
 def test_blender_validates_the_zip(tmp_path):
@@ -91,6 +200,10 @@ assert "bl_ext.user_default.gs_ibl" in sys.modules
 site = glob.glob(os.path.join(os.environ["BLENDER_USER_RESOURCES"], "extensions", ".local", "lib", "python*",
                               "site-packages"))[0]
 assert {"vulkan", "cffi", "pycparser"} <= set(os.listdir(site)), os.listdir(site)
+# of the eleven cffi wheels in the zip, exactly the one for this platform and Python was installed
+import sysconfig
+backend = glob.glob(os.path.join(site, "_cffi_backend*"))
+assert [os.path.basename(b) for b in backend] == ["_cffi_backend" + sysconfig.get_config_var("EXT_SUFFIX")], backend
 assert bpy.ops.gs_ibl.import_splats(filepath=ply_path) == {"FINISHED"}
 obj = bpy.context.active_object
 assert obj["gs_ibl"]["source"] == ply_path and len(obj.data.vertices) == 20

@@ -9,6 +9,7 @@ from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatPrope
 from bpy_extras.io_utils import ImportHelper, axis_conversion
 
 from ..core.formats import EXTENSIONS, SplatFormatError, read_scene
+from ..core.formats.spz import read_spz
 from .splat_object import create_splat_object
 
 _AXES = [(a, a, "") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
@@ -29,6 +30,10 @@ def import_matrix(preset: str, forward: str, up: str, scale: float) -> np.ndarra
     m = np.identity(4)
     m[:3, :3] = np.array(axis_conversion(from_forward=forward, from_up=up).to_3x3()) * scale
     return m
+
+
+def _is_spz(path: str) -> bool:
+    return os.path.splitext(path)[1].lower() == ".spz"
 
 
 class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
@@ -53,6 +58,16 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
     axis_forward: EnumProperty(name="Forward", items=_AXES, default="Z")
     axis_up: EnumProperty(name="Up", items=_AXES, default="-Y")
     global_scale: FloatProperty(name="Scale", default=1.0, min=1e-4, max=1e4, soft_min=0.01, soft_max=100.0)
+    # The SPZ spec stores RUB, but SuperSplat / splat-transform (and Niantic's ply_to_spz) store the PLY's RDF data
+    # unconverted, and nothing in a v2/v3 file says which: such files come in upside down unless told.
+    spz_axes: EnumProperty(
+        name="SPZ Axes",
+        items=[("RUB", "RUB (spec)", "As the SPZ specification says: x right, y up, z back (a version-4 file's "
+                "coordinate-system record, if present, is used instead)"),
+               ("RDF", "RDF (as exported by SuperSplat)", "Data stored unconverted from a 3DGS PLY: x right, y down, "
+                "z forward (SuperSplat, splat-transform, Niantic's ply_to_spz); use when an .spz comes in upside "
+                "down")],
+        default="RUB")
     show_proxy: BoolProperty(name="Point Proxy", default=True,
                              description="Show a random subset of the splats as coloured points in the viewport")
 
@@ -64,6 +79,8 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
             layout.prop(self, "axis_forward")
             layout.prop(self, "axis_up")
         layout.prop(self, "global_scale")
+        if any(_is_spz(p) for p in self._paths()):
+            layout.prop(self, "spz_axes")
         layout.prop(self, "show_proxy")
 
     def _paths(self) -> list[str]:
@@ -71,6 +88,12 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         if names and self.directory:
             return [os.path.join(self.directory, n) for n in names]
         return [self.filepath]
+
+    def _read(self, path: str):
+        if _is_spz(path):
+            # RUB: None, so that a version-4 coordinate-system record still wins over the spec's default
+            return read_spz(path, coordinates="RDF" if self.spz_axes == "RDF" else None)
+        return read_scene(path)
 
     def execute(self, context):
         if self.axis_preset == "CUSTOM" and self.axis_forward.lstrip("-") == self.axis_up.lstrip("-"):
@@ -81,7 +104,7 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         scenes = []
         for path in self._paths():
             try:
-                scenes.append((path, read_scene(path)))
+                scenes.append((path, self._read(path)))
             except (SplatFormatError, ValueError, OSError) as e:
                 self.report({"ERROR"}, str(e))
                 return {"CANCELLED"}

@@ -64,6 +64,10 @@ class SplatScene:
         sh[:, :m] = self.sh[:, :m]
         return SplatScene(self.positions, self.scales, self.rotations, self.opacities, sh, self.source, dict(self.repairs))
 
+    def subset(self, index: np.ndarray) -> "SplatScene":
+        return SplatScene(self.positions[index], self.scales[index], self.rotations[index], self.opacities[index],
+                          self.sh[index], self.source, dict(self.repairs))
+
     def transformed(self, matrix: np.ndarray) -> "SplatScene":
         """Splats moved by a 4x4 similarity transform (rotation, uniform scale, translation).
 
