@@ -39,3 +39,10 @@ def test_no_vulkan_loader_gives_the_install_hint(tmp_path):
                        cwd=__file__.rsplit("/tests/", 1)[0])
     assert r.returncode == 2, r.stderr
     assert "apt-get install libvulkan1 mesa-vulkan-drivers" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_install_hint_names_what_to_install_per_platform():
+    from gs_ibl_addon.core.vk.context import _install_hint
+    assert "MoltenVK" in _install_hint("darwin")
+    assert "vulkan-1.dll" in _install_hint("win32")
+    assert "mesa-vulkan-drivers" in _install_hint("linux")

@@ -7,11 +7,23 @@ else an integrated or virtual GPU, else any device (lavapipe).
 from __future__ import annotations
 
 import os
+import sys
 import threading
 from importlib import resources
 
-INSTALL_HINT = ("install a Vulkan loader and driver: on Debian/Ubuntu `apt-get install libvulkan1 mesa-vulkan-drivers` "
-                "(Mesa lavapipe runs Vulkan on the CPU), or a GPU driver that provides Vulkan")
+
+def _install_hint(platform: str = sys.platform) -> str:
+    if platform == "darwin":
+        return ("macOS has no Vulkan of its own: install MoltenVK with the Vulkan loader (the LunarG Vulkan SDK for "
+                "macOS with its system-global installation, so that /usr/local/lib/libvulkan.dylib exists, or "
+                "`brew install molten-vk vulkan-loader`), then restart Blender")
+    if platform.startswith("win"):
+        return "update your GPU driver: NVIDIA, AMD and Intel drivers install the Vulkan loader (vulkan-1.dll)"
+    return ("install a Vulkan loader and driver: on Debian/Ubuntu `apt-get install libvulkan1 mesa-vulkan-drivers` "
+            "(Mesa lavapipe runs Vulkan on the CPU), or your GPU driver's Vulkan package")
+
+
+INSTALL_HINT = _install_hint()
 
 
 class VulkanUnavailable(RuntimeError):
@@ -37,7 +49,12 @@ class VulkanContext:
         self._keep: list = []
         app = vk.VkApplicationInfo(pApplicationName="gs-ibl", applicationVersion=1, pEngineName="gs-ibl",
                                    engineVersion=1, apiVersion=vk.VK_MAKE_VERSION(1, 2, 0))
-        ici = vk.VkInstanceCreateInfo(pApplicationInfo=app)
+        # MoltenVK (macOS) is a portability driver: loaders >= 1.3.216 list it only when asked to.
+        portability = "VK_KHR_portability_enumeration" in self._instance_extensions()
+        extensions = ["VK_KHR_portability_enumeration"] if portability else []
+        flags = vk.VK_INSTANCE_CREATE_ENUMERATE_PORTABILITY_BIT_KHR if portability else 0
+        ici = vk.VkInstanceCreateInfo(pApplicationInfo=app, flags=flags, enabledExtensionCount=len(extensions),
+                                      ppEnabledExtensionNames=extensions or None)
         try:
             self.instance = vk.vkCreateInstance(ici, None)
         except Exception as e:
@@ -61,7 +78,10 @@ class VulkanContext:
         priorities = vk.ffi.new("float[]", [1.0])
         qci = vk.VkDeviceQueueCreateInfo(queueFamilyIndex=self.queue_family, queueCount=1, pQueuePriorities=priorities)
         qcis = [qci]
-        dci = vk.VkDeviceCreateInfo(queueCreateInfoCount=1, pQueueCreateInfos=qcis)
+        # a portability device (MoltenVK) must have its subset extension enabled when it offers it
+        dev_ext = [e for e in ("VK_KHR_portability_subset",) if e in self._device_extensions()]
+        dci = vk.VkDeviceCreateInfo(queueCreateInfoCount=1, pQueueCreateInfos=qcis, enabledExtensionCount=len(dev_ext),
+                                    ppEnabledExtensionNames=dev_ext or None)
         self.device = vk.vkCreateDevice(self.physical_device, dci, None)
         self.queue = vk.vkGetDeviceQueue(self.device, self.queue_family, 0)
         pci = vk.VkCommandPoolCreateInfo(queueFamilyIndex=self.queue_family,
@@ -69,6 +89,18 @@ class VulkanContext:
         self.command_pool = vk.vkCreateCommandPool(self.device, pci, None)
         self._pipelines: dict[str, object] = {}
         self.lock = threading.RLock()
+
+    def _instance_extensions(self) -> set[str]:
+        try:
+            return {e.extensionName for e in self.vk.vkEnumerateInstanceExtensionProperties(None)}
+        except Exception:
+            return set()
+
+    def _device_extensions(self) -> set[str]:
+        try:
+            return {e.extensionName for e in self.vk.vkEnumerateDeviceExtensionProperties(self.physical_device, None)}
+        except Exception:
+            return set()
 
     def _subgroup_info(self) -> tuple[int, bool]:
         vk = self.vk
