@@ -1,21 +1,16 @@
-"""The renderer on a real capture (shared/data/guitar.compressed.ply, SuperSplat layout, MIT, PlayCanvas)."""
+"""The renderer on a real capture (tests/data/guitar.compressed.ply, SuperSplat layout, MIT, PlayCanvas)."""
 import os
 
 import numpy as np
-import pytest
 
 from gs_ibl_addon.core.formats import read_scene
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.views import ViewBatch
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-CANDIDATES = [os.path.join(HERE, "..", "..", "shared", "data", "guitar.compressed.ply"),
-              "/work/shared/data/guitar.compressed.ply"]
-GUITAR = next((p for p in CANDIDATES if os.path.exists(p)), None)
+GUITAR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "guitar.compressed.ply")
 
 
-@pytest.mark.skipif(GUITAR is None, reason="shared/data/guitar.compressed.ply is not beside this checkout")
 def test_guitar_front_view_matches_reference_and_is_an_object():
     scene = read_scene(GUITAR)
     lo, hi = scene.bounds()
