@@ -39,6 +39,25 @@ def _vec3(values) -> np.ndarray:
     return np.asarray(values, np.float64)
 
 
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1, with a message that says so."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must be 1 or more")
+    return value
+
+
+def face_size(text: str) -> int:
+    """argparse type for --face-size of bake: 0 (search) or a size >= 1."""
+    return 0 if text.strip() == "0" else positive_int(text)
+
+
+OUTPUT_WRITERS = {".ply": ("ply", "write_ply"), ".spz": ("spz", "write_spz"), ".splat": ("splat", "write_splat")}
+
+
 def cmd_info(a) -> int:
     s = _load(a.scene)
     lo, hi = s.bounds()
@@ -111,20 +130,15 @@ def cmd_bake(a) -> int:
 
 
 def cmd_convert(a) -> int:
+    import importlib
+
     from .core.formats import SplatFormatError
-    s = _load(a.input)
     ext = os.path.splitext(a.output)[1].lower()
-    if ext == ".ply":
-        from .core.formats.ply import write_ply
-        write_ply(a.output, s)
-    elif ext == ".spz":
-        from .core.formats.spz import write_spz
-        write_spz(a.output, s)
-    elif ext == ".splat":
-        from .core.formats.splat import write_splat
-        write_splat(a.output, s)
-    else:
-        raise SplatFormatError(f"{a.output}: cannot write '{ext}' files (use .ply, .spz or .splat)")
+    if ext not in OUTPUT_WRITERS:  # before reading a large input for nothing
+        raise SplatFormatError(f"{a.output}: cannot write '{ext}' files (use {', '.join(OUTPUT_WRITERS)})")
+    s = _load(a.input)
+    module, name = OUTPUT_WRITERS[ext]
+    getattr(importlib.import_module(f".core.formats.{module}", __package__), name)(a.output, s)
     print(f"wrote {a.output}: {s.count:,} splats")
     return 0
 
@@ -156,7 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--up", nargs=3, type=float, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"),
                    help="up direction (default +Z, Blender's; most 3DGS captures are -Y up: use 0 -1 0)")
     q.add_argument("--fov", type=float, default=60.0, help="horizontal field of view in degrees (default 60)")
-    q.add_argument("--size", nargs=2, type=int, default=(640, 480), metavar=("W", "H"), help="image size in pixels")
+    q.add_argument("--size", nargs=2, type=positive_int, default=(640, 480), metavar=("W", "H"),
+                   help="image size in pixels")
     q.add_argument("--out", required=True, help="output EXR path")
     q.add_argument("--png", help="also write an 8-bit sRGB preview PNG here")
     q.add_argument("--exposure", type=float, default=0.0, help="exposure (stops) of the PNG preview")
@@ -165,7 +180,7 @@ def build_parser() -> argparse.ArgumentParser:
     q = sub.add_parser("cubemap", help="render the six cube faces seen from a probe point to EXRs, plus a lat-long")
     q.add_argument("scene", help="splat file (.ply, .spz, .splat)")
     q.add_argument("--probe", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="probe position")
-    q.add_argument("--face-size", type=int, default=256, help="pixels per face side (default 256)")
+    q.add_argument("--face-size", type=positive_int, default=256, help="pixels per face side (default 256)")
     q.add_argument("--out", required=True, help="output folder (face_posx.exr ... face_negz.exr, radiance.exr)")
     q.set_defaults(fn=cmd_cubemap)
 
@@ -178,10 +193,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "texel integrated with its exact solid angle), sh (9 SH coefficients: rings near small "
                         "bright sources), conv (cosine convolution, the thesis's method), box (box-filtered "
                         "mips, fast and rough); docs/accuracy.md compares them")
-    q.add_argument("--face-size", type=int, default=0,
+    q.add_argument("--face-size", type=face_size, default=0,
                    help="radiance face size (default 0: start at 32 and double until the irradiance changes by "
                         "less than --tolerance)")
-    q.add_argument("--irradiance-size", type=int, default=16, help="irradiance cube face size (default 16)")
+    q.add_argument("--irradiance-size", type=positive_int, default=16, help="irradiance cube face size (default 16)")
     q.add_argument("--tolerance", type=float, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
     q.add_argument("--glossy", action="store_true", help="also write GGX prefiltered radiance (ggx_*.exr)")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")

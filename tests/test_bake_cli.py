@@ -107,3 +107,32 @@ def test_bundled_sample_is_the_generated_one():
     assert bundled.count == fresh.count
     np.testing.assert_allclose(bundled.positions, fresh.positions, atol=1e-6)
     np.testing.assert_allclose(bundled.sh, fresh.sh, atol=1e-5)
+
+
+@pytest.mark.parametrize("args", [
+    ["render", "X", "--camera", "0", "0", "0", "--look-at", "1", "0", "0", "--size", "0", "48", "--out", "o.exr"],
+    ["cubemap", "X", "--probe", "0", "0", "0", "--face-size", "0", "--out", "o"],
+    ["bake", "X", "--face-size", "-4", "--out", "o"],
+    ["bake", "X", "--irradiance-size", "0", "--out", "o"],
+])
+def test_bad_sizes_are_refused_before_any_work(args, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(args)
+    assert e.value.code == 2
+    assert "must be 1 or more" in capsys.readouterr().err
+
+
+def test_convert_refuses_an_unknown_output_before_reading(tmp_path, capsys):
+    assert main(["convert", str(tmp_path / "does-not-exist.ply"), str(tmp_path / "out.obj")]) == 2
+    err = capsys.readouterr().err
+    assert "cannot write '.obj'" in err and "no such file" not in err
+
+
+def test_core_refuses_bad_sizes():
+    from gs_ibl_addon.core.render.views import ViewBatch
+    with pytest.raises(ValueError, match="face size 0"):
+        ViewBatch.cubemap([0, 0, 0], 0)
+    with pytest.raises(ValueError, match="image size"):
+        ViewBatch.pinhole([0, 0, 0], [1, 0, 0], 60, 0, 10)
+    with pytest.raises(ValueError, match="irradiance size"):
+        bake_probe(shell_scene(SkyGradient(), 500), [0, 0, 0], ProbeSettings(irradiance_size=0))

@@ -61,6 +61,9 @@ def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings |
     method = METHOD_ALIASES.get(str(s.method).lower())
     if method is None:
         raise ValueError(f"unknown irradiance method {s.method!r}: use one of auto, sh, conv, box, exact")
+    if int(s.face_size) < 0 or int(s.irradiance_size) < 1:
+        raise ValueError(f"face size {s.face_size} must be 0 (search) or more, irradiance size "
+                         f"{s.irradiance_size} 1 or more")
     if not 0 < s.tolerance < 1:
         raise ValueError(f"tolerance {s.tolerance} must be a fraction between 0 and 1 (0.01 = 1%)")
     pos = default_probe_position(scene) if probe_position is None else np.asarray(probe_position, np.float64)

@@ -48,6 +48,8 @@ class ViewBatch:
     @staticmethod
     def cubemap(origin, face_size: int, energy_preserving: bool = True) -> "ViewBatch":
         """The six faces of a probe; their images are light to integrate, so the dilation preserves energy."""
+        if int(face_size) < 1:
+            raise ValueError(f"cube face size {face_size} must be 1 or more")
         views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
                       for f in range(6))
         return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving)
@@ -55,6 +57,8 @@ class ViewBatch:
     @staticmethod
     def pinhole(position, look_at, fov_deg: float, width: int, height: int, up=(0.0, 0.0, 1.0)) -> "ViewBatch":
         """A perspective camera; ``fov_deg`` is the horizontal field of view; ``up`` defaults to Blender's +Z."""
+        if int(width) < 1 or int(height) < 1:
+            raise ValueError(f"image size {width}x{height} must be at least 1x1")
         o = np.asarray(position, np.float64).reshape(3)
         f = np.asarray(look_at, np.float64).reshape(3) - o
         if not np.linalg.norm(f) > 0:
