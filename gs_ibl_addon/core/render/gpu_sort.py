@@ -1,4 +1,5 @@
-"""GPU prefix sum and stable LSD radix sort (4-bit digits) of uint32 key/value pairs, recorded into a Recorder.
+"""GPU prefix sum and stable LSD radix sort (8-bit digits with subgroup ballots, else 4-bit) of uint32 key/value
+pairs, recorded into a Recorder.
 
 Counts may live on the GPU (``count`` buffer), so a sort of a GPU-sized list needs no read-back: work is dispatched
 for a known capacity and blocks past the count return at once.
@@ -29,8 +30,8 @@ class Scanner:
             n = nb
         self.capacity = int(capacity)
 
-    def record(self, rec: Recorder, data: Buffer, n: int) -> tuple[Buffer, int]:
-        """Scan ``data[:n]`` in place; returns (buffer, index) holding the grand total."""
+    def record(self, rec: Recorder, data: Buffer, n: int) -> Buffer:
+        """Scan ``data[:n]`` in place; returns the buffer whose first uint is the grand total."""
         if n > self.capacity:
             raise ValueError(f"scan of {n} > capacity {self.capacity}")
         blk = self.ctx.pipeline("scan_block", 2, 4)
@@ -46,7 +47,7 @@ class Scanner:
             cur, length = sums, nb
         for cur, sums, length in reversed(chain[:-1]):
             rec.dispatch(add, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), pack("I", length))
-        return chain[-1][1], 0
+        return chain[-1][1]
 
     def destroy(self) -> None:
         for _, b in self.levels:
@@ -127,9 +128,9 @@ def exclusive_scan(ctx, data: np.ndarray) -> tuple[np.ndarray, int]:
     b.write(data.astype(np.uint32))
     sc = Scanner(ctx, n)
     with Recorder(ctx) as rec:
-        tot_buf, idx = sc.record(rec, b, n)
+        tot_buf = sc.record(rec, b, n)
     out = b.read(np.uint32, n)
-    total = int(tot_buf.read(np.uint32, 1, idx * 4)[0])
+    total = int(tot_buf.read(np.uint32, 1)[0])
     sc.destroy()
     b.destroy()
     return out, total

@@ -139,7 +139,7 @@ class SplatRenderer:
         fr["views"].write(view_data)
         for _attempt in range(2):
             timings = self._record_and_submit(batch, total_tiles, timestamps)
-            kept, needed = (int(x) for x in self.count.read(np.uint32, 2))
+            needed = int(self.count.read(np.uint32, 2)[1])  # [0] pairs kept, [1] pairs wanted
             if needed <= self.capacity:
                 break
             self._ensure_capacity(int(needed * 1.25) + 1024)
@@ -173,7 +173,7 @@ class SplatRenderer:
                 rec.dispatch(c.pipeline("gs_gather_counts", 4, 4),
                              [self.depth_key, self.depth_val, self.tile_count, self.offsets], groups(n, 256, c),
                              pack("I", n))
-                total_buf, _ = self.scanner.record(rec, self.offsets, n)
+                total_buf = self.scanner.record(rec, self.offsets, n)
                 rec.dispatch(c.pipeline("gs_emit", 10, 16),
                              [fr["views"], self.depth_key, self.depth_val, self.offsets, total_buf, self.inst_key,
                               self.inst_val, self.count, self.prepared, self.rects],

@@ -25,7 +25,7 @@ class Buffer:
         self.ctx, self.name, self.serial = ctx, name, next(_serial)
         self.nbytes = max(int(nbytes), 16)
         usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
-                 | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT | vk.VK_BUFFER_USAGE_INDIRECT_BUFFER_BIT)
+                 | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT)
         bci = vk.VkBufferCreateInfo(size=self.nbytes, usage=usage, sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE)
         self.handle = vk.vkCreateBuffer(ctx.device, bci, None)
         req = vk.vkGetBufferMemoryRequirements(ctx.device, self.handle)
@@ -228,11 +228,10 @@ class Recorder:
     def _barrier(self) -> None:
         vk = self.vk
         access = (vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_TRANSFER_READ_BIT
-                  | vk.VK_ACCESS_TRANSFER_WRITE_BIT | vk.VK_ACCESS_INDIRECT_COMMAND_READ_BIT)
+                  | vk.VK_ACCESS_TRANSFER_WRITE_BIT)
         mb = vk.VkMemoryBarrier(srcAccessMask=access, dstAccessMask=access)
         mbs = [mb]
-        stages = (vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_TRANSFER_BIT
-                  | vk.VK_PIPELINE_STAGE_DRAW_INDIRECT_BIT)
+        stages = vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_TRANSFER_BIT
         vk.vkCmdPipelineBarrier(self.cmd, stages, stages, 0, 1, mbs, 0, None, 0, None)
 
     def dispatch(self, pipeline: Pipeline, buffers: Sequence[Buffer], group_count: tuple[int, int] | int,

@@ -46,7 +46,6 @@ class VulkanContext:
 
     def __init__(self, device: str | None = None) -> None:
         vk = self.vk = _vk()
-        self._keep: list = []
         app = vk.VkApplicationInfo(pApplicationName="gs-ibl", applicationVersion=1, pEngineName="gs-ibl",
                                    engineVersion=1, apiVersion=vk.VK_MAKE_VERSION(1, 2, 0))
         # MoltenVK (macOS) is a portability driver: loaders >= 1.3.216 list it only when asked to.
