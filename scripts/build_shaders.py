@@ -1,9 +1,13 @@
-"""Compile shaders/*.comp (GLSL 450) to gs_ibl_addon/shaders/*.spv, only where a source or include is newer.
+"""Compile shaders/*.comp (GLSL 450) to gs_ibl_addon/shaders/*.spv where a source or an include changed.
 
-The SPIR-V is committed, so an installed extension and a machine without glslc still work.
+The SPIR-V is committed, so an installed extension and a machine without glslc still work. What each .spv was
+built from is recorded as a hash (gs_ibl_addon/shaders/sources.json), not judged by file times: a fresh clone
+gives every file the same time, and another glslc version would otherwise rewrite committed files for nothing.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import pathlib
 import shutil
 import subprocess
@@ -12,29 +16,40 @@ import sys
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 SRC = ROOT / "shaders"
 DST = ROOT / "gs_ibl_addon" / "shaders"
+RECORD = DST / "sources.json"
+
+
+def source_hash(comp: pathlib.Path) -> str:
+    h = hashlib.sha1(comp.read_bytes())
+    for inc in sorted(SRC.glob("*.glsl")):  # includes: any change rebuilds every shader (they are few and small)
+        h.update(inc.name.encode())
+        h.update(inc.read_bytes())
+    return h.hexdigest()
 
 
 def main() -> int:
     glslc = shutil.which("glslc")
     DST.mkdir(parents=True, exist_ok=True)
-    includes = max((p.stat().st_mtime for p in SRC.glob("*.glsl")), default=0.0)
+    record = json.loads(RECORD.read_text()) if RECORD.exists() else {}
     built = 0
     for comp in sorted(SRC.glob("*.comp")):
         out = DST / (comp.stem + ".spv")
-        if out.exists() and out.stat().st_mtime >= max(comp.stat().st_mtime, includes):
+        digest = source_hash(comp)
+        if out.exists() and record.get(comp.name) == digest:
             continue
         if glslc is None:
-            if out.exists():
-                continue
-            print(f"glslc is missing and {out} is not built: apt-get install glslc", file=sys.stderr)
+            print(f"glslc is missing and {out.name} is not built from the current {comp.name}: apt-get install glslc",
+                  file=sys.stderr)
             return 1
         cmd = [glslc, "--target-env=vulkan1.2", "-O", "-I", str(SRC), str(comp), "-o", str(out)]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
             print(r.stderr, file=sys.stderr)
             return r.returncode
+        record[comp.name] = digest
         built += 1
     if built:
+        RECORD.write_text(json.dumps(dict(sorted(record.items())), indent=1) + "\n")
         print(f"[shaders] compiled {built} shader(s) into {DST.relative_to(ROOT)}")
     return 0
 
