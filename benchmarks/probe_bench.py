@@ -1,7 +1,7 @@
 """A whole probe on the GPU (cubemap render + exact irradiance filter) against splat count and face size.
 
 Run: python benchmarks/probe_bench.py [--counts 50000,1000000,6000000] [--faces 32,64,128,256,512] [--repeats 10]
-GPU time from timestamp queries (median), render and filter separately; appends to docs/bench/probe.csv.
+GPU time from timestamp queries (median), render and filter separately; appends to out/bench/probe.csv.
 The scene is benchmarks/renderer_bench.py's (random splats around the probe, shrinking with the count).
 """
 from __future__ import annotations
@@ -29,7 +29,8 @@ def main() -> None:
     ap.add_argument("--counts", default="50000,1000000,6000000")
     ap.add_argument("--faces", default="32,64,128,256,512")
     ap.add_argument("--repeats", type=int, default=10)
-    ap.add_argument("--csv", default=os.path.join(os.path.dirname(__file__), "..", "docs", "bench", "probe.csv"))
+    ap.add_argument("--csv", default=os.path.join(os.path.dirname(__file__), "..", "out", "bench", "probe.csv"),
+                    help="CSV to append to (copy it into docs/bench/ to publish a run)")
     args = ap.parse_args()
     rows = []
     date = datetime.date.today().isoformat()

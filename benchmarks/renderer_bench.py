@@ -1,7 +1,7 @@
 """Per-stage GPU time of the splat renderer over splat counts and cube face sizes (timestamp queries).
 
 Run: python benchmarks/renderer_bench.py [--counts 10000,50000,...] [--faces 64,256,1024] [--repeats 10]
-Prints a markdown table and appends rows to docs/bench/renderer.csv (device, date, count, face, stage times).
+Prints a markdown table and appends rows to out/bench/renderer.csv (device, date, count, face, stage times);
 The scene is random_scene (realistic scale/opacity spread) filling a box around the probe, like an environment;
 above 50k splats the splats shrink as 1/sqrt(count), as a denser capture of the same surfaces would.
 """
@@ -35,7 +35,8 @@ def main() -> None:
     ap.add_argument("--extent", type=float, default=5.0, help="half size of the box of splats around the probe")
     ap.add_argument("--max-chunks", type=int, help="override the raster's chunk limit (experiments)")
     ap.add_argument("--target-groups", type=int, help="override the raster's workgroup target (experiments)")
-    ap.add_argument("--csv", default=os.path.join(os.path.dirname(__file__), "..", "docs", "bench", "renderer.csv"))
+    ap.add_argument("--csv", default=os.path.join(os.path.dirname(__file__), "..", "out", "bench", "renderer.csv"),
+                    help="CSV to append to (copy it into docs/bench/ to publish a run)")
     args = ap.parse_args()
     ctx = get_context()
     import gs_ibl_addon.core.render.renderer as renderer_module
