@@ -27,7 +27,7 @@ from .views import ViewBatch
 # is split into chunks composited in parallel (gs_raster.comp / gs_merge.comp), up to RASTER_TARGET_GROUPS
 # workgroups. Chunks give up the early termination of pixels that turned opaque in an earlier chunk, so they only
 # pay where tiles are very few: on an H200, for 1M splats, 32 chunks took a 32^2 probe's raster from 2.0 to 1.1 ms,
-# while 2 to 10 chunks made 64^2 slower than one pass (0.76 ms) (docs/benchmarks.md).
+# while 10 chunks made 64^2 slower than one pass (1.16 vs 0.76 ms) (docs/bench/runs/chunk_experiment.md).
 RASTER_TARGET_GROUPS = 1024
 MAX_RASTER_CHUNKS = 32
 CHUNK_BELOW_TILES = 64
