@@ -9,43 +9,12 @@ import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
-from plyfile import PlyData, PlyElement  # noqa: E402
 
 import gs_ibl_addon  # noqa: E402
-from gs_ibl_addon.core.scene import SH_C0, SplatScene  # noqa: E402
+from gs_ibl_addon.core.scene import SH_C0  # noqa: E402
+from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-
-
-def random_scene(n: int, degree: int = 1, seed: int = 0) -> SplatScene:
-    rng = np.random.default_rng(seed)
-    q = rng.normal(size=(n, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    return SplatScene(rng.normal(size=(n, 3)).astype(np.float32), rng.uniform(0.01, 0.1, (n, 3)).astype(np.float32),
-                      q.astype(np.float32), rng.uniform(0.05, 0.95, n).astype(np.float32),
-                      (0.3 * rng.normal(size=(n, (degree + 1) ** 2, 3))).astype(np.float32), source="random")
-
-
-def write_3dgs_ply(path, scene: SplatScene) -> None:
-    """The standard 3DGS layout (raw, un-activated values), written with plyfile directly."""
-    n, k = scene.count, scene.sh.shape[1]
-    names = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + [f"f_rest_{i}" for i in range(3 * (k - 1))] + \
-        ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
-    rest = scene.sh[:, 1:].transpose(0, 2, 1).reshape(n, -1)  # channel-major
-    op = np.log(scene.opacities / (1 - scene.opacities))
-    cols = np.concatenate([scene.positions, scene.sh[:, 0], rest, op[:, None], np.log(scene.scales), scene.rotations], 1)
-    arr = np.empty(n, [(nm, "f4") for nm in names])
-    for i, nm in enumerate(names):
-        arr[nm] = cols[:, i]
-    PlyData([PlyElement.describe(arr, "vertex")]).write(str(path))
-
-
-@pytest.fixture
-def blender():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    gs_ibl_addon.register()
-    yield bpy
-    gs_ibl_addon.unregister()
 
 
 # ---------------------------------------------------------------------------------------------- package
@@ -106,8 +75,8 @@ def _op_exists(idname: str) -> bool:
 
 # ---------------------------------------------------------------------------------------------- import
 
-def test_import_ply_creates_splat_object(blender, tmp_path):
-    src = random_scene(500, degree=2)
+def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
+    src = random_scene(500, sh_degree=2)
     path = tmp_path / "garden.ply"
     write_3dgs_ply(path, src)
     assert bpy.ops.gs_ibl.import_splats(filepath=str(path)) == {"FINISHED"}
@@ -136,7 +105,7 @@ def test_import_ply_creates_splat_object(blender, tmp_path):
 
 def test_scene_from_object_applies_world_transform(blender):
     from gs_ibl_addon.blender.splat_object import create_splat_object, scene_from_object
-    src = random_scene(50)
+    src = random_scene(50, sh_degree=1)
     obj = create_splat_object(bpy.context, src, "S")
     obj.location = (1.0, 2.0, 3.0)
     obj.rotation_euler = (0.3, -0.2, 1.1)
@@ -151,9 +120,9 @@ def test_scene_from_object_applies_world_transform(blender):
     np.testing.assert_allclose(got.positions[0], (m @ [*src.positions[0], 1.0])[:3], atol=1e-5)
 
 
-def test_custom_axes_and_scale(blender, tmp_path):
+def test_custom_axes_and_scale(blender, tmp_path, write_3dgs_ply):
     path = tmp_path / "s.ply"
-    write_3dgs_ply(path, random_scene(10))
+    write_3dgs_ply(path, random_scene(10, sh_degree=1))
     assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", global_scale=3.0) == {"FINISHED"}
     np.testing.assert_allclose(np.array(bpy.context.active_object.matrix_world), np.diag([3.0, 3.0, 3.0, 1.0]),
                                atol=1e-6)
@@ -178,9 +147,9 @@ def test_bad_file_reports_error_and_leaves_nothing(blender, tmp_path, content, e
     assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.node_groups), len(bpy.data.materials)) == counts
 
 
-def test_truncated_ply_reports_error(blender, tmp_path):
+def test_truncated_ply_reports_error(blender, tmp_path, write_3dgs_ply):
     path = tmp_path / "cut.ply"
-    write_3dgs_ply(path, random_scene(100))
+    write_3dgs_ply(path, random_scene(100, sh_degree=1))
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(RuntimeError, match="cut.ply"):
@@ -218,7 +187,9 @@ def test_world_never_overwrites_user_world_and_restores(blender):
     mix = nodes["GS-IBL Keep Background"]
     assert mix.inputs["Fac"].links[0].from_socket.name == "Is Camera Ray"
     # a rebuild replaces our World in place: the scene follows, the user's World is untouched
-    w2 = gw.build_world(img, strength=1.0, keep_background=False, background_from=user)
+    assert gw.build_world(img, replace=user) != user  # a World not ours is never replaced
+    bpy.data.worlds.remove([x for x in bpy.data.worlds if x.get("gs_ibl") and x != w][0])
+    w2 = gw.build_world(img, strength=1.0, keep_background=False, background_from=user, replace=w)
     assert scene.world == w2 and len([x for x in bpy.data.worlds if x.get("gs_ibl")]) == 1
     assert "GS-IBL Keep Background" not in w2.node_tree.nodes
     assert gw.restore_world(scene) and scene.world == user
@@ -254,6 +225,99 @@ def test_images_saved_next_to_blend_survive_reload(blender, tmp_path):
     img = bpy.context.scene.world.node_tree.nodes["GS-IBL Radiance"].image
     assert os.path.isfile(bpy.path.abspath(img.filepath))
     np.testing.assert_allclose(gw.image_latlong_pixels(img), rad, rtol=1e-6)
+
+
+def test_unpacked_images_never_overwrite_a_file_not_ours(blender, tmp_path):
+    """Pack Images off: the EXRs get names of ours (gs_ibl_<probe>_<role>.exr); a file of that name we did not
+    write is left as it is and ours takes a suffix; a re-bake rewrites our own files in place."""
+    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.bake import apply_probe_images
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.pack_images = False
+    theirs = tmp_path / "gs_ibl_GS-IBL_Probe_radiance.exr"
+    theirs.write_bytes(b"the user's own file")
+    rad = np.linspace(0, 3, 8 * 16 * 3, dtype=np.float32).reshape(8, 16, 3)
+    irr = np.full((4, 8, 3), 0.25, np.float32)
+    for k in (1.0, 2.0):  # bake, then re-bake
+        apply_probe_images(bpy.context.scene, probe, k * rad, irr)
+        s = probe.gs_ibl_probe
+        assert theirs.read_bytes() == b"the user's own file"
+        assert os.path.basename(s.radiance_image.filepath) == "gs_ibl_GS-IBL_Probe_radiance_1.exr"
+        assert os.path.basename(s.irradiance_image.filepath) == "gs_ibl_GS-IBL_Probe_irradiance.exr"
+        assert sorted(os.listdir(tmp_path)) == ["gs_ibl_GS-IBL_Probe_irradiance.exr",
+                                                "gs_ibl_GS-IBL_Probe_radiance.exr",
+                                                "gs_ibl_GS-IBL_Probe_radiance_1.exr", "scene.blend"]
+        np.testing.assert_allclose(gw.image_latlong_pixels(s.radiance_image), k * rad, rtol=1e-6)
+    # a file counts as ours only for the image that wrote it: any other writer moves on to a free name
+    assert gw.our_file_path(str(tmp_path), "gs_ibl_GS-IBL_Probe_radiance", s.radiance_image) == \
+        str(tmp_path / "gs_ibl_GS-IBL_Probe_radiance_1.exr")
+    assert gw.our_file_path(str(tmp_path), "gs_ibl_GS-IBL_Probe_radiance", None) == \
+        str(tmp_path / "gs_ibl_GS-IBL_Probe_radiance_2.exr")
+
+
+def test_proxy_material_and_tree_found_by_marker_not_name(blender):
+    """A user's material and node group named like the proxy's are left alone, and every import shares one of ours."""
+    from gs_ibl_addon.blender.splat_object import PROXY_MATERIAL, PROXY_MODIFIER, PROXY_TREE, create_splat_object
+    user_mat = bpy.data.materials.new(PROXY_MATERIAL)
+    user_mat.diffuse_color = (1.0, 0.0, 0.0, 1.0)
+    user_tree = bpy.data.node_groups.new(PROXY_TREE, "GeometryNodeTree")
+    a = create_splat_object(bpy.context, random_scene(20, sh_degree=1), "A")
+    b = create_splat_object(bpy.context, random_scene(30, sh_degree=1), "B")
+    tree = a.modifiers[PROXY_MODIFIER].node_group
+    assert tree != user_tree and b.modifiers[PROXY_MODIFIER].node_group == tree
+    assert [t for t in bpy.data.node_groups if t.get("gs_ibl")] == [tree]
+    ours = [m for m in bpy.data.materials if m.get("gs_ibl")]
+    assert len(ours) == 1 and ours[0] != user_mat
+    assert user_mat.name == PROXY_MATERIAL and tuple(user_mat.diffuse_color) == (1.0, 0.0, 0.0, 1.0)
+    assert user_tree.name == PROXY_TREE and len(user_tree.nodes) == 0 and "gs_ibl" not in user_tree.keys()
+    assert "gs_ibl" not in user_mat.keys()
+
+
+def test_each_probe_has_its_world_and_strength(blender):
+    """Probes in two scenes bake into two Worlds; a probe's Strength changes its own World only; a re-bake
+    rebuilds the probe's World in place; a duplicated probe gets a World of its own."""
+    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.bake import apply_probe_images
+
+    def strength(world):
+        return world.node_tree.nodes["GS-IBL Strength"].inputs["Strength"].default_value
+
+    def radiance(world):
+        return gw.image_latlong_pixels(world.node_tree.nodes["GS-IBL Radiance"].image)
+
+    def ours():
+        return [w for w in bpy.data.worlds if w.get("gs_ibl")]
+
+    scene1, scene2 = bpy.context.scene, bpy.data.scenes.new("Other")
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    p1 = bpy.context.active_object
+    p2 = bpy.data.objects.new("Probe 2", None)
+    p2.gs_ibl_probe.is_probe = True
+    scene2.collection.objects.link(p2)
+    rad1, rad2 = (np.full((8, 16, 3), v, np.float32) for v in (0.2, 0.7))
+    irr = np.full((4, 8, 3), 0.25, np.float32)
+    w1 = apply_probe_images(scene1, p1, rad1, irr)
+    w2 = apply_probe_images(scene2, p2, rad2, irr)
+    assert w1 != w2 and scene1.world == w1 and scene2.world == w2 and len(ours()) == 2
+    np.testing.assert_allclose(radiance(w1), rad1)
+    np.testing.assert_allclose(radiance(w2), rad2)  # each World shows its own probe's light
+    p1.gs_ibl_probe.strength = 3.0
+    assert strength(w1) == pytest.approx(3.0) and strength(w2) == pytest.approx(1.0)
+    p2.gs_ibl_probe.strength = 0.5
+    assert strength(w1) == pytest.approx(3.0) and strength(w2) == pytest.approx(0.5)
+    w1 = apply_probe_images(scene1, p1, 2 * rad1, irr)
+    assert len(ours()) == 2 and scene1.world == w1 == p1.gs_ibl_probe.world and scene2.world == w2
+    np.testing.assert_allclose(radiance(w1), 2 * rad1)
+    np.testing.assert_allclose(radiance(w2), rad2)
+    p3 = p1.copy()  # Shift+D copies the probe's references to its World and images
+    scene1.collection.objects.link(p3)
+    w3 = apply_probe_images(scene1, p3, rad2, irr)
+    assert len(ours()) == 3 and w3 != w1 and p1.gs_ibl_probe.world == w1
+    np.testing.assert_allclose(radiance(w1), 2 * rad1)
+    p3.gs_ibl_probe.strength = 5.0
+    assert strength(w1) == pytest.approx(3.0) and strength(w3) == pytest.approx(5.0)
 
 
 def test_add_probe_at_selected_mesh(blender):

@@ -12,25 +12,14 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import gs_ibl_addon  # noqa: E402
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
 from gs_ibl_addon.core.cubemap import latlong_directions  # noqa: E402
 from gs_ibl_addon.core.probe.latlong import cube_to_latlong  # noqa: E402
 from gs_ibl_addon.core.synthetic import SkyGradient, room_scene, shell_scene  # noqa: E402
 
-from test_blender_addon import write_3dgs_ply  # noqa: E402
-
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SKY = SkyGradient()
 SHELL_N, SHELL_R = 6000, 5.0
-
-
-@pytest.fixture
-def blender():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    gs_ibl_addon.register()
-    yield bpy
-    gs_ibl_addon.unregister()
 
 
 def _world_images():
@@ -40,18 +29,18 @@ def _world_images():
     return rad, irr
 
 
-def _import_shell(tmp_path, center=(0.0, 0.0, 0.0)):
+def _import_shell(tmp_path, write_3dgs_ply, center=(0.0, 0.0, 0.0)):
     path = tmp_path / "shell.ply"
     write_3dgs_ply(path, shell_scene(SKY, SHELL_N, SHELL_R, center))
     assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
     return bpy.context.active_object
 
 
-def test_bake_operator_matches_core_result(blender, tmp_path):
+def test_bake_operator_matches_core_result(blender, tmp_path, write_3dgs_ply):
     """Import a PLY shell, add a probe, bake through the operator: the World's images are the core's result, and
     the irradiance is the shell's known one (a + 2/3 b n_z)."""
     from gs_ibl_addon.blender.splat_object import scene_from_object
-    splats = _import_shell(tmp_path)
+    splats = _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
     s = probe.gs_ibl_probe
@@ -75,8 +64,8 @@ def test_bake_operator_matches_core_result(blender, tmp_path):
     assert bpy.context.scene.world.get("gs_ibl") == "world"
 
 
-def test_auto_reports_choice_and_error(blender, tmp_path):
-    _import_shell(tmp_path)
+def test_auto_reports_choice_and_error(blender, tmp_path, write_3dgs_ply):
+    _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
     probe.gs_ibl_probe.face_size = 0  # auto: doubled until the irradiance stops moving
@@ -105,9 +94,9 @@ def test_hole_warning(blender):
     assert warning in probe.gs_ibl_probe.last_report
 
 
-def test_bake_headless_from_saved_blend(blender, tmp_path):
+def test_bake_headless_from_saved_blend(blender, tmp_path, write_3dgs_ply):
     """The documented headless use: open a saved .blend in a fresh process, bake, save; the bake is in the file."""
-    _import_shell(tmp_path)
+    _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     bpy.context.active_object.gs_ibl_probe.face_size = 16
     bpy.context.active_object.select_set(False)
@@ -133,10 +122,10 @@ def test_bake_headless_from_saved_blend(blender, tmp_path):
     np.testing.assert_allclose(irr, known, rtol=0.03)
 
 
-def test_update_when_moved(blender, tmp_path):
+def test_update_when_moved(blender, tmp_path, write_3dgs_ply):
     """The depsgraph handler notes a moved probe and schedules one throttled timer; the timer re-bakes there."""
     from gs_ibl_addon.blender import bake as gb
-    splats = _import_shell(tmp_path)
+    splats = _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
     s = probe.gs_ibl_probe
@@ -167,6 +156,96 @@ def test_update_when_moved(blender, tmp_path):
     # the next move waits out the interval
     assert gb.throttle_delay(gb._last_bake, 2.0, gb._last_bake + 0.5) == pytest.approx(1.5)
     assert gb.throttle_delay(gb._last_bake, 2.0, gb._last_bake + 3.0) == 0.0
+
+
+def test_report_gives_the_filters_gpu_time():
+    """The report's filter time is the filters' GPU time (SH projection + irradiance, + GGX when baked), not every
+    timing key: host wall times, per-step splits and the upload would count the same work two or three times."""
+    from gs_ibl_addon.blender.bake import summary
+    scene = shell_scene(SKY, 2000, SHELL_R)
+    for glossy in (False, True):
+        result = bake_probe(scene, (0.0, 0.0, 0.0), ProbeSettings(method="exact", face_size=16, irradiance_size=8,
+                                                                  glossy=glossy))
+        t = result.timings_ms
+        assert {"irradiance_wall", "sh_project_wall", "upload"} <= set(t)
+        assert any(k.startswith("irradiance.") for k in t)
+        want = t["irradiance"] + t["sh_project"] + (t["ggx"] if glossy else 0.0)
+        assert ("ggx" in t) == glossy
+        lines, _ = summary(result, 1.0)
+        assert f"render {t['render_total']:.0f} ms, filter {want:.0f} ms, total 1.00 s" in lines[2], lines
+        everything = sum(v for k, v in t.items() if not k.startswith("render_") and k != "bake_wall")
+        assert want < everything - 1.0  # the old sum: the wall times alone add about as much again
+
+
+def test_bakes_and_overlay_share_one_upload(blender, tmp_path, write_3dgs_ply):
+    """Re-bakes of an unchanged splat object and the viewport overlay use one renderer (one upload); moving,
+    scaling or editing the object uploads it again, and the bake then matches the core's for the changed object."""
+    from gs_ibl_addon.blender import overlay, splat_cache
+    from gs_ibl_addon.blender.bake import bake_into_world
+    from gs_ibl_addon.blender.splat_object import scene_from_object
+    splats = _import_shell(tmp_path, write_3dgs_ply)
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.face_size, probe.gs_ibl_probe.irradiance_size = 16, 8
+    scene = bpy.context.scene
+    bpy.context.view_layer.update()
+    n0 = splat_cache.uploads
+    bake_into_world(scene, probe)
+    assert splat_cache.uploads == n0 + 1  # the bake read and uploaded the splats through the cache
+    renderer = splat_cache.get(splats).renderer
+    bake_into_world(scene, probe)
+    assert splat_cache.uploads == n0 + 1 and splat_cache.get(splats).renderer is renderer
+    assert overlay.overlay_for(splats).renderer is renderer and splat_cache.uploads == n0 + 1
+
+    def changed(step: int) -> None:
+        bpy.context.view_layer.update()
+        result, _, _ = bake_into_world(scene, probe)
+        assert splat_cache.uploads == n0 + step and splat_cache.get(splats).renderer is not renderer
+        assert overlay.overlay_for(splats).renderer is splat_cache.get(splats).renderer
+        core = bake_probe(scene_from_object(splats), (0.0, 0.0, 0.0), ProbeSettings(face_size=16, irradiance_size=8))
+        np.testing.assert_allclose(result.irradiance, core.irradiance, rtol=1e-5, atol=1e-6)
+
+    splats.location = (0.0, 0.0, 1.0)
+    changed(2)
+    renderer = splat_cache.get(splats).renderer
+    splats.scale = (1.5, 1.5, 1.5)
+    changed(3)
+    renderer = splat_cache.get(splats).renderer
+    co = np.empty(3 * len(splats.data.vertices), np.float32)  # an edit that keeps the vertex count
+    splats.data.vertices.foreach_get("co", co)
+    splats.data.vertices.foreach_set("co", co * 0.9)
+    splats.data.update()
+    changed(4)
+    bpy.data.objects.remove(splats)  # a deleted object's splats leave the GPU at the next update
+    bpy.context.view_layer.update()
+    assert not splat_cache._entries
+
+
+@pytest.mark.parametrize("scale, words", [
+    pytest.param((1.0, 2.0, 1.0), ("non-uniformly", "Ctrl+A"), id="non-uniform"),
+    pytest.param((-1.0, 1.0, 1.0), ("Ctrl+A",), id="mirrored"),
+])
+def test_bake_names_a_splat_object_it_cannot_transform(blender, scale, words):
+    """Splats cannot follow a non-uniform or mirrored object scale: the bake is cancelled with a message naming
+    the object (no traceback, nothing written), and the overlay says the same."""
+    from gs_ibl_addon.blender import overlay
+    from gs_ibl_addon.blender.splat_object import create_splat_object
+    obj = create_splat_object(bpy.context, shell_scene(SKY, 500, SHELL_R), "Stretched Room", proxy=False)
+    obj.scale = scale
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.face_size = 16
+    bpy.context.view_layer.update()
+    before = (len(bpy.data.worlds), len(bpy.data.images), len(bpy.data.node_groups))
+    with pytest.raises(RuntimeError) as e:  # bpy.ops raises on an ERROR report: the operator was cancelled
+        bpy.ops.gs_ibl.bake_probe()
+    msg = str(e.value)
+    assert "Stretched Room: " in msg and "Traceback" not in msg, msg
+    assert all(w in msg for w in words), msg
+    assert (len(bpy.data.worlds), len(bpy.data.images), len(bpy.data.node_groups)) == before
+    assert probe.gs_ibl_probe.last_report == ""
+    with pytest.raises(ValueError, match="^Stretched Room: "):
+        overlay.overlay_for(obj)
 
 
 def test_demo_script_runs(tmp_path):

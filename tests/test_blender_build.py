@@ -212,14 +212,14 @@ print("INSTALLED-OK", type(obj.data).__name__)
 """
 
 
-def test_installs_with_blenders_extension_installer(tmp_path):
+def test_installs_with_blenders_extension_installer(tmp_path, write_3dgs_ply):
     """Blender's own installer takes the zip, installs its wheels, and the add-on imports a file under bl_ext."""
     pytest.importorskip("bpy")
     from pathlib import Path
-    from test_blender_addon import random_scene, write_3dgs_ply
+    from gs_ibl_addon.core.synthetic import random_scene
     out, _ = be.build(tmp_path / "gs_ibl.zip", Path(CACHE), "bpy")
     ply = tmp_path / "s.ply"
-    write_3dgs_ply(ply, random_scene(20))
+    write_3dgs_ply(ply, random_scene(20, sh_degree=1))
     script = tmp_path / "install.py"
     script.write_text(_INSTALL_SCRIPT)
     env = dict(os.environ, BLENDER_USER_RESOURCES=str(tmp_path / "user"))

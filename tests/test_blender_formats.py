@@ -13,7 +13,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import gs_ibl_addon  # noqa: E402
 from gs_ibl_addon.blender.importer import import_matrix  # noqa: E402
 from gs_ibl_addon.core.formats import SplatFormatError, read_scene  # noqa: E402
 from gs_ibl_addon.core.formats.compressed_ply import CHUNK_SIZE, write_compressed_ply  # noqa: E402
@@ -69,14 +68,6 @@ def _write(fmt: str, path, scene: SplatScene):
 
 FORMATS = {"ply": ".ply", "compressed_ply": ".ply", "spz_v2": ".spz", "spz_v3": ".spz", "spz_v4": ".spz",
            "splat": ".splat"}
-
-
-@pytest.fixture
-def blender():
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    gs_ibl_addon.register()
-    yield bpy
-    gs_ibl_addon.unregister()
 
 
 def _datablock_counts() -> dict[str, int]:

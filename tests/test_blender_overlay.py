@@ -130,16 +130,6 @@ def test_to_display_premultiplied_srgb():
 bpy_only = pytest.mark.skipif(__import__("importlib").util.find_spec("bpy") is None, reason="bpy not installed")
 
 
-@pytest.fixture
-def blender():
-    bpy = pytest.importorskip("bpy")
-    import gs_ibl_addon
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    gs_ibl_addon.register()
-    yield bpy
-    gs_ibl_addon.unregister()
-
-
 @bpy_only
 def test_blender_camera_matrices_give_the_same_image(blender):
     """Blender's own matrices (camera.calc_matrix_camera, the inverse of matrix_world), as the viewport's are in

@@ -11,13 +11,13 @@ bpy = pytest.importorskip("bpy")
 
 from gs_ibl_addon.blender.splat_object import PROXY_POINTS, create_splat_object, scene_from_object  # noqa: E402
 
-from test_blender_addon import random_scene  # noqa: E402
+from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
 
 
 def test_million_splats_survive_save_and_reload(tmp_path):
     n = 1_000_000
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    src = random_scene(n, degree=3, seed=7)
+    src = random_scene(n, seed=7, sh_degree=3)
     t0 = time.perf_counter()
     obj = create_splat_object(bpy.context, src, "million")
     t_create = time.perf_counter() - t0

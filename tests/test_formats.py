@@ -21,7 +21,8 @@ from gs_ibl_addon.core.formats import SplatFormatError, read_scene
 from gs_ibl_addon.core.formats.compressed_ply import CHUNK_SIZE, _unpack_rotation, write_compressed_ply
 from gs_ibl_addon.core.formats.splat import read_splat, write_splat
 from gs_ibl_addon.core.formats.spz import _axis_flips, _flip, read_spz, write_spz
-from gs_ibl_addon.core.scene import SH_C0, SplatScene, quat_to_matrix
+from gs_ibl_addon.core import synthetic
+from gs_ibl_addon.core.scene import SH_C0, SplatScene, quat_to_matrix, rgb_to_sh_dc, sh_dc_to_rgb
 from gs_ibl_addon.core.sh import eval_sh_color
 
 GUITAR = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "guitar.compressed.ply")
@@ -40,17 +41,12 @@ SPZ_V4_NIANTIC = bytes.fromhex(
     "2ffd200c61000069698096698069968096968028b52ffd200c450000107b7b01001bc00228b52ffd20105d000028000000c00001008cab05")
 
 
-def random_scene(n: int, degree: int, seed: int = 0, spread: float = 5.0) -> SplatScene:
-    rng = np.random.default_rng(seed)
-    q = rng.normal(size=(n, 4))
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    rgb = rng.uniform(-0.1, 1.1, (n, 3))  # a little outside [0, 1], as trained scenes have
-    sh = np.zeros((n, (degree + 1) ** 2, 3))
-    sh[:, 0] = (rgb - 0.5) / SH_C0
-    sh[:, 1:] = rng.uniform(-0.9, 0.9, (n, sh.shape[1] - 1, 3))
-    return SplatScene(rng.uniform(-spread, spread, (n, 3)).astype(np.float32),
-                      np.exp(rng.uniform(-7, 0, (n, 3))).astype(np.float32), q.astype(np.float32),
-                      rng.uniform(0.01, 0.99, n).astype(np.float32), sh.astype(np.float32))
+def random_scene(n: int, degree: int, seed: int = 0) -> SplatScene:
+    """core.synthetic.random_scene over +-5 (SPZ's fixed point and the chunk ranges see real spans), with DC colours
+    reaching a little outside [0, 1] as trained scenes' do (compressed PLY keeps them; .splat clamps them)."""
+    scene = synthetic.random_scene(n, seed, degree, extent=5.0)
+    scene.sh[:, 0] = rgb_to_sh_dc(np.random.default_rng([seed, 1]).uniform(-0.1, 1.1, (n, 3)))  # not tied to positions
+    return scene
 
 
 def angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -60,7 +56,7 @@ def angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def rgb_of(scene: SplatScene) -> np.ndarray:
-    return 0.5 + SH_C0 * scene.sh[:, 0].astype(np.float64)
+    return sh_dc_to_rgb(scene.sh[:, 0])
 
 
 def assert_error(path, call, *words: str) -> str:

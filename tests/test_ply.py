@@ -7,7 +7,8 @@ from plyfile import PlyData, PlyElement
 
 from gs_ibl_addon.core.formats import SplatFormatError, read_scene
 from gs_ibl_addon.core.formats import ply as plymod
-from gs_ibl_addon.core.formats.ply import MIN_SCALE, read_ply, write_ply
+from gs_ibl_addon.core.formats.ply import read_ply, write_ply
+from gs_ibl_addon.core.formats.repair import MIN_SCALE
 from gs_ibl_addon.core.scene import SplatScene
 from gs_ibl_addon.core.synthetic import random_scene
 

@@ -6,17 +6,14 @@ import numpy as np
 import pytest
 
 from gs_ibl_addon.core import cubemap
+from gs_ibl_addon.core.bake import relative_rms
 from gs_ibl_addon.core.probe import (box_irradiance, cosine_convolve, downsample_cube, exact_irradiance_cube,
                                      ggx_prefilter, sample_cube_bilinear, sh_irradiance_cube, split_alpha)
 from gs_ibl_addon.core.probe.ggx import ggx_prefilter_level
-from gs_ibl_addon.core.probe.box import mip_chain
+from gs_ibl_addon.core.probe.box import halving_sizes, mip_chain
 from gs_ibl_addon.core.probe.reference import (analytic_irradiance, bright_patch_environment, cube_from_function,
-                                               exact_ggx_prefilter, smooth_environment,
+                                               exact_ggx_prefilter, integration_size, smooth_environment,
                                                smooth_environment_irradiance)
-
-
-def rel_rms(a, b):
-    return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 
 
 @pytest.fixture(scope="module")
@@ -79,8 +76,8 @@ def test_exact_reference_matches_closed_form():
 def test_convolution_converges_to_exact(smooth_cube):
     # Smooth environment: measured rel RMS 7.8e-3 (8x2 samples), 1.3e-3 (16x4), 8.8e-5 (64x16, M=16).
     ref = exact_irradiance_cube(smooth_cube, 8)
-    assert rel_rms(cosine_convolve(smooth_cube, 8, 64, 16), ref) < 5e-4
-    assert rel_rms(cosine_convolve(smooth_cube, 8, 16, 4), ref) < 3e-3
+    assert relative_rms(cosine_convolve(smooth_cube, 8, 64, 16), ref) < 5e-4
+    assert relative_rms(cosine_convolve(smooth_cube, 8, 16, 4), ref) < 3e-3
 
 
 def test_convolution_noise_at_low_sample_counts(patch_cube):
@@ -88,7 +85,7 @@ def test_convolution_noise_at_low_sample_counts(patch_cube):
     # Measured rel RMS vs exact (M=8): 8x2: 3.01, 16x4: 1.50, 64x16: 0.15; error falls ~2-3x per doubling of both
     # step counts (M=16: 4x1: 9.4, 8x2: 3.1, 16x4: 1.5, 32x8: 0.50, 64x16: 0.17, 128x32: 0.031).
     ref = exact_irradiance_cube(patch_cube, 8)
-    errs = {s: rel_rms(cosine_convolve(patch_cube, 8, *s), ref) for s in ((8, 2), (16, 4), (64, 16))}
+    errs = {s: relative_rms(cosine_convolve(patch_cube, 8, *s), ref) for s in ((8, 2), (16, 4), (64, 16))}
     assert errs[(8, 2)] > 1.0  # wrong by more than the signal: unusable
     assert errs[(16, 4)] > 0.5
     assert errs[(64, 16)] < 0.3
@@ -104,9 +101,18 @@ def test_box_filter_error(smooth_cube, patch_cube):
     measured_smooth = {16: 0.1535, 4: 0.1356, 2: 0.0986, 1: 0.0451}
     measured_patch = {16: 11.73, 4: 3.949, 2: 1.484, 1: 0.6036}
     for level, want in measured_smooth.items():
-        assert rel_rms(box_irradiance(smooth_cube, 16, level), ref_s) == pytest.approx(want, rel=0.15)
+        assert relative_rms(box_irradiance(smooth_cube, 16, level), ref_s) == pytest.approx(want, rel=0.15)
     for level, want in measured_patch.items():
-        assert rel_rms(box_irradiance(patch_cube, 16, level), ref_p) == pytest.approx(want, rel=0.15)
+        assert relative_rms(box_irradiance(patch_cube, 16, level), ref_p) == pytest.approx(want, rel=0.15)
+
+
+def test_halving_sizes_drive_every_downsampling_chain():
+    assert halving_sizes(64, 16) == [64, 32, 16]
+    assert halving_sizes(12) == [12, 6, 3] and halving_sizes(8, 8) == [8] and halving_sizes(5) == [5]
+    assert [m.shape[1] for m in mip_chain(np.ones((6, 12, 12, 3)))] == [12, 6, 3]
+    # downsample_to halves while above the target and even, so it can land below the target (48 -> 24 -> 12).
+    assert [integration_size(48, d) for d in (16, 12, 48, None)] == [12, 12, 48, 48]
+    assert integration_size(36, 16) == 9
 
 
 def test_downsample_preserves_radiant_power(patch_cube):
@@ -151,7 +157,7 @@ def test_ggx_matches_exact_lobe_on_smooth_environment(smooth_cube):
     mips = mip_chain(smooth_cube)
     n = cubemap.face_directions(8)
     for r, tol in ((0.25, 0.0036), (0.5, 0.0051), (1.0, 0.0138)):
-        assert rel_rms(ggx_prefilter_level(mips, 8, r, 256), exact_ggx_prefilter(smooth_cube, n, r)) < tol
+        assert relative_rms(ggx_prefilter_level(mips, 8, r, 256), exact_ggx_prefilter(smooth_cube, n, r)) < tol
 
 
 def test_ggx_mip_filtering_removes_fireflies(patch_cube):
@@ -159,8 +165,8 @@ def test_ggx_mip_filtering_removes_fireflies(patch_cube):
     # RMS at r=1.0 vs the exact lobe: 64 samples plain 258%, filtered 27%; 256 plain 93%, filtered 10%.
     mips = mip_chain(patch_cube)
     ref = exact_ggx_prefilter(patch_cube, cubemap.face_directions(8), 1.0)
-    plain = rel_rms(ggx_prefilter_level(mips, 8, 1.0, 64, lod_bias=-100.0), ref)  # lod clamps to 0: no filtering
-    filtered = rel_rms(ggx_prefilter_level(mips, 8, 1.0, 64), ref)
+    plain = relative_rms(ggx_prefilter_level(mips, 8, 1.0, 64, lod_bias=-100.0), ref)  # lod clamps to 0: no filtering
+    filtered = relative_rms(ggx_prefilter_level(mips, 8, 1.0, 64), ref)
     assert plain > 2.0 and filtered < 0.35
 
 

@@ -5,14 +5,11 @@ import numpy as np
 import pytest
 
 from gs_ibl_addon.core import cubemap, sh
+from gs_ibl_addon.core.bake import relative_rms
 from gs_ibl_addon.core.probe.reference import (bright_patch_environment, cube_from_function, exact_irradiance_cube,
                                                smooth_environment, smooth_environment_irradiance)
 from gs_ibl_addon.core.probe.sh_project import (cosine_lobe_coefficients, project_cube, sh_basis_any,
                                                 sh_irradiance, sh_irradiance_cube, window_factors)
-
-
-def rel_rms(a, b):
-    return float(np.sqrt(np.mean((a - b) ** 2)) / np.sqrt(np.mean(b ** 2)))
 
 
 def test_basis_equals_3dgs_basis_up_to_degree_3():
@@ -52,7 +49,7 @@ def test_order2_exact_on_band_limited_environment():
     cube = cube_from_function(smooth_environment, 64)
     irr, _ = sh_irradiance_cube(cube, 16)
     truth = smooth_environment_irradiance(cubemap.face_directions(16))
-    assert rel_rms(irr[..., :2], truth) < 1e-4
+    assert relative_rms(irr[..., :2], truth) < 1e-4
 
 
 def test_order2_within_one_percent_of_exact_reference():
@@ -62,7 +59,7 @@ def test_order2_within_one_percent_of_exact_reference():
     irr, _ = sh_irradiance_cube(cube, 16)
     ref = exact_irradiance_cube(cube, 16)
     for c in range(3):
-        assert rel_rms(irr[..., c], ref[..., c]) < 0.01
+        assert relative_rms(irr[..., c], ref[..., c]) < 0.01
 
 
 def test_ringing_next_to_small_bright_patch_is_reproduced_and_bounded():
@@ -79,10 +76,10 @@ def test_ringing_next_to_small_bright_patch_is_reproduced_and_bounded():
     assert -0.22 < raw.min() < -0.17
     assert 0.19 < np.mean(raw[..., 0] < 0) < 0.25
     assert 1.04 < raw.max() / ref.max() < 1.08
-    assert 0.07 < rel_rms(np.maximum(raw, 0), ref) < 0.087
+    assert 0.07 < relative_rms(np.maximum(raw, 0), ref) < 0.087
     assert np.all(sh_irradiance(project_cube(cube, 2), normals) >= 0.0)  # the clamp
     raw8 = sh_irradiance(project_cube(cube, 8), normals, clamp=False)
-    assert raw8.min() > 0.0 and rel_rms(raw8, ref) < 0.02
+    assert raw8.min() > 0.0 and relative_rms(raw8, ref) < 0.02
 
 
 def test_window_trades_ringing_for_blur():

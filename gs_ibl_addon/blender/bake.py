@@ -16,9 +16,10 @@ from bpy.app.handlers import persistent
 
 from ..core.bake import ProbeSettings, bake_probe
 from ..core.probe.latlong import cube_to_latlong
+from . import splat_cache
 from . import world as gw
 from .properties import is_probe
-from .splat_object import is_splat_object, scene_from_object
+from .splat_object import is_splat_object
 
 METHODS = {"AUTO": "auto", "SH": "sh", "CONV": "conv", "BOX": "box", "EXACT": "exact"}
 HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
@@ -47,28 +48,56 @@ def result_latlong(result, kind: str, height: int) -> np.ndarray:
     return cube_to_latlong(cube, 2 * height, height)
 
 
+def _own(probe: bpy.types.Object, attr: str):
+    """The datablock the probe's last bake wrote (``attr`` of its settings), unless another probe refers to it
+    too (a duplicated probe copies the references): then None, so this probe gets its own."""
+    idb = getattr(probe.gs_ibl_probe, attr)
+    if idb is None:
+        return None
+    shared = any(o != probe and is_probe(o) and getattr(o.gs_ibl_probe, attr) == idb for o in bpy.data.objects)
+    return None if shared else idb
+
+
 def apply_probe_images(scene: bpy.types.Scene, probe: bpy.types.Object, radiance: np.ndarray,
                        irradiance: np.ndarray | None) -> bpy.types.World:
-    """Write baked lat-long maps into our images, World and irradiance node group, per the probe's settings."""
+    """Write baked lat-long maps into the probe's images and World and the irradiance node group, per the probe's
+    settings. Files (Pack Images off) are named gs_ibl_<probe>_<role>.exr."""
     s = probe.gs_ibl_probe
-    rad_img = gw.latlong_image("radiance", radiance, pack=s.pack_images)
+    stem = f"gs_ibl_{probe.name}"
+    s.radiance_image = gw.latlong_image("radiance", radiance, pack=s.pack_images, image=_own(probe, "radiance_image"),
+                                        file_stem=f"{stem}_radiance")
     if irradiance is not None:
-        gw.irradiance_group(gw.latlong_image("irradiance", irradiance, pack=s.pack_images))
+        s.irradiance_image = gw.latlong_image("irradiance", irradiance, pack=s.pack_images,
+                                              image=_own(probe, "irradiance_image"), file_stem=f"{stem}_irradiance")
+        gw.irradiance_group(s.irradiance_image)
     # The camera keeps what it saw before we first took over the World.
     previous = scene.get(gw.PREVIOUS_WORLD)
     if not isinstance(previous, bpy.types.World):
         previous = scene.world if scene.world is not None and scene.world.get(gw.MARKER) != "world" else None
-    world = gw.build_world(rad_img, s.strength, s.keep_background, previous)
+    s.world = gw.build_world(s.radiance_image, s.strength, s.keep_background, previous, replace=_own(probe, "world"))
     if s.assign_world:
-        gw.use_world(scene, world)
-    return world
+        gw.use_world(scene, s.world)
+    return s.world
+
+
+FILTER_STAGES = ("sh_project", "irradiance", "ggx")  # the filters a bake runs; their other keys are details
+
+
+def filter_gpu_ms(timings: dict[str, float]) -> float:
+    """The filters' GPU time of a bake: SH projection + irradiance (+ GGX when baked).
+
+    Only these totals: ``<stage>_wall`` (the same work timed on the host), ``<stage>.<step>`` (the per-step split of
+    the total) and ``upload`` would count time twice or time the host. Where a stage ran on the CPU its value is
+    wall time (core/probe/filters.py).
+    """
+    return sum(timings.get(k, 0.0) for k in FILTER_STAGES)
 
 
 def summary(result, seconds: float) -> tuple[list[str], str | None]:
     """(lines saying what the bake did and how long each part took, hole warning or None)."""
     t = result.timings_ms
     render_ms = t.get("render_total", sum(v for k, v in t.items() if k.startswith("render_")))
-    filter_ms = sum(v for k, v in t.items() if not k.startswith("render_") and k != "bake_wall")
+    filter_ms = filter_gpu_ms(t)
     st = result.settings
     method = st.get("method", "?")
     how = f"method {method}"
@@ -100,9 +129,9 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     if splats is None:
         raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
     t0 = time.perf_counter()
-    splat_scene = scene_from_object(splats)
-    result = bake_probe(splat_scene, np.array(probe.matrix_world.translation, np.float64),
-                        probe_settings(probe.gs_ibl_probe), progress=progress)
+    cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
+    result = bake_probe(cached.scene, np.array(probe.matrix_world.translation, np.float64),
+                        probe_settings(probe.gs_ibl_probe), renderer=cached.renderer, progress=progress)
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]
     # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)

@@ -1,9 +1,9 @@
 """Viewport overlay: the splats, rendered by our renderer from each 3D View's camera, drawn behind the meshes.
 
-A SpaceView3D POST_VIEW draw handler. Per splat object it keeps one SplatOverlay (the scene uploaded to the
-GPU once; re-uploaded when the object's transform or vertex count changes) and per viewport region the last
-image, re-rendered only when the view or window matrix, the region size or the resolution changed
-(overlay_math.SplatOverlay). The image becomes a float GPUTexture drawn as one quad.
+A SpaceView3D POST_VIEW draw handler. Per splat object it keeps one SplatOverlay over the object's shared GPU
+renderer (splat_cache: uploaded once, shared with probe bakes, re-uploaded when the object moves or its mesh
+changes) and per viewport region the last image, re-rendered only when the view or window matrix, the region
+size or the resolution changed (overlay_math.SplatOverlay). The image becomes a float GPUTexture drawn as one quad.
 
 Depth: our renderer returns colour and coverage, no depth, so the quad is drawn at the far plane with the
 depth test on: meshes always cover the splats (right for meshes inside a captured room; a splat object in
@@ -15,36 +15,34 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
+from . import splat_cache
 from .overlay_math import SplatOverlay, to_display
-from .splat_object import PROXY_MODIFIER, is_splat_object, scene_from_object
+from .splat_object import PROXY_MODIFIER, is_splat_object
 
 FAR_NDC = 0.999999  # depth of the quad: behind every mesh, in front of the cleared background (1.0)
 
 _handle = None
-_overlays: dict[str, tuple[tuple, SplatOverlay]] = {}  # object name -> (data key, overlay)
+_overlays: dict[int, SplatOverlay] = {}  # splat_cache.uid(object) -> its images over the shared renderer
 _textures: dict[tuple[str, int], tuple[int, float, object]] = {}  # (object, region) -> (image id, exposure, tex)
 last_error: str | None = None
 
 
-def _data_key(obj: bpy.types.Object) -> tuple:
-    return (obj.data.name, len(obj.data.vertices), np.array(obj.matrix_world, np.float64).tobytes())
-
-
 def overlay_for(obj: bpy.types.Object) -> SplatOverlay:
-    """The object's overlay renderer, built (scene uploaded) on first use or when its splats moved or changed."""
-    key = _data_key(obj)
-    cached = _overlays.get(obj.name)
-    if cached is not None and cached[0] == key:
-        return cached[1]
-    if cached is not None:
-        cached[1].close()
-    ov = SplatOverlay(scene_from_object(obj))
-    _overlays[obj.name] = (key, ov)
+    """The object's overlay: its images over the renderer splat_cache shares with bakes (new when that changes)."""
+    splats = splat_cache.get(obj)
+    ov = _overlays.get(splat_cache.uid(obj))
+    if ov is not None and ov.renderer is splats.renderer:
+        return ov
+    if ov is not None:
+        ov.close()  # its images only: the renderer belongs to splat_cache
+    ov = SplatOverlay(splats.scene, renderer=splats.renderer)
+    _overlays[splat_cache.uid(obj)] = ov
     return ov
 
 
 def clear_cache() -> None:
-    for _key, ov in _overlays.values():
+    """Drop the overlay's images and textures (the uploaded splats stay in splat_cache for bakes)."""
+    for ov in _overlays.values():
         ov.close()
     _overlays.clear()
     _textures.clear()

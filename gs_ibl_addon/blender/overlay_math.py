@@ -111,9 +111,11 @@ class SplatOverlay:
     """One splat object's GPU renderer (scene uploaded once) and its last image per viewport.
 
     ``image`` re-renders only when the matrices, the region size or the scale changed; ``renders`` counts renders.
+    A renderer passed in stays its owner's (close() leaves it open); one made here is closed with the overlay.
     """
 
     def __init__(self, scene: SplatScene, renderer=None) -> None:
+        self._owns_renderer = renderer is None
         if renderer is None:
             from ..core.render.renderer import SplatRenderer
             renderer = SplatRenderer(scene)
@@ -137,9 +139,8 @@ class SplatOverlay:
 
     def close(self) -> None:
         self._last.clear()
-        close = getattr(self.renderer, "close", None)
-        if close is not None:
-            close()
+        if self._owns_renderer:
+            self.renderer.close()
 
 
 def perspective_matrix(fov_x_deg: float, width: int, height: int, near: float = 0.1, far: float = 100.0,

@@ -18,11 +18,12 @@ def _poll_splats(_self, obj) -> bool:
 
 
 def _strength_changed(self, context) -> None:
-    # Live: the World's strength node follows the slider without a re-bake.
-    from .world import MARKER, set_world_strength
-    for w in bpy.data.worlds:
-        if w.get(MARKER) == "world":
-            set_world_strength(w, self.strength)
+    # Live: the strength node of the World this probe baked follows the slider without a re-bake; other
+    # probes' Worlds (in this scene or others) keep theirs.
+    from .datablocks import is_ours
+    from .world import set_world_strength
+    if is_ours(self.world, "world"):
+        set_world_strength(self.world, self.strength)
 
 
 class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
@@ -60,6 +61,10 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                    description="Seconds between automatic re-bakes at most")
     # Shown after a bake (read-only in the panel): what the last bake did.
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"})
+    # What the last bake of this probe wrote: re-bakes update these in place, Strength edits this World only.
+    world: PointerProperty(type=bpy.types.World, options={"HIDDEN"})
+    radiance_image: PointerProperty(type=bpy.types.Image, options={"HIDDEN"})
+    irradiance_image: PointerProperty(type=bpy.types.Image, options={"HIDDEN"})
 
 
 def _overlay_changed(self, context) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake, importer, overlay, panel, properties
+from . import bake, importer, overlay, panel, properties, splat_cache
 
 _CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES)
 _MENUS = (*importer.MENUS, *panel.MENUS)
@@ -16,6 +16,7 @@ def register() -> None:
     properties.register_properties()
     for menu, fn in _MENUS:
         menu.append(fn)
+    splat_cache.register_handlers()
     bake.register_handlers()
     overlay.register_overlay()
 
@@ -23,6 +24,7 @@ def register() -> None:
 def unregister() -> None:
     overlay.unregister_overlay()
     bake.unregister_handlers()
+    splat_cache.unregister_handlers()  # after the overlay: frees the renderers it drew with
     for menu, fn in reversed(_MENUS):
         menu.remove(fn)
     properties.unregister_properties()

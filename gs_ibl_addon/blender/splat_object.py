@@ -17,8 +17,12 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.scene import SH_C0, SplatScene
+from .datablocks import MARKER, find_ours
 
-MARKER = "gs_ibl"  # object custom property: {"source": path, "sh_degree": d, "version": 1}
+# The splat object's MARKER is a dict {"source": path, "sh_degree": d, "version": 1}; the proxy's material and
+# node tree carry these roles (found by them, never by name: datablocks.py).
+PROXY_TREE_ROLE = "proxy_tree"
+PROXY_MATERIAL_ROLE = "proxy_material"
 PROXY_TREE = "GS-IBL Splat Proxy"
 PROXY_MATERIAL = "GS-IBL Splat Colour"
 PROXY_MODIFIER = "GS-IBL Proxy"
@@ -55,11 +59,11 @@ def _fill_mesh(mesh: bpy.types.Mesh, scene: SplatScene) -> None:
 
 
 def _proxy_material() -> bpy.types.Material:
-    mat = bpy.data.materials.get(PROXY_MATERIAL)
-    if mat is not None and mat.get(MARKER):
+    mat = find_ours(bpy.data.materials, PROXY_MATERIAL_ROLE)
+    if mat is not None:
         return mat
     mat = bpy.data.materials.new(PROXY_MATERIAL)
-    mat[MARKER] = 1
+    mat[MARKER] = PROXY_MATERIAL_ROLE
     if mat.node_tree is None:
         mat.use_nodes = True
     nt = mat.node_tree
@@ -75,11 +79,11 @@ def _proxy_material() -> bpy.types.Material:
 
 def _proxy_tree() -> bpy.types.NodeTree:
     """Geometry Nodes: a random fraction of the vertices as coloured points (display only)."""
-    tree = bpy.data.node_groups.get(PROXY_TREE)
-    if tree is not None and tree.get(MARKER):
+    tree = find_ours(bpy.data.node_groups, PROXY_TREE_ROLE)
+    if tree is not None:
         return tree
     tree = bpy.data.node_groups.new(PROXY_TREE, "GeometryNodeTree")
-    tree[MARKER] = 1
+    tree[MARKER] = PROXY_TREE_ROLE
     iface = tree.interface
     iface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     frac = iface.new_socket("Fraction", in_out="INPUT", socket_type="NodeSocketFloat")
@@ -175,10 +179,17 @@ def scene_from_mesh(mesh: bpy.types.Mesh, source: str = "<blender>") -> SplatSce
 
 
 def scene_from_object(obj: bpy.types.Object) -> SplatScene:
-    """The object's splats in Blender world space (its matrix_world applied): what a probe bake needs."""
+    """The object's splats in Blender world space (its matrix_world applied): what a probe bake needs.
+
+    Raises ValueError naming the object when its transform cannot move splats (non-uniform or mirrored scale).
+    """
     if not is_splat_object(obj):
         raise ValueError(f"{obj.name if obj else None!r} is not a GS-IBL splat object (import a splat file first)")
     info = obj[MARKER]
     source = str(info.get("source", obj.name)) if hasattr(info, "get") else obj.name
     local = scene_from_mesh(obj.data, source)
-    return local.transformed(np.array(obj.matrix_world, np.float64))
+    try:
+        return local.transformed(np.array(obj.matrix_world, np.float64))
+    except ValueError as e:
+        # The core's message says what is wrong with the matrix; the user needs to know which object has it.
+        raise ValueError(f"{obj.name}: {e}") from e

@@ -1,9 +1,11 @@
 """Writing baked light into Blender: float lat-long images, the GS-IBL World, the irradiance node group.
 
 Never touches what the user made: our images, World and node group carry the custom property ``gs_ibl``
-(with a role) and are found by it, not by name; a user's datablock of the same name is left alone (ours then
-gets Blender's .001 suffix). scene.world changes only through use_world(), which remembers the World it
-replaces so restore_world() can put it back.
+(with a role, datablocks.py) and are found by it, not by name; a user's datablock of the same name is left alone
+(ours then gets Blender's .001 suffix). Each probe has its own images and World (the probe remembers them); the
+irradiance node group is one per file and follows the last bake. Images saved as files get names of ours
+(``gs_ibl_<probe>_<role>.exr``) and never replace a file we did not write. scene.world changes only through
+use_world(), which remembers the World it replaces so restore_world() can put it back.
 
 Lat-long images follow core/cubemap.py (Blender's equirectangular mapping, top row = +Z); Blender stores
 image rows bottom-up, so rows are flipped on the way in.
@@ -16,27 +18,42 @@ import os
 import bpy
 import numpy as np
 
-MARKER = "gs_ibl"
+from .datablocks import MARKER, find_ours, is_ours
+
 WORLD_NAME = "GS-IBL World"
 IRRADIANCE_GROUP = "GS-IBL Irradiance"
 PREVIOUS_WORLD = "gs_ibl_previous_world"  # scene custom property: the World use_world() replaced
-
-
-def _ours(collection, role: str):
-    for idb in collection:
-        if idb.get(MARKER) == role and idb.library is None:
-            return idb
-    return None
+WRITTEN_FILE = "gs_ibl_file"  # image custom property: the EXR file we wrote for it (files we may overwrite)
 
 
 # ---------------------------------------------------------------------------------------------- images
 
-def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: bool = True,
-                  save_dir: str | None = None) -> bpy.types.Image:
-    """Create or update our float image for ``role`` ("radiance", "irradiance", ...) from (H, W, 3) linear RGB.
+def _abs(path: str) -> str:
+    return os.path.normcase(os.path.abspath(bpy.path.abspath(path)))
 
-    pack=True keeps it inside the .blend (as OpenEXR); otherwise it is saved as an EXR in save_dir
-    (default: next to the .blend, which must then be saved).
+
+def our_file_path(folder: str, stem: str, image: bpy.types.Image | None) -> str:
+    """``folder/stem.exr``, or ``stem_1.exr``, ``stem_2.exr``, ...: the first that does not exist or that
+    ``image`` itself was last written to. A file we did not write is never chosen (never overwritten)."""
+    written = image.get(WRITTEN_FILE) if image is not None else None
+    mine = _abs(written) if isinstance(written, str) else None
+    i = 0
+    while True:
+        path = os.path.join(folder, f"{stem}_{i}.exr" if i else f"{stem}.exr")
+        if not os.path.exists(path) or _abs(path) == mine:
+            return path
+        i += 1
+
+
+def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: bool = True,
+                  save_dir: str | None = None, image: bpy.types.Image | None = None,
+                  file_stem: str | None = None) -> bpy.types.Image:
+    """Our float image for ``role`` ("radiance", "irradiance", ...) from (H, W, 3) linear RGB.
+
+    ``image``: our earlier image to update in place (ignored unless it is ours for ``role``); otherwise a new one.
+    pack=True keeps it inside the .blend (as OpenEXR); otherwise it is saved as the EXR ``file_stem``.exr
+    (default ``gs_ibl_<role>``; a suffix when a file of that name is not ours) in save_dir (default: next to the
+    .blend, which must then be saved).
     """
     px = np.asarray(pixels, np.float32)
     if px.ndim != 3 or px.shape[2] not in (3, 4) or px.shape[1] != 2 * px.shape[0]:
@@ -44,7 +61,7 @@ def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: 
     if not np.isfinite(px).all():
         raise ValueError(f"lat-long image for {role!r} contains NaN or infinite values")
     h, w = px.shape[:2]
-    img = _ours(bpy.data.images, role)
+    img = image if is_ours(image, role) else None
     if pack:
         if img is not None and (img.source != "GENERATED" or tuple(img.size) != (w, h) or not img.is_float):
             bpy.data.images.remove(img)
@@ -62,8 +79,7 @@ def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: 
         if not folder:
             raise ValueError("save the .blend first (baked images are written next to it), or pack the images")
         from ..core.image_io import write_exr
-        base = bpy.path.clean_name(img.name if img is not None else (name or f"GS-IBL {role.capitalize()}"))
-        path = os.path.join(folder, base + ".exr")
+        path = our_file_path(folder, bpy.path.clean_name(file_stem or f"gs_ibl_{role}"), img)
         write_exr(path, px[..., :3])  # 32-bit float (Image.save would write half floats)
         if img is None:
             img = bpy.data.images.load(path, check_existing=False)
@@ -75,6 +91,8 @@ def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: 
             img.source = "FILE"
             img.filepath = bpy.path.relpath(path) if bpy.data.filepath else path
             img.reload()
+        # relative to the .blend, so moving the .blend with its images keeps them recognised as ours
+        img[WRITTEN_FILE] = bpy.path.relpath(path) if bpy.data.filepath else path
     img.update()
     return img
 
@@ -102,13 +120,15 @@ def _background_output(world: bpy.types.World):
 
 
 def build_world(radiance: bpy.types.Image, strength: float = 1.0, keep_background: bool = False,
-                background_from: bpy.types.World | None = None) -> bpy.types.World:
-    """Our World lit by ``radiance``; rebuilt in place of an earlier GS-IBL World (its users follow).
+                background_from: bpy.types.World | None = None,
+                replace: bpy.types.World | None = None) -> bpy.types.World:
+    """Our World lit by ``radiance``: a new one, or rebuilt in place of ``replace`` if that is a GS-IBL World
+    (its users, e.g. scenes, follow; any other World is never replaced).
 
     keep_background: camera rays see ``background_from`` (a copy of its nodes, or its colour) instead of
     the probe, so the rendered backdrop stays as the user had it while everything else is lit by the probe.
     """
-    old = _ours(bpy.data.worlds, "world")
+    old = replace if is_ours(replace, "world") else None
     if keep_background and background_from is not None and background_from.get(MARKER) != "world":
         world = background_from.copy()  # the user's World stays as it is; we edit the copy
     else:
@@ -195,7 +215,7 @@ def irradiance_group(image: bpy.types.Image) -> bpy.types.ShaderNodeTree:
     The lookup is the one of core/cubemap.py written in math nodes:
     u = 0.5 - atan2(y, x) / 2pi,  v (bottom-up) = 1 - acos(z) / pi.
     """
-    tree = _ours(bpy.data.node_groups, "irradiance")
+    tree = find_ours(bpy.data.node_groups, "irradiance")
     if tree is None:
         tree = bpy.data.node_groups.new(IRRADIANCE_GROUP, "ShaderNodeTree")
         tree[MARKER] = "irradiance"

@@ -87,14 +87,6 @@ def latlong_directions(width: int, height: int) -> np.ndarray:
     return np.stack([st * np.cos(ph), st * np.sin(ph), np.cos(th)], -1)
 
 
-def direction_to_latlong(dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(..., 3) unit directions -> (u, v_top) in [0, 1]."""
-    d = np.asarray(dirs, np.float64)
-    u = (0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2.0 * np.pi)) % 1.0
-    v = np.arccos(np.clip(d[..., 2], -1.0, 1.0)) / np.pi
-    return u, v
-
-
 def edge_neighbours(size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Every border texel of every face, its neighbour across the cube edge, and its neighbour inward.
 

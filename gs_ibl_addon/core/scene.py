@@ -11,16 +11,22 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-SH_C0 = 0.28209479177387814
+from .sh import C0 as SH_C0  # re-exported: the degree-0 colour rule's constant, under its 3DGS name
+from .sh import coeff_count, degree_of
 
-
-def sh_coeff_count(degree: int) -> int:
-    return (degree + 1) ** 2
+# Relative spread of a transform's singular values below which its scale counts as uniform (float32 matrices
+# from Blender carry ~1e-7 noise; a deliberate non-uniform scale differs by far more).
+UNIFORM_SCALE_RTOL = 1e-4
 
 
 def rgb_to_sh_dc(rgb: np.ndarray) -> np.ndarray:
-    """Inverse of the degree-0 colour rule: the f_dc that renders as ``rgb``."""
+    """Inverse of the degree-0 colour rule: the f_dc (float32) that renders as ``rgb``."""
     return (np.asarray(rgb, np.float32) - 0.5) / SH_C0
+
+
+def sh_dc_to_rgb(dc: np.ndarray) -> np.ndarray:
+    """The degree-0 colour rule, unclamped, in float64: ``0.5 + SH_C0 * f_dc``."""
+    return 0.5 + SH_C0 * np.asarray(dc, np.float64)
 
 
 @dataclass
@@ -54,11 +60,11 @@ class SplatScene:
 
     @property
     def sh_degree(self) -> int:
-        return int(round(np.sqrt(self.sh.shape[1]))) - 1
+        return degree_of(self.sh.shape[1])
 
     def with_sh_degree(self, degree: int) -> "SplatScene":
         """The same splats with SH truncated (or zero-padded) to ``degree``."""
-        k = sh_coeff_count(degree)
+        k = coeff_count(degree)
         sh = np.zeros((self.count, k, 3), np.float32)
         m = min(k, self.sh.shape[1])
         sh[:, :m] = self.sh[:, :m]
@@ -71,14 +77,14 @@ class SplatScene:
     def transformed(self, matrix: np.ndarray) -> "SplatScene":
         """Splats moved by a 4x4 similarity transform (rotation, uniform scale, translation).
 
+        A non-uniform scale or a mirror raises ValueError saying what to do: lin / cbrt(det) is then no rotation,
+        and using it would silently give the splats wrong shapes.
         SH view dependence is not rotated (as most viewers do); the DC colour, which carries
         nearly all of a probe's light, is exact.
         """
         m = np.asarray(matrix, np.float64)
         lin = m[:3, :3]
-        s = np.cbrt(np.linalg.det(lin))
-        if not s > 0:
-            raise ValueError("transform must have a positive determinant")
+        s = _uniform_scale(lin, self.source)
         r = lin / s
         pos = self.positions.astype(np.float64) @ lin.T + m[:3, 3]
         q = quat_multiply(matrix_to_quat(r), self.rotations.astype(np.float64))
@@ -94,6 +100,24 @@ class SplatScene:
     def empty() -> "SplatScene":
         return SplatScene(np.zeros((0, 3), np.float32), np.ones((0, 3), np.float32),
                           np.zeros((0, 4), np.float32), np.zeros((0,), np.float32), np.zeros((0, 1, 3), np.float32))
+
+
+def _uniform_scale(lin: np.ndarray, source: str) -> float:
+    """The factor s of a 3x3 map lin = s * R (R a rotation); ValueError naming the problem otherwise."""
+    advice = ("splats support rotation, translation and uniform scale only: apply the scale (Ctrl+A in Blender) "
+              "or use a uniform scale")
+    if not np.all(np.isfinite(lin)):
+        raise ValueError(f"{source}: the transform has NaN or infinite entries; give the object a finite transform")
+    sv = np.linalg.svd(lin, compute_uv=False)
+    if not sv[-1] > 0:
+        raise ValueError(f"{source}: the transform is degenerate (a zero scale flattens the splats); "
+                         "give the object a non-zero scale")
+    if sv[0] - sv[-1] > UNIFORM_SCALE_RTOL * sv[0]:
+        factors = ", ".join(f"{f:.4g}" for f in np.linalg.norm(lin, axis=0))
+        raise ValueError(f"{source}: the transform scales non-uniformly (x, y, z factors {factors}); {advice}")
+    if np.linalg.det(lin) < 0:
+        raise ValueError(f"{source}: the transform mirrors (negative determinant: a negative scale); {advice}")
+    return float(np.cbrt(np.linalg.det(lin)))
 
 
 def quat_to_matrix(q: np.ndarray) -> np.ndarray:

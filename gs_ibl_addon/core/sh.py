@@ -15,6 +15,19 @@ C3 = (-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.37317633259
       -0.4570457994644658, 1.445305721320277, -0.5900435899266435)
 
 
+def coeff_count(degree: int) -> int:
+    """SH coefficients per colour channel up to ``degree``: (degree + 1)^2."""
+    return (degree + 1) ** 2
+
+
+def degree_of(count: int) -> int:
+    """The SH degree whose coefficient count is ``count``; ValueError if ``count`` is not a square."""
+    degree = int(round(float(np.sqrt(count)))) - 1
+    if degree < 0 or coeff_count(degree) != count:
+        raise ValueError(f"SH coefficient count {count} is not a square (degree+1)^2")
+    return degree
+
+
 def sh_basis(dirs: np.ndarray, degree: int) -> np.ndarray:
     """(..., 3) unit directions -> (..., (degree+1)^2) basis values, 3DGS order and signs."""
     d = np.asarray(dirs, np.float64)
@@ -36,8 +49,6 @@ def sh_basis(dirs: np.ndarray, degree: int) -> np.ndarray:
 
 def eval_sh_color(sh: np.ndarray, dirs: np.ndarray) -> np.ndarray:
     """3DGS colour: sh (N, K, 3), dirs (N, 3) unit, from the viewer toward the splat -> (N, 3) >= 0."""
-    k = sh.shape[1]
-    degree = int(round(np.sqrt(k))) - 1
-    basis = sh_basis(dirs, degree)  # (N, K)
+    basis = sh_basis(dirs, degree_of(sh.shape[1]))  # (N, K)
     rgb = np.einsum("nk,nkc->nc", basis, sh.astype(np.float64)) + 0.5
     return np.maximum(rgb, 0.0)

@@ -13,6 +13,11 @@ class SplatFormatError(ValueError):
     """Bad splat input: the message names the file, the field and what to do."""
 
 
+def fail(path: str, what: str, todo: str | None = None) -> SplatFormatError:
+    """The error every reader raises: ``<file>: <what is wrong>``, then `` (<what to do>)`` when given separately."""
+    return SplatFormatError(f"{path}: {what}" + (f" ({todo})" if todo else ""))
+
+
 # extension -> human description; the Blender importer's file browser filter is built from this.
 EXTENSIONS = {".ply": "3DGS PLY (standard or SuperSplat compressed)", ".spz": "Niantic SPZ", ".splat": "antimatter15 .splat"}
 
@@ -21,7 +26,7 @@ def read_scene(path: str | os.PathLike) -> SplatScene:
     """Read any supported splat file into a SplatScene."""
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise SplatFormatError(f"{path}: no such file")
+        raise fail(path, "no such file")
     with open(path, "rb") as f:
         head = f.read(4096)
     ext = os.path.splitext(path)[1].lower()
@@ -38,5 +43,5 @@ def read_scene(path: str | os.PathLike) -> SplatScene:
     if ext == ".splat":
         from .splat import read_splat
         return read_splat(path)
-    raise SplatFormatError(f"{path}: not a splat file this add-on reads (expected {', '.join(EXTENSIONS)}); "
-                           f"the first bytes are {head[:8]!r}")
+    raise fail(path, f"not a splat file this add-on reads (expected {', '.join(EXTENSIONS)}); "
+                     f"the first bytes are {head[:8]!r}")

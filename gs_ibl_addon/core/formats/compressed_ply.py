@@ -19,12 +19,13 @@ Everything is decoded with whole-array numpy operations.
 from __future__ import annotations
 
 import os
+from functools import partial
 
 import numpy as np
 from plyfile import PlyData, PlyElement, PlyParseError
 
-from ..scene import SH_C0, SplatScene
-from . import SplatFormatError
+from ..scene import SplatScene, rgb_to_sh_dc, sh_dc_to_rgb
+from . import fail
 
 CHUNK_SIZE = 256
 _CHUNK_BASE = ("min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
@@ -39,9 +40,7 @@ _OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]], np.intp)
 _ALPHA_EPS = 0.25 / 255.0  # a quarter step: inside the byte's rounding interval, so it re-encodes to the same byte
 _REEXPORT = "re-export it from SuperSplat or PlayCanvas splat-transform"
 
-
-def _fail(path: str, what: str, todo: str = _REEXPORT) -> SplatFormatError:
-    return SplatFormatError(f"{path}: {what} ({todo})")
+_fail = partial(fail, todo=_REEXPORT)  # this format's usual advice; a call passes todo= for other advice
 
 
 def _unorm(packed: np.ndarray, shift: int, bits: int) -> np.ndarray:
@@ -70,7 +69,7 @@ def read_compressed_ply(path: str | os.PathLike) -> SplatScene:
         # Memory-mapped: plyfile then views each element as one array (without mmap it parses row by row).
         ply = PlyData.read(path, mmap=True)
     except (PlyParseError, ValueError, EOFError, OSError) as e:
-        raise _fail(path, f"not a readable PLY: {e}", "the file is truncated or damaged; " + _REEXPORT) from None
+        raise _fail(path, f"not a readable PLY: {e}", todo="the file is truncated or damaged; " + _REEXPORT) from None
     elements = {e.name: e for e in ply.elements}
     for name in ("chunk", "vertex"):
         if name not in elements:
@@ -113,7 +112,7 @@ def read_compressed_ply(path: str | os.PathLike) -> SplatScene:
     rgb = [_unorm(pc, 24, 8), _unorm(pc, 16, 8), _unorm(pc, 8, 8)]
     if has_colour_range:
         rgb = [ranged(ch, "", t) for ch, t in zip("rgb", rgb)]
-    dc = (np.stack(rgb, 1) - np.float32(0.5)) / np.float32(SH_C0)
+    dc = rgb_to_sh_dc(np.stack(rgb, 1))
     opacities = np.clip(_unorm(pc, 0, 8), _ALPHA_EPS, 1 - _ALPHA_EPS).astype(np.float32)
 
     sh = _read_sh(path, elements.get("sh"), n)
@@ -229,7 +228,7 @@ def write_compressed_ply(path: str | os.PathLike, scene: SplatScene, sort: bool 
 
     pos = chunked(scene.positions)
     log_scale = chunked(np.log(np.maximum(scene.scales, 1e-30)))
-    colour = chunked(scene.sh[:, 0] * SH_C0 + 0.5)
+    colour = chunked(sh_dc_to_rgb(scene.sh[:, 0]))
     p_lo, p_hi = pos.min(1, keepdims=True), pos.max(1, keepdims=True)
     s_lo = np.clip(log_scale.min(1, keepdims=True), -20, 20)
     s_hi = np.clip(log_scale.max(1, keepdims=True), -20, 20)

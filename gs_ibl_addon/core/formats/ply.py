@@ -17,7 +17,7 @@ Errors (one ``SplatFormatError`` naming the file, the field and what to do; noth
   element, or none of the splat properties) ; missing or misspelt properties (the close name found is suggested);
   a list property where a number is expected; an f_rest count other than 0, 9, 24, 45 or gaps in its numbering;
   a truncated file (fewer bytes or lines than the header promises); zero splats; every splat non-finite.
-Repairs (done silently to the data, counted in ``scene.repairs``; a key is present only when its count is > 0):
+Repairs (formats/repair.py; done silently to the data, counted in ``scene.repairs``, a key only when its count > 0):
   ``dropped_nonfinite``  splats with NaN/inf in any field used (or whose exp(scale) overflows float32) are dropped;
   ``clamped_scales``     splats with a scale below ``MIN_SCALE`` (exp(raw) zero or subnormal, where 1/scale^2 would
                          overflow float32 in a renderer) get that axis clamped to ``MIN_SCALE``;
@@ -37,8 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 from plyfile import PlyData, PlyElement, PlyListProperty, PlyParseError
 
-from . import SplatFormatError
 from ..scene import SplatScene
+from . import fail
+from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 CHUNK_ROWS = 1 << 16  # splats converted per step: bounds temporaries to a few MB whatever the file size
 F_REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest properties -> SH degree
@@ -80,19 +81,10 @@ def _exp32(raw: np.ndarray) -> np.ndarray:
         return np.exp(np.asarray(raw, np.float64)).astype(np.float32)
 
 
-# Below about 1e-12 an axis scale is degenerate: 1/scale^2 (the inverse covariance a renderer builds) nears float32
-# overflow. The clamp value is exp() of a float32 raw value, so that a written repaired scene reads back unchanged.
-MIN_SCALE = _exp32(np.float32(-27.6))
-
-
-def _fail(path: str, message: str) -> SplatFormatError:
-    return SplatFormatError(f"{path}: {message}")
-
-
 def _check_header(path: str, ply: PlyData) -> tuple[PlyElement, _Layout]:
     names = [e.name for e in ply.elements]
     if "vertex" not in names:
-        raise _fail(path, f"no 'vertex' element (elements found: {', '.join(names) or 'none'}); {_ADVICE}")
+        raise fail(path, f"no 'vertex' element (elements found: {', '.join(names) or 'none'}); {_ADVICE}")
     vertex = ply["vertex"]
     props = [p.name for p in vertex.properties]
     missing = [n for n in _REQUIRED if n not in props]
@@ -100,31 +92,31 @@ def _check_header(path: str, ply: PlyData) -> tuple[PlyElement, _Layout]:
         looks_splat = any(difflib.get_close_matches(n, props, n=1, cutoff=0.8) for n in _SPLAT_ONLY)
         if "face" in names or not looks_splat:
             why = "it has a 'face' element" if "face" in names else f"its vertices have only {', '.join(props)}"
-            raise _fail(path, f"this is a mesh or point-cloud PLY, not a 3DGS splat file ({why}; no "
-                              f"{', '.join(missing)}). Import it with File > Import > Stanford PLY instead, or "
-                              f"choose the splat PLY your 3DGS trainer wrote (e.g. point_cloud.ply)")
+            raise fail(path, f"this is a mesh or point-cloud PLY, not a 3DGS splat file ({why}; no "
+                             f"{', '.join(missing)}). Import it with File > Import > Stanford PLY instead, or "
+                             f"choose the splat PLY your 3DGS trainer wrote (e.g. point_cloud.ply)")
         unused = [p for p in props if p not in _REQUIRED]
         parts = []
         for n in missing:
             close = difflib.get_close_matches(n, unused, n=1, cutoff=0.6)
             parts.append(f"'{n}'" + (f" (found '{close[0]}': a misspelling? rename it to '{n}')" if close else ""))
-        raise _fail(path, f"vertex property {', '.join(parts)} missing; {_ADVICE}")
+        raise fail(path, f"vertex property {', '.join(parts)} missing; {_ADVICE}")
 
     rest = sorted(int(m.group(1)) for p in props if (m := _F_REST.match(p)))
     if len(rest) not in F_REST_COUNTS:
-        raise _fail(path, f"{len(rest)} f_rest_* properties; the standard layout has 0, 9, 24 or 45 "
-                          f"(SH degree 0-3). Re-export the file with SH degree 0-3")
+        raise fail(path, f"{len(rest)} f_rest_* properties; the standard layout has 0, 9, 24 or 45 "
+                         f"(SH degree 0-3). Re-export the file with SH degree 0-3")
     if rest != list(range(len(rest))):
         gap = sorted(set(range(len(rest))) - set(rest))
-        raise _fail(path, f"f_rest properties are not numbered 0..{len(rest) - 1} (f_rest_{gap[0]} is missing); "
-                          f"the file is not in the standard layout: re-export it")
+        raise fail(path, f"f_rest properties are not numbered 0..{len(rest) - 1} (f_rest_{gap[0]} is missing); "
+                         f"the file is not in the standard layout: re-export it")
     layout = _Layout.standard(F_REST_COUNTS[len(rest)])
     for p in vertex.properties:
         if p.name in layout.names and isinstance(p, PlyListProperty):
-            raise _fail(path, f"vertex property '{p.name}' is a list, expected one number per splat; "
-                              f"re-export the file in the standard 3DGS layout")
+            raise fail(path, f"vertex property '{p.name}' is a list, expected one number per splat; "
+                             f"re-export the file in the standard 3DGS layout")
     if vertex.count == 0:
-        raise _fail(path, "the vertex element holds 0 splats: nothing to import. Check the export")
+        raise fail(path, "the vertex element holds 0 splats: nothing to import. Check the export")
     return vertex, layout
 
 
@@ -141,9 +133,9 @@ def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
     need = vertex.count * dtype.itemsize
     have = os.path.getsize(path) - offset
     if have < need:
-        raise _fail(path, f"the file is truncated: the header promises {vertex.count} splats ({need} bytes) but only "
-                          f"{have} bytes follow ({have // dtype.itemsize} whole splats). The download or copy was "
-                          f"probably cut off: get the file again")
+        raise fail(path, f"the file is truncated: the header promises {vertex.count} splats ({need} bytes) but only "
+                         f"{have} bytes follow ({have // dtype.itemsize} whole splats). The download or copy was "
+                         f"probably cut off: get the file again")
     for i in range(0, vertex.count, CHUNK_ROWS):
         # A fresh small map per chunk, dropped after use, so resident memory never holds the whole file.
         rows = np.memmap(path, dtype, "r", offset + i * dtype.itemsize, (min(CHUNK_ROWS, vertex.count - i),))
@@ -156,23 +148,23 @@ def _read_all(path: str, mmap: bool) -> PlyData:
         return PlyData.read(path, mmap=mmap)
     except PlyParseError as e:
         if "early end-of-file" in str(e):
-            raise _fail(path, f"the file is truncated ({e}): the download or copy was probably cut off; "
-                              f"get the file again") from None
-        raise _fail(path, f"the PLY data cannot be parsed ({e}); re-export the file") from None
+            raise fail(path, f"the file is truncated ({e}): the download or copy was probably cut off; "
+                             f"get the file again") from None
+        raise fail(path, f"the PLY data cannot be parsed ({e}); re-export the file") from None
 
 
 def read_ply(path: str | os.PathLike) -> SplatScene:
     """Read a standard 3DGS PLY into an activated SplatScene (see the module docstring for errors and repairs)."""
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise _fail(path, "no such file")
+        raise fail(path, "no such file")
     try:
         with open(path, "rb") as f:
             # plyfile's header parser on its own, so that a mesh or a bad layout is refused before any data is read.
             ply = PlyData._parse_header(f)
             offset = f.tell()
     except (PlyParseError, UnicodeDecodeError) as e:
-        raise _fail(path, f"not a readable PLY file (header: {e}); choose a 3DGS .ply file") from None
+        raise fail(path, f"not a readable PLY file (header: {e}); choose a 3DGS .ply file") from None
     vertex, layout = _check_header(path, ply)
     if ply.text:
         data = _read_all(path, mmap=False)["vertex"].data
@@ -189,7 +181,7 @@ def _activate(path: str, chunks, n: int, layout: _Layout) -> SplatScene:
     opa = np.empty((n,), np.float32)
     scl = np.empty((n, 3), np.float32)
     rot = np.empty((n, 4), np.float32)
-    counts = {"dropped_nonfinite": 0, "clamped_scales": 0, "identity_rotations": 0}
+    counts = new_counts()
     m = 0  # rows kept so far: dropped splats are compacted away as we go, never copied twice
     e = layout.sh_end
     for rows in chunks:
@@ -207,31 +199,15 @@ def _activate(path: str, chunks, n: int, layout: _Layout) -> SplatScene:
         # channel-major f_rest: column 6 + ch*(k-1) + (i-1) -> sh[:, i, ch]
         sh[m:m + c, 1:] = raw[:, 6:e].reshape(c, 3, k - 1).transpose(0, 2, 1)
         opa[m:m + c] = _sigmoid32(raw[:, e])
-        small = s < MIN_SCALE
-        counts["clamped_scales"] += int(small.any(1).sum())
-        s[small] = MIN_SCALE
+        clamp_scales(s, counts)
         scl[m:m + c] = s
-        rot[m:m + c] = _normalise(raw[:, e + 4:e + 8], counts)
+        rot[m:m + c] = normalise_quaternions(raw[:, e + 4:e + 8], counts)
         m += c
     if m == 0:
-        raise _fail(path, f"all {n} splats have NaN or infinite values; the file is damaged: re-export it")
-    repairs = {key: v for key, v in counts.items() if v}
+        raise fail(path, f"all {n} splats have NaN or infinite values; the file is damaged: re-export it")
+    repairs = reported(counts)
     # Views of the first m rows: when splats were dropped the tail is unused, which is cheaper than copying.
     return SplatScene(pos[:m], scl[:m], rot[:m], opa[:m], sh[:m], source=path, repairs=repairs)
-
-
-def _normalise(q32: np.ndarray, counts: dict[str, int]) -> np.ndarray:
-    q = q32.astype(np.float64)
-    n2 = np.einsum("ij,ij->i", q, q)
-    zero = n2 == 0
-    counts["identity_rotations"] += int(zero.sum())
-    q[zero] = (1.0, 0.0, 0.0, 0.0)
-    n2[zero] = 1.0
-    out = (q / np.sqrt(n2)[:, None]).astype(np.float32)
-    # Already unit to float32 precision: keep the stored bits, so that re-reading a written scene changes nothing.
-    unit = np.abs(n2 - 1.0) <= 2.0 ** -21
-    out[unit & ~zero] = q32[unit & ~zero]
-    return out
 
 
 def _invert_exactly(forward, y: np.ndarray, guess: np.ndarray, lo: float, hi: float) -> np.ndarray:

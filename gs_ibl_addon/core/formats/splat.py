@@ -12,12 +12,13 @@ With no magic number, a wrong file is recognised by its size (a multiple of 32) 
 from __future__ import annotations
 
 import os
+from functools import partial
 
 import numpy as np
 
-from ..scene import SH_C0, SplatScene
-from . import SplatFormatError
-from .ply import MIN_SCALE
+from ..scene import SplatScene, rgb_to_sh_dc, sh_dc_to_rgb
+from . import fail
+from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])
 assert RECORD.itemsize == 32
@@ -25,9 +26,7 @@ _ALPHA_EPS = 0.25 / 255.0  # a quarter step: inside the byte's rounding interval
 _REEXPORT = "re-export the .splat, or export a 3DGS PLY instead"
 _DAMAGED = "the file is damaged or not a .splat file"
 
-
-def _fail(path: str, what: str, todo: str = _REEXPORT) -> SplatFormatError:
-    return SplatFormatError(f"{path}: {what} ({todo})")
+_fail = partial(fail, todo=_REEXPORT)  # this format's usual advice; a call passes todo= for other advice
 
 
 def read_splat(path: str | os.PathLike) -> SplatScene:
@@ -44,37 +43,26 @@ def read_splat(path: str | os.PathLike) -> SplatScene:
     if (rec["scale"] < 0).any():
         bad = (rec["scale"] < 0).any(1)
         raise _fail(path, f"{int(bad.sum())} of {n} splats have negative scales (first: splat {int(np.argmax(bad))}); "
-                          ".splat stores exp(log scale), which is never negative", _DAMAGED)
-    repairs = {}
-    # As read_ply does: splats with non-finite values are dropped, too-small scales clamped, zero quaternions
-    # replaced by the identity, each counted under the same repair name.
+                          ".splat stores exp(log scale), which is never negative", todo=_DAMAGED)
+    # The repairs read_ply makes: splats with non-finite values are dropped (only positions and scales are floats
+    # here), too-small scales clamped (exp() of a very negative log scale underflows), zero quaternions replaced by
+    # the identity, each counted under the same repair name.
+    counts = new_counts()
     finite = np.isfinite(rec["position"]).all(1) & np.isfinite(rec["scale"]).all(1)
     if not finite.any():
-        raise _fail(path, f"all {n} splats have non-finite positions or scales", _DAMAGED)
+        raise _fail(path, f"all {n} splats have non-finite positions or scales", todo=_DAMAGED)
     if not finite.all():
-        repairs["dropped_nonfinite"] = int(n - finite.sum())
+        counts["dropped_nonfinite"] = int(n - finite.sum())
         rec = rec[finite]
     positions = np.ascontiguousarray(rec["position"])
-    scales = np.ascontiguousarray(rec["scale"])
-    small = scales < MIN_SCALE  # exp() of a very negative log scale underflows; such a splat is invisible anyway
-    if small.any():
-        repairs["clamped_scales"] = int(small.any(1).sum())
-        scales = np.maximum(scales, MIN_SCALE)
-
-    q = rec["rotation"].astype(np.float32) - 128.0
-    norm = np.linalg.norm(q, axis=1)
-    degenerate = norm == 0
-    if degenerate.any():
-        repairs["identity_rotations"] = int(degenerate.sum())
-        q[degenerate] = (1.0, 0.0, 0.0, 0.0)
-        norm[degenerate] = 1.0
-    rotations = q / norm[:, None]
+    scales = np.ascontiguousarray(rec["scale"])  # a copy (the field is strided), clamped in place below
+    clamp_scales(scales, counts)
+    rotations = normalise_quaternions(rec["rotation"].astype(np.float32) - 128.0, counts)
 
     rgba = rec["rgba"].astype(np.float32) / 255.0
-    sh = ((rgba[:, :3] - 0.5) / np.float32(SH_C0))[:, None, :]
+    sh = rgb_to_sh_dc(rgba[:, :3])[:, None, :]
     opacities = np.clip(rgba[:, 3], _ALPHA_EPS, 1 - _ALPHA_EPS)
-    return SplatScene(positions, scales, rotations.astype(np.float32), opacities, sh.astype(np.float32),
-                      source=path, repairs=repairs)
+    return SplatScene(positions, scales, rotations, opacities, sh, source=path, repairs=reported(counts))
 
 
 def write_splat(path: str | os.PathLike, scene: SplatScene) -> None:
@@ -83,7 +71,7 @@ def write_splat(path: str | os.PathLike, scene: SplatScene) -> None:
     rec = np.empty(scene.count, RECORD)
     rec["position"] = scene.positions
     rec["scale"] = scene.scales
-    rgb = np.clip(0.5 + SH_C0 * scene.sh[:, 0].astype(np.float64), 0.0, 1.0)
+    rgb = np.clip(sh_dc_to_rgb(scene.sh[:, 0]), 0.0, 1.0)
     alpha = np.clip(np.asarray(scene.opacities, np.float64), 0.0, 1.0)
     rec["rgba"] = np.round(np.concatenate([rgb, alpha[:, None]], 1) * 255.0).astype(np.uint8)
     q = np.asarray(scene.rotations, np.float64)

@@ -26,14 +26,15 @@ from __future__ import annotations
 
 import gzip
 import os
+from functools import partial
 import struct
 import zlib
 
 import numpy as np
 
 from ..scene import SplatScene
-from ..sh import sh_basis
-from . import SplatFormatError
+from ..sh import degree_of, sh_basis
+from . import fail
 
 MAGIC = 0x5053474E
 COLOR_SCALE = 0.15  # SPZ stores f_dc * 0.15 (not SH_C0) so DC colours a little outside [0, 1] survive
@@ -48,9 +49,7 @@ _OTHERS = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]], np.intp)
 _ALPHA_EPS = 0.25 / 255.0  # a quarter step: inside the byte's rounding interval, so it re-encodes to the same byte
 _REEXPORT = "re-export the .spz, or export a 3DGS PLY instead"
 
-
-def _fail(path: str, what: str, todo: str = _REEXPORT) -> SplatFormatError:
-    return SplatFormatError(f"{path}: {what} ({todo})")
+_fail = partial(fail, todo=_REEXPORT)  # this format's usual advice; a call passes todo= for other advice
 
 
 def _axis_flips(system: str) -> np.ndarray:
@@ -71,7 +70,7 @@ def _flip(positions: np.ndarray, rot_wxyz: np.ndarray, sh_rest: np.ndarray, f: n
     rot_wxyz[:, 1:] *= np.array([f[1] * f[2], f[0] * f[2], f[0] * f[1]], np.float32)
     k = sh_rest.shape[1]
     if k:
-        degree = int(round(np.sqrt(k + 1))) - 1
+        degree = degree_of(k + 1)
         d = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])  # a direction no basis function vanishes on
         signs = np.sign(sh_basis(d * f, degree) / sh_basis(d, degree))[1:]
         sh_rest *= signs.astype(np.float32)[None, :, None]
@@ -92,7 +91,7 @@ def _parse_extensions(path: str, zone: bytes, base: int) -> str | None:
             code = struct.unpack_from("<I", payload)[0]
             if code not in _COORDINATE_SYSTEMS and code != 0:
                 raise _fail(path, f"stored in coordinate system {code} (a y/z-swapped system) which this reader "
-                                  "does not convert", "re-export it in RUB or RDF")
+                                  "does not convert", todo="re-export it in RUB or RDF")
             system = _COORDINATE_SYSTEMS.get(code)
         at += 8 + length
     return system
@@ -106,7 +105,7 @@ def _check_header(path: str, version: int, n: int, sh_degree: int, allowed: tupl
     if version not in allowed:
         what = "gzip-compressed" if allowed == (2, 3) else "uncompressed-header (NGSP)"
         raise _fail(path, f"SPZ version {version} in a {what} file; this reader handles versions 2 and 3 "
-                          "(gzip) and 4 (NGSP)", "convert it with a current spz or splat-transform")
+                          "(gzip) and 4 (NGSP)", todo="convert it with a current spz or splat-transform")
     if n == 0:
         raise _fail(path, "the header says the file holds 0 splats")
     if sh_degree not in _SH_DIM:
@@ -157,7 +156,7 @@ def _read_v4(path: str, raw: bytes) -> tuple[int, int, int, int, int, list, str 
         import zstandard  # ships with Blender and with the bpy module
     except ImportError:
         raise _fail(path, "SPZ version 4 is ZSTD-compressed and the Python package 'zstandard' is missing",
-                    "install zstandard, or convert the file to SPZ version 3 or PLY") from None
+                    todo="install zstandard, or convert the file to SPZ version 3 or PLY") from None
     streams, at = [], toc_end
     dctx = zstandard.ZstdDecompressor()
     for i, size in enumerate(sizes):

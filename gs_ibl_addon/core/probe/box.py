@@ -27,12 +27,38 @@ def downsample_cube(cube: np.ndarray) -> np.ndarray:
     return num / den
 
 
+def halving_sizes(size: int, target: int = 1) -> list[int]:
+    """Face sizes a 2x2 downsampling chain goes through from ``size``: [size, size/2, ...], halved while the face
+    is above ``target`` and even. Every mip chain and downsample-to-size (numpy and GPU) follows this list."""
+    sizes = [int(size)]
+    while sizes[-1] > target and sizes[-1] % 2 == 0:
+        sizes.append(sizes[-1] // 2)
+    return sizes
+
+
+def downsample_to_size(cube: np.ndarray, target: int) -> np.ndarray:
+    """downsample_cube repeated along halving_sizes(face size, target): the last (smallest) level only."""
+    small = check_cube(cube)
+    for _ in halving_sizes(small.shape[1], target)[1:]:
+        small = downsample_cube(small)
+    return small
+
+
 def mip_chain(cube: np.ndarray, min_size: int = 1) -> list[np.ndarray]:
     """[cube, cube/2, ...] down to min_size per face (halving stops at an odd size)."""
     mips = [check_cube(cube)]
-    while mips[-1].shape[1] > min_size and mips[-1].shape[1] % 2 == 0:
+    for _ in halving_sizes(mips[0].shape[1], min_size)[1:]:
         mips.append(downsample_cube(mips[-1]))
     return mips
+
+
+def box_level_size(face_size: int, size: int, level_size: int | None) -> int:
+    """The face size the box filter reads from (default: the output size), checked to be face_size / 2^k."""
+    level = size if level_size is None else level_size
+    n = face_size
+    if level < 1 or n % level or (n // level) & (n // level - 1):
+        raise ValueError(f"box filter: level size {level} must be the face size {n} divided by a power of 2")
+    return level
 
 
 def box_irradiance(cube: np.ndarray, size: int, level_size: int | None = None) -> np.ndarray:
@@ -41,11 +67,5 @@ def box_irradiance(cube: np.ndarray, size: int, level_size: int | None = None) -
     Returns (6, size, size, C). level_size must be the input size divided by a power of two.
     """
     a = check_cube(cube)
-    level_size = size if level_size is None else level_size
-    n = a.shape[1]
-    if level_size < 1 or n % level_size or (n // level_size) & (n // level_size - 1):
-        raise ValueError(f"box filter: level size {level_size} must be the face size {n} divided by a power of 2")
-    small = a
-    while small.shape[1] > level_size:
-        small = downsample_cube(small)
+    small = downsample_to_size(a, box_level_size(a.shape[1], size, level_size))
     return sample_cube_bilinear(small, cubemap.face_directions(size))

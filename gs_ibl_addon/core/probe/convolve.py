@@ -13,28 +13,28 @@ from __future__ import annotations
 import numpy as np
 
 from .. import cubemap
-from .reference import tangent_frames
+from .reference import row_chunks, tangent_frames, to_world
 from .sampling import check_cube, sample_cube_bilinear
 
 # Output texels per chunk: bounds the (texels x samples x C) lookup arrays.
 _CHUNK_SAMPLES = 1 << 21
 
 
-def hemisphere_grid(phi_steps: int, theta_steps: int) -> tuple[np.ndarray, np.ndarray]:
-    """Local directions (S, 3) about +Z and normalised weights (S,) of the midpoint (phi, theta) grid."""
+def check_steps(phi_steps: int, theta_steps: int) -> None:
+    """The (phi, theta) grid needs at least one step per angle (numpy and GPU convolution alike)."""
     if phi_steps < 1 or theta_steps < 1:
         raise ValueError(f"convolution needs at least one step per angle, got phi={phi_steps} theta={theta_steps}")
+
+
+def hemisphere_grid(phi_steps: int, theta_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """Local directions (S, 3) about +Z and normalised weights (S,) of the midpoint (phi, theta) grid."""
+    check_steps(phi_steps, theta_steps)
     phi = (np.arange(phi_steps) + 0.5) * (2.0 * np.pi / phi_steps)
     theta = (np.arange(theta_steps) + 0.5) * (0.5 * np.pi / theta_steps)
     th, ph = np.meshgrid(theta, phi, indexing="ij")
     local = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
     w = (np.cos(th) * np.sin(th)).reshape(-1)
     return local, w / w.sum()
-
-
-def steps_from_delta(sample_delta: float) -> tuple[int, int]:
-    """de Vries's single 'sampleDelta' (radians) -> (phi_steps, theta_steps)."""
-    return max(1, round(2.0 * np.pi / sample_delta)), max(1, round(0.5 * np.pi / sample_delta))
 
 
 def cosine_convolve(cube: np.ndarray, size: int, phi_steps: int = 64, theta_steps: int = 16) -> np.ndarray:
@@ -44,10 +44,7 @@ def cosine_convolve(cube: np.ndarray, size: int, phi_steps: int = 64, theta_step
     normals = cubemap.face_directions(size).reshape(-1, 3)
     t, b = tangent_frames(normals)
     out = np.empty((normals.shape[0], a.shape[3]))
-    step = max(1, _CHUNK_SAMPLES // local.shape[0])
-    for k in range(0, normals.shape[0], step):
-        sl = slice(k, k + step)
-        dirs = (local[None, :, 0:1] * t[sl, None] + local[None, :, 1:2] * b[sl, None]
-                + local[None, :, 2:3] * normals[sl, None])
+    for sl in row_chunks(normals.shape[0], local.shape[0], _CHUNK_SAMPLES):
+        dirs = to_world(local, t[sl], b[sl], normals[sl])
         out[sl] = np.einsum("ms,msc->mc", np.broadcast_to(w, dirs.shape[:2]), sample_cube_bilinear(a, dirs))
     return out.reshape(6, size, size, a.shape[3])

@@ -9,6 +9,7 @@ GPU stages report GPU timestamps (``timings_ms['irradiance']`` = the filter's GP
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -26,6 +27,47 @@ METHODS = ("sh", "convolve", "box", "exact")
 DEFAULT_DOWNSAMPLE_TO = 32  # exact method: integrate a <= 32^2-face copy (rel RMS loss ~2e-4, docs/accuracy.md)
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Params:
+    """What the irradiance and GGX stages are asked for (filter_probe's arguments, minus where they run)."""
+    size: int
+    method: str
+    sh_order: int
+    sh_window: str
+    phi_steps: int
+    theta_steps: int
+    box_level_size: int
+    downsample_to: int | None
+    roughness: tuple[float, ...] | None
+    ggx_samples: int
+
+
+class _Stages:
+    """Runs filter stages, recording each one's time (ms) under its name and where it ran (cpu/gpu)."""
+
+    def __init__(self, timings: dict[str, float]) -> None:
+        self.timings = timings
+        self.devices: dict[str, str] = {}
+
+    def cpu(self, name: str, fn, *args, **kw):
+        t0 = time.perf_counter()
+        out = fn(*args, **kw)
+        self.timings[name] = (time.perf_counter() - t0) * 1e3
+        self.devices[name] = "cpu"
+        return out
+
+    def gpu(self, name: str, fn, *args, **kw):
+        """fn returns (result, GPU timings): the stage's time is the GPU's where the device has timestamps."""
+        t0 = time.perf_counter()
+        out, tm = fn(*args, **kw)
+        wall = (time.perf_counter() - t0) * 1e3
+        self.timings[name] = tm.get("total", wall)
+        self.timings[f"{name}_wall"] = wall
+        self.timings.update({f"{name}.{k}": v for k, v in tm.items() if k != "total"})
+        self.devices[name] = "gpu"
+        return out
+
+
 def filter_probe(radiance: np.ndarray, irradiance_size: int = 16, method: str = "sh", sh_order: int = 2,
                  sh_window: str = "none", phi_steps: int = 64, theta_steps: int = 16, box_level_size: int = 1,
                  downsample_to: int | None = DEFAULT_DOWNSAMPLE_TO,
@@ -39,76 +81,61 @@ def filter_probe(radiance: np.ndarray, irradiance_size: int = 16, method: str = 
     """
     if method not in METHODS:
         raise ValueError(f"irradiance method must be one of {METHODS}, got {method!r}")
-    timings: dict[str, float] = dict(result_fields.pop("timings_ms", {}))
-    devices: dict[str, str] = {}
-
-    def timed(name: str, fn, *args, **kw):
-        t0 = time.perf_counter()
-        out = fn(*args, **kw)
-        timings[name] = (time.perf_counter() - t0) * 1e3
-        devices[name] = "cpu"
-        return out
-
+    stages = _Stages(dict(result_fields.pop("timings_ms", {})))
     rgb, hole = split_alpha(radiance)
-    rough = None if roughness is None else tuple(roughness)
+    p = _Params(size=irradiance_size, method=method, sh_order=sh_order, sh_window=sh_window, phi_steps=phi_steps,
+                theta_steps=theta_steps, box_level_size=box_level_size, downsample_to=downsample_to,
+                roughness=None if roughness is None else tuple(roughness), ggx_samples=ggx_samples)
     if use_gpu:
-        coeffs, irr, pre = _filter_gpu(rgb, irradiance_size, method, sh_order, sh_window, phi_steps, theta_steps,
-                                       box_level_size, downsample_to, rough, ggx_samples, vk_context, timings,
-                                       devices, timed)
+        coeffs, irr, pre = _filter_gpu(rgb, p, vk_context, stages)
     else:
-        coeffs = timed("sh_project", project_cube, rgb, sh_order)
-        normals = cubemap.face_directions(irradiance_size)
-        if method == "sh":
-            irr = timed("irradiance", sh_irradiance, coeffs, normals, sh_window)
-        elif method == "convolve":
-            irr = timed("irradiance", cosine_convolve, rgb, irradiance_size, phi_steps, theta_steps)
-        elif method == "box":
-            irr = timed("irradiance", box_irradiance, rgb, irradiance_size, box_level_size)
-        else:
-            irr = timed("irradiance", exact_irradiance_cube, rgb, irradiance_size, downsample_to)
-        pre = [] if rough is None else timed("ggx", ggx_prefilter, rgb, rough, None, ggx_samples)
+        coeffs, irr, pre = _filter_cpu(rgb, p, stages)
     settings = {"method": method, "irradiance_size": irradiance_size, "sh_order": sh_order, "sh_window": sh_window,
                 "phi_steps": phi_steps, "theta_steps": theta_steps, "box_level_size": box_level_size,
                 "downsample_to": downsample_to, "ggx_samples": ggx_samples, "radiance_face_size": int(rgb.shape[1]),
-                "use_gpu": bool(use_gpu), "stage_devices": devices}
+                "use_gpu": bool(use_gpu), "stage_devices": stages.devices}
     settings.update(result_fields.pop("settings", {}))
     return ProbeResult(radiance=np.asarray(radiance), irradiance=irr, sh_coefficients=coeffs, prefiltered=pre,
                        roughness=[] if roughness is None else list(roughness), settings=settings,
-                       timings_ms=timings, hole_fraction=hole, **result_fields)
+                       timings_ms=stages.timings, hole_fraction=hole, **result_fields)
 
 
-def _filter_gpu(rgb, size, method, sh_order, sh_window, phi_steps, theta_steps, box_level_size, downsample_to,
-                roughness, ggx_samples, ctx, timings, devices,
-                timed) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+def _filter_cpu(rgb: np.ndarray, p: _Params, stages: _Stages) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    coeffs = stages.cpu("sh_project", project_cube, rgb, p.sh_order)
+    if p.method == "sh":
+        irr = stages.cpu("irradiance", sh_irradiance, coeffs, cubemap.face_directions(p.size), p.sh_window)
+    elif p.method == "convolve":
+        irr = stages.cpu("irradiance", cosine_convolve, rgb, p.size, p.phi_steps, p.theta_steps)
+    elif p.method == "box":
+        irr = stages.cpu("irradiance", box_irradiance, rgb, p.size, p.box_level_size)
+    else:
+        irr = stages.cpu("irradiance", exact_irradiance_cube, rgb, p.size, p.downsample_to)
+    pre = [] if p.roughness is None else stages.cpu("ggx", ggx_prefilter, rgb, p.roughness, None, p.ggx_samples)
+    return coeffs, irr, pre
+
+
+def _filter_gpu(rgb: np.ndarray, p: _Params, ctx, stages: _Stages
+                ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     from . import gpu_filters as g  # Vulkan is imported only when the GPU path is asked for
 
     t0 = time.perf_counter()
     cube = g.upload_cube(rgb, ctx)
-    timings["upload"] = (time.perf_counter() - t0) * 1e3
-
-    def gpu(name: str, fn, *args, **kw):
-        t1 = time.perf_counter()
-        out, tm = fn(*args, **kw)
-        wall = (time.perf_counter() - t1) * 1e3
-        timings[name] = tm.get("total", wall)  # GPU time; wall time where the device has no timestamps
-        timings[f"{name}_wall"] = wall
-        timings.update({f"{name}.{k}": v for k, v in tm.items() if k != "total"})
-        devices[name] = "gpu"
-        return out
-
+    stages.timings["upload"] = (time.perf_counter() - t0) * 1e3
     try:
-        coeffs = (gpu("sh_project", g.gpu_sh_project, cube) if sh_order == 2
-                  else timed("sh_project", project_cube, rgb, sh_order))
-        if method == "sh":
-            irr = (gpu("irradiance", g.gpu_sh_irradiance, coeffs, size, sh_window, ctx=cube.ctx) if sh_order == 2
-                   else timed("irradiance", sh_irradiance, coeffs, cubemap.face_directions(size), sh_window))
-        elif method == "convolve":
-            irr = gpu("irradiance", g.gpu_cosine_convolve, cube, size, phi_steps, theta_steps)
-        elif method == "box":
-            irr = gpu("irradiance", g.gpu_box_irradiance, cube, size, box_level_size)
+        coeffs = (stages.gpu("sh_project", g.gpu_sh_project, cube) if p.sh_order == 2
+                  else stages.cpu("sh_project", project_cube, rgb, p.sh_order))
+        if p.method == "sh":
+            irr = (stages.gpu("irradiance", g.gpu_sh_irradiance, coeffs, p.size, p.sh_window, ctx=cube.ctx)
+                   if p.sh_order == 2 else
+                   stages.cpu("irradiance", sh_irradiance, coeffs, cubemap.face_directions(p.size), p.sh_window))
+        elif p.method == "convolve":
+            irr = stages.gpu("irradiance", g.gpu_cosine_convolve, cube, p.size, p.phi_steps, p.theta_steps)
+        elif p.method == "box":
+            irr = stages.gpu("irradiance", g.gpu_box_irradiance, cube, p.size, p.box_level_size)
         else:
-            irr = gpu("irradiance", g.gpu_exact_irradiance, cube, size, downsample_to)
-        pre = [] if roughness is None else gpu("ggx", g.gpu_ggx_prefilter, cube, roughness, None, ggx_samples)
+            irr = stages.gpu("irradiance", g.gpu_exact_irradiance, cube, p.size, p.downsample_to)
+        pre = ([] if p.roughness is None
+               else stages.gpu("ggx", g.gpu_ggx_prefilter, cube, p.roughness, None, p.ggx_samples))
     finally:
         cube.close()
     return coeffs, irr, pre

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import cubemap
 from .box import mip_chain
-from .reference import tangent_frames
+from .reference import row_chunks, tangent_frames, to_world
 from .sampling import check_cube, sample_mips_trilinear
 
 DEFAULT_ROUGHNESS = (0.0, 0.25, 0.5, 0.75, 1.0)
@@ -64,14 +64,24 @@ def ggx_prefilter_level(mips: list[np.ndarray], size: int, roughness: float, sam
     local, w, lod = ggx_samples(roughness, samples, base, lod_bias)
     t, b = tangent_frames(normals)
     out = np.empty((normals.shape[0], mips[0].shape[3]))
-    step = max(1, _CHUNK_SAMPLES // len(w))
-    for k in range(0, normals.shape[0], step):
-        sl = slice(k, k + step)
-        dirs = (local[None, :, 0:1] * t[sl, None] + local[None, :, 1:2] * b[sl, None]
-                + local[None, :, 2:3] * normals[sl, None])
+    for sl in row_chunks(normals.shape[0], len(w), _CHUNK_SAMPLES):
+        dirs = to_world(local, t[sl], b[sl], normals[sl])
         vals = sample_mips_trilinear(mips, dirs, np.broadcast_to(lod, dirs.shape[:2]))
         out[sl] = np.einsum("s,msc->mc", w, vals) / w.sum()
     return out.reshape(6, size, size, -1)
+
+
+def level_sizes(face_size: int, roughness: tuple[float, ...], sizes: tuple[int, ...] | None, samples: int
+                ) -> tuple[int, ...]:
+    """Output face size per roughness level (default: the face size halved per level, >= 4), checked along with
+    the sample count (numpy and GPU prefilters alike)."""
+    if sizes is None:
+        sizes = tuple(max(4, face_size >> k) for k in range(len(roughness)))
+    if len(sizes) != len(roughness):
+        raise ValueError(f"GGX prefilter: {len(roughness)} roughness levels but {len(sizes)} sizes")
+    if roughness and (samples < 1 or min(sizes) < 1):
+        raise ValueError(f"GGX prefilter: needs samples >= 1 and face sizes >= 1, got {samples} and {sizes}")
+    return tuple(int(m) for m in sizes)
 
 
 def ggx_prefilter(cube: np.ndarray, roughness: tuple[float, ...] = DEFAULT_ROUGHNESS,
@@ -79,9 +89,6 @@ def ggx_prefilter(cube: np.ndarray, roughness: tuple[float, ...] = DEFAULT_ROUGH
                   ) -> list[np.ndarray]:
     """Radiance cube -> one prefiltered cube per roughness (default sizes: face size halved per level, >= 4)."""
     a = check_cube(cube)
-    if sizes is None:
-        sizes = tuple(max(4, a.shape[1] >> k) for k in range(len(roughness)))
-    if len(sizes) != len(roughness):
-        raise ValueError(f"GGX prefilter: {len(roughness)} roughness levels but {len(sizes)} sizes")
+    sizes = level_sizes(a.shape[1], roughness, sizes, samples)
     mips = mip_chain(a)
     return [ggx_prefilter_level(mips, s, r, samples, lod_bias) for r, s in zip(roughness, sizes)]

@@ -8,32 +8,56 @@ Both return E(n)/pi.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import Callable, Iterator
 
 import numpy as np
 
 from .. import cubemap
-from .box import downsample_cube
+from .box import downsample_to_size, halving_sizes
 from .sampling import split_alpha
 
 # Elements of the (normals x texels) cosine block held at once: ~64 MB of float64.
 _CHUNK_ELEMS = 1 << 23
 
 
+def row_chunks(rows: int, row_size: int, budget: int) -> Iterator[slice]:
+    """Slices of ``rows`` output rows, each of row_size elements, so that a chunk holds about ``budget`` elements."""
+    step = max(1, budget // max(1, row_size))
+    for start in range(0, rows, step):
+        yield slice(start, start + step)
+
+
+def _texel_sums(cube: np.ndarray, normals: np.ndarray,
+                kernel: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]) -> np.ndarray:
+    """Per (..., 3) normal, a sum over every texel w of the cube (holes black), in float64 -> (..., C):
+    ``kernel(n.w (M, T), texel solid angles (T,), radiance (T, C)) -> (M, C)`` for chunks of M normals."""
+    rgb, _ = split_alpha(cube)
+    n, c = rgb.shape[1], rgb.shape[3]
+    w = cubemap.face_directions(n).reshape(-1, 3)
+    dom = np.tile(cubemap.texel_solid_angles(n).reshape(-1), 6)
+    lw = rgb.reshape(-1, c)
+    nrm = np.asarray(normals, np.float64).reshape(-1, 3)
+    out = np.empty((nrm.shape[0], c))
+    for sl in row_chunks(nrm.shape[0], w.shape[0], _CHUNK_ELEMS):
+        out[sl] = kernel(nrm[sl] @ w.T, dom, lw)
+    return out.reshape(np.shape(normals)[:-1] + (c,))
+
+
 def exact_irradiance(cube: np.ndarray, normals: np.ndarray) -> np.ndarray:
     """E(n)/pi = (1/pi) sum_texels L * max(0, n.w) * dOmega for (..., 3) unit normals -> (..., C), float64."""
-    rgb, _ = split_alpha(cube)
-    n = rgb.shape[1]
-    w = cubemap.face_directions(n).reshape(-1, 3)
-    lw = rgb.reshape(-1, rgb.shape[3]) * np.tile(cubemap.texel_solid_angles(n).reshape(-1), 6)[:, None] / np.pi
-    nrm = np.asarray(normals, np.float64).reshape(-1, 3)
-    out = np.empty((nrm.shape[0], rgb.shape[3]))
-    step = max(1, _CHUNK_ELEMS // w.shape[0])
-    for a in range(0, nrm.shape[0], step):
-        cos = nrm[a:a + step] @ w.T
+    def kernel(cos: np.ndarray, dom: np.ndarray, lw: np.ndarray) -> np.ndarray:
         np.maximum(cos, 0.0, out=cos)
-        out[a:a + step] = cos @ lw
-    return out.reshape(np.shape(normals)[:-1] + (rgb.shape[3],))
+        return cos @ (lw * dom[:, None] / np.pi)
+    return _texel_sums(cube, normals, kernel)
+
+
+def integration_size(face_size: int, downsample_to: int | None) -> int:
+    """Face size the exact integral runs at: halved while above downsample_to and even (None: no downsampling)."""
+    if downsample_to is None:
+        return int(face_size)
+    if downsample_to < 1:
+        raise ValueError(f"exact irradiance: downsample_to must be >= 1 or None, got {downsample_to}")
+    return halving_sizes(face_size, downsample_to)[-1]
 
 
 def exact_irradiance_cube(cube: np.ndarray, size: int, downsample_to: int | None = None) -> np.ndarray:
@@ -44,11 +68,7 @@ def exact_irradiance_cube(cube: np.ndarray, size: int, downsample_to: int | None
     the cosine taken at parent rather than child centres (measured in docs/accuracy.md); None keeps every texel.
     """
     rgb, _ = split_alpha(cube)
-    if downsample_to is not None:
-        if downsample_to < 1:
-            raise ValueError(f"exact irradiance: downsample_to must be >= 1 or None, got {downsample_to}")
-        while rgb.shape[1] > downsample_to and rgb.shape[1] % 2 == 0:
-            rgb = downsample_cube(rgb)
+    rgb = downsample_to_size(rgb, integration_size(rgb.shape[1], downsample_to))
     return exact_irradiance(rgb, cubemap.face_directions(size))
 
 
@@ -74,6 +94,11 @@ def tangent_frames(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t, np.cross(n, t)
 
 
+def to_world(local: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Directions (S, 3) about +Z -> (M, S, 3) in each of M frames (tangent t, bitangent b, normal n), each (M, 3)."""
+    return local[None, :, 0:1] * t[:, None] + local[None, :, 1:2] * b[:, None] + local[None, :, 2:3] * n[:, None]
+
+
 def analytic_irradiance(radiance: Callable[[np.ndarray], np.ndarray], normals: np.ndarray,
                         n_mu: int = 48, n_phi: int = 96) -> np.ndarray:
     """E(n)/pi of a radiance function f((S, 3) unit dirs) -> (S, C) at (..., 3) unit normals -> (..., C)."""
@@ -82,7 +107,7 @@ def analytic_irradiance(radiance: Callable[[np.ndarray], np.ndarray], normals: n
     t, b = tangent_frames(nrm)
     out = []
     for k in range(nrm.shape[0]):
-        dirs = local[:, :1] * t[k] + local[:, 1:2] * b[k] + local[:, 2:3] * nrm[k]
+        dirs = to_world(local, t[k:k + 1], b[k:k + 1], nrm[k:k + 1])[0]
         out.append(weight @ np.asarray(radiance(dirs), np.float64) / np.pi)
     return np.stack(out).reshape(np.shape(normals)[:-1] + (out[0].shape[-1],))
 
@@ -99,23 +124,15 @@ def exact_ggx_prefilter(cube: np.ndarray, normals: np.ndarray, roughness: float)
     prefiltered(n) = sum L(l) (n.l)+ D(n.h) dOmega / sum (n.l)+ D(n.h) dOmega,  h = normalize(n + l), V = N,
     because importance sampling with pdf(l) = D(h)/4 and weighting by n.l estimates exactly this ratio.
     """
-    rgb, _ = split_alpha(cube)
-    n = rgb.shape[1]
-    w = cubemap.face_directions(n).reshape(-1, 3)
-    lw = rgb.reshape(-1, rgb.shape[3])
-    dom = np.tile(cubemap.texel_solid_angles(n).reshape(-1), 6)
     a2 = max(float(roughness), 1e-4) ** 4
-    nrm = np.asarray(normals, np.float64).reshape(-1, 3)
-    out = np.empty((nrm.shape[0], rgb.shape[3]))
-    step = max(1, _CHUNK_ELEMS // w.shape[0])
-    for a in range(0, nrm.shape[0], step):
-        n_dot_l = nrm[a:a + step] @ w.T
+
+    def kernel(n_dot_l: np.ndarray, dom: np.ndarray, lw: np.ndarray) -> np.ndarray:
         # n.h for h = normalize(n + l): |n + l| = sqrt(2 + 2 n.l), n.h = (1 + n.l) / |n + l| = sqrt((1 + n.l) / 2)
         n_dot_h2 = np.clip((1.0 + n_dot_l) * 0.5, 0.0, 1.0)
         d = a2 / (np.pi * (n_dot_h2 * (a2 - 1.0) + 1.0) ** 2)
         wt = np.maximum(n_dot_l, 0.0) * d * dom
-        out[a:a + step] = (wt @ lw) / wt.sum(axis=1, keepdims=True)
-    return out.reshape(np.shape(normals)[:-1] + (rgb.shape[3],))
+        return (wt @ lw) / wt.sum(axis=1, keepdims=True)
+    return _texel_sums(cube, normals, kernel)
 
 
 # Synthetic environments with known character, for tests and demos. Each maps (S, 3) unit dirs -> (S, 3) RGB.

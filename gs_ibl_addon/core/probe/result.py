@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import cubemap
 from ..image_io import write_exr
+from ..sh import degree_of
 from .latlong import cube_to_latlong
 
 CONVENTIONS = {
@@ -94,7 +95,7 @@ def write_probe(result: ProbeResult, out_dir: str | os.PathLike, half: bool = Fa
     meta = {
         "conventions": CONVENTIONS,
         "sh_coefficients": None if result.sh_coefficients is None else result.sh_coefficients,
-        "sh_order": None if result.sh_coefficients is None else int(round(np.sqrt(len(result.sh_coefficients)))) - 1,
+        "sh_order": None if result.sh_coefficients is None else degree_of(len(result.sh_coefficients)),
         "roughness": list(result.roughness),
         "radiance_face_size": int(rad.shape[1]),
         "irradiance_face_size": int(result.irradiance.shape[1]),

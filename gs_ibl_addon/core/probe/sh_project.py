@@ -22,13 +22,10 @@ import math
 import numpy as np
 
 from .. import cubemap
+from ..sh import coeff_count, degree_of
 from .sampling import split_alpha
 
 MAX_ORDER = 8  # beyond this a probe's irradiance gains nothing (A_l < 0.3% of A_0) and the recurrence loses digits
-
-
-def sh_count(order: int) -> int:
-    return (order + 1) ** 2
 
 
 def sh_basis_any(dirs: np.ndarray, order: int) -> np.ndarray:
@@ -37,7 +34,7 @@ def sh_basis_any(dirs: np.ndarray, order: int) -> np.ndarray:
         raise ValueError(f"SH order must be in 0..{MAX_ORDER}, got {order}")
     d = np.asarray(dirs, np.float64)
     x, y, z = d[..., 0], d[..., 1], d[..., 2]
-    out = [None] * sh_count(order)
+    out = [None] * coeff_count(order)
     # (x + i y)^m gives cos(m phi) sin^m(theta) and sin(m phi) sin^m(theta) without trigonometry.
     cm = [np.ones_like(x)]
     sm = [np.zeros_like(x)]
@@ -108,10 +105,7 @@ def project_cube(cube: np.ndarray, order: int = 2) -> np.ndarray:
 def sh_irradiance(coeffs: np.ndarray, dirs: np.ndarray, window: str = "none",
                   window_width: float | None = None, clamp: bool = True) -> np.ndarray:
     """E(n)/pi along (..., 3) unit normals from radiance SH coefficients (K, C) -> (..., C)."""
-    k = coeffs.shape[0]
-    order = int(round(math.sqrt(k))) - 1
-    if sh_count(order) != k:
-        raise ValueError(f"SH coefficient count {k} is not a square (order+1)^2")
+    order = degree_of(coeffs.shape[0])
     band = np.repeat(cosine_lobe_coefficients(order) / math.pi * window_factors(order, window, window_width),
                      [2 * l + 1 for l in range(order + 1)])
     e = np.einsum("...k,kc->...c", sh_basis_any(dirs, order), coeffs * band[:, None])

@@ -1,0 +1,109 @@
+"""One GPU copy of each splat object, shared by the viewport overlay and probe bakes.
+
+Reading a splat object (``scene_from_object``) and uploading it (``SplatRenderer``) cost about as much as a small
+bake, and a scene on the GPU twice costs twice the memory, so both are done once per object and reused until the
+object changes: the entry's key is the object's mesh (identity, vertex count, a generation bumped by every
+geometry edit of that mesh, seen by a depsgraph handler) and its world matrix. Entries of deleted objects are
+dropped at the next depsgraph update; everything is freed when a file is loaded and when the extension is
+disabled. Renderers stay on the GPU between bakes (that is what makes "Update When Moved" cheap).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+from bpy.app.handlers import persistent
+
+from ..core.scene import SplatScene
+from .splat_object import scene_from_object
+
+
+@dataclass
+class CachedSplats:
+    key: tuple
+    scene: SplatScene  # in world space; bake_probe takes it with the renderer (splat count, default position)
+    renderer: object  # core.render.renderer.SplatRenderer holding ``scene``
+
+
+_entries: dict[int, CachedSplats] = {}  # uid(object) -> entry
+_mesh_generation: dict[int, int] = {}  # uid(mesh) -> number of geometry edits seen
+uploads = 0  # entries built so far (tests and the console see how often the splats were uploaded)
+
+
+def uid(idb) -> int:
+    """A datablock's identity for this session: session_uid (kept across renames), or, in a Blender
+    without it, its memory address (changes on undo: at worst one extra upload)."""
+    value = getattr(idb, "session_uid", None)
+    return value if value is not None else idb.as_pointer()
+
+
+def data_key(obj: bpy.types.Object) -> tuple:
+    """What the uploaded splats depend on: which mesh, its size, its edits and the object's world matrix."""
+    mesh = uid(obj.data)
+    return (mesh, len(obj.data.vertices), _mesh_generation.get(mesh, 0),
+            np.array(obj.matrix_world, np.float64).tobytes())
+
+
+def get(obj: bpy.types.Object) -> CachedSplats:
+    """The object's splats in world space and on the GPU, read and uploaded on first use or after a change.
+
+    Raises ValueError naming the object when it cannot be read (e.g. non-uniform scale).
+    """
+    global uploads
+    key = data_key(obj)
+    entry = _entries.get(uid(obj))
+    if entry is not None and entry.key == key:
+        return entry
+    release(uid(obj))
+    scene = scene_from_object(obj)
+    from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
+    entry = CachedSplats(key, scene, SplatRenderer(scene))
+    _entries[uid(obj)] = entry
+    uploads += 1
+    return entry
+
+
+def release(key: int) -> None:
+    entry = _entries.pop(key, None)
+    if entry is not None:
+        entry.renderer.close()
+
+
+def clear() -> None:
+    for key in list(_entries):
+        release(key)
+    _mesh_generation.clear()
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    """Counts geometry edits per mesh (they invalidate its entry) and frees entries of deleted objects."""
+    for u in depsgraph.updates:
+        if u.is_updated_geometry and isinstance(u.id, bpy.types.Mesh):
+            mesh = uid(u.id.original)
+            _mesh_generation[mesh] = _mesh_generation.get(mesh, 0) + 1
+    if _entries:
+        live = {uid(o) for o in bpy.data.objects}
+        for gone in [k for k in _entries if k not in live]:
+            release(gone)
+
+
+@persistent
+def on_load_pre(*_args) -> None:
+    clear()
+
+
+def register_handlers() -> None:
+    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_load_pre not in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.append(on_load_pre)
+
+
+def unregister_handlers() -> None:
+    while on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    while on_load_pre in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.remove(on_load_pre)
+    clear()
