@@ -25,9 +25,7 @@ from gs_ibl_addon.core import synthetic
 from gs_ibl_addon.core.scene import SH_C0, SplatScene, quat_to_matrix, rgb_to_sh_dc, sh_dc_to_rgb
 from gs_ibl_addon.core.sh import eval_sh_color
 
-GUITAR = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "guitar.compressed.ply")
-if not os.path.exists(GUITAR):
-    GUITAR = "/work/shared/data/guitar.compressed.ply"
+GUITAR = os.path.join(os.path.dirname(__file__), "data", "guitar.compressed.ply")
 
 # Written by Niantic's spz (Adobe's WASM build) with from=RDF: 4 splats on a 2x2 grid, positions ((i%2)-1, 0,
 # (i//2)-1), scale 0.1, opacity 0.9, rendered colour ((i%2+1)/3, (i//2+1)/3, 0.5), identity rotation.

@@ -16,7 +16,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..core.scene import SH_C0, SplatScene
+from ..core.scene import SplatScene, sh_dc_to_rgb
 from .datablocks import MARKER, find_ours
 
 # The splat object's MARKER is a dict {"source": path, "sh_degree": d, "version": 1}; the proxy's material and
@@ -51,7 +51,7 @@ def _fill_mesh(mesh: bpy.types.Mesh, scene: SplatScene) -> None:
     for k in range(scene.sh.shape[1]):
         _new_attr(mesh, _SH_NAME.format(k), "FLOAT_VECTOR", "vector", scene.sh[:, k])
     rgba = np.empty((n, 4), np.float32)
-    rgba[:, :3] = np.maximum(SH_C0 * scene.sh[:, 0] + 0.5, 0.0)
+    rgba[:, :3] = np.maximum(sh_dc_to_rgb(scene.sh[:, 0]), 0.0)
     rgba[:, 3] = scene.opacities
     _new_attr(mesh, "gs_color", "FLOAT_COLOR", "color", rgba)
     mesh.color_attributes.active_color = mesh.color_attributes["gs_color"]

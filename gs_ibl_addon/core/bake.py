@@ -53,31 +53,15 @@ def relative_rms(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)) / max(np.sqrt(np.mean(b ** 2)), 1e-12))
 
 
-def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings | dict | None = None,
-               renderer: SplatRenderer | None = None,
-               progress: Callable[[str, float], None] | None = None) -> ProbeResult:
-    """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX)."""
-    s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
-    method = METHOD_ALIASES.get(str(s.method).lower())
-    if method is None:
-        raise ValueError(f"unknown irradiance method {s.method!r}: use one of auto, sh, conv, box, exact")
-    if int(s.face_size) < 0 or int(s.irradiance_size) < 1:
-        raise ValueError(f"face size {s.face_size} must be 0 (search) or more, irradiance size "
-                         f"{s.irradiance_size} 1 or more")
-    if not 0 < s.tolerance < 1:
-        raise ValueError(f"tolerance {s.tolerance} must be a fraction between 0 and 1 (0.01 = 1%)")
-    pos = default_probe_position(scene) if probe_position is None else np.asarray(probe_position, np.float64)
-    say = progress or (lambda _msg, _frac: None)
-    t0 = time.perf_counter()
-    say(f"uploading {scene.count:,} splats", 0.0)
-    r = renderer or SplatRenderer(scene)
-
+def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
+                       say: Callable[[str, float], None]) -> ProbeResult:
+    """Render (and, with face size 0, search the face size), filter, and add the glossy maps when asked."""
     def probe_at(face: int) -> ProbeResult:
         res = r.render(ViewBatch.cubemap(pos, face), timestamps=True)
         timings = {f"render_{k}": v for k, v in res.timings_ms.items()}
         return filter_probe(np.stack(res.images), irradiance_size=s.irradiance_size, method=method,
                             sh_order=s.sh_order, roughness=None, timings_ms=timings, use_gpu=True, vk_context=r.ctx,
-                            splat_count=scene.count, device=r.ctx.device_name, **s.extra)
+                            splat_count=splat_count, device=r.ctx.device_name, **s.extra)
 
     trials: list[dict] = []
     if s.face_size:
@@ -108,6 +92,32 @@ def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings |
                             "face_size_trials": trials, "converged": (not trials) or
                             (trials[-1]["change"] is not None and trials[-1]["change"] <= s.tolerance),
                             "probe_position": [float(x) for x in pos]})
+    return result
+
+
+def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings | dict | None = None,
+               renderer: SplatRenderer | None = None,
+               progress: Callable[[str, float], None] | None = None) -> ProbeResult:
+    """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX)."""
+    s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
+    method = METHOD_ALIASES.get(str(s.method).lower())
+    if method is None:
+        raise ValueError(f"unknown irradiance method {s.method!r}: use one of auto, sh, conv, box, exact")
+    if int(s.face_size) < 0 or int(s.irradiance_size) < 1:
+        raise ValueError(f"face size {s.face_size} must be 0 (search) or more, irradiance size "
+                         f"{s.irradiance_size} 1 or more")
+    if not 0 < s.tolerance < 1:
+        raise ValueError(f"tolerance {s.tolerance} must be a fraction between 0 and 1 (0.01 = 1%)")
+    pos = default_probe_position(scene) if probe_position is None else np.asarray(probe_position, np.float64)
+    say = progress or (lambda _msg, _frac: None)
+    t0 = time.perf_counter()
+    say(f"uploading {scene.count:,} splats", 0.0)
+    r = renderer or SplatRenderer(scene)
+    try:
+        result = _search_and_filter(r, scene.count, pos, s, method, say)
+    finally:
+        if renderer is None:  # ours: give its GPU buffers back now, not whenever Python collects it
+            r.close()
     result.timings_ms["bake_wall"] = (time.perf_counter() - t0) * 1e3
     say("done", 1.0)
     return result

@@ -104,8 +104,9 @@ class SplatScene:
 
 def _uniform_scale(lin: np.ndarray, source: str) -> float:
     """The factor s of a 3x3 map lin = s * R (R a rotation); ValueError naming the problem otherwise."""
-    advice = ("splats support rotation, translation and uniform scale only: apply the scale (Ctrl+A in Blender) "
-              "or use a uniform scale")
+    # Not "apply the scale": in Blender that would move the splat centres and leave their stored sizes behind.
+    advice = ("splats support rotation, translation and uniform scale only: give the object the same scale on all "
+              "three axes, with no negative factor")
     if not np.all(np.isfinite(lin)):
         raise ValueError(f"{source}: the transform has NaN or infinite entries; give the object a finite transform")
     sv = np.linalg.svd(lin, compute_uv=False)
