@@ -18,19 +18,26 @@ ls /usr/share/vulkan/icd.d/lvp_icd.*.json >/dev/null 2>&1 || need+=(mesa-vulkan-
 for p in libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libxxf86vm1 libsm6 libgl1; do
   have_pkg "$p" || need+=("$p")
 done
-PY=${PYTHON:-}
-if [ -z "$PY" ]; then
-  if command -v python3.11 >/dev/null; then PY=python3.11; else PY=python3; fi
+python3 -c "import venv, ensurepip" >/dev/null 2>&1 || need+=(python3-venv)
+# bpy 5.0.1 is built for Python 3.11 only; Debian 12 and Ubuntu 22.04 have it in apt, Ubuntu 24.04 does not
+want311=()
+if [ -z "${PYTHON:-}" ] && ! { command -v python3.11 >/dev/null && python3.11 -c "import venv, ensurepip" 2>/dev/null; }; then
+  want311=(python3.11 python3.11-venv)
 fi
-if ! "$PY" -c "import venv, ensurepip" >/dev/null 2>&1; then
-  need+=(python3-venv)
-  command -v python3.11 >/dev/null || { apt-cache policy python3.11 2>/dev/null | grep -q Candidate && need+=(python3.11 python3.11-venv); }
+if [ ${#need[@]} -gt 0 ] || [ ${#want311[@]} -gt 0 ]; then
+  $SUDO apt-get update -qq
 fi
 if [ ${#need[@]} -gt 0 ]; then
   echo "[setup] installing system packages: ${need[*]}"
-  $SUDO apt-get update -qq
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${need[@]}" >/dev/null
-  [ -z "${PYTHON:-}" ] && command -v python3.11 >/dev/null && PY=python3.11
+fi
+if [ ${#want311[@]} -gt 0 ]; then
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${want311[@]}" >/dev/null 2>&1 \
+    || echo "[setup] apt has no Python 3.11 here: the Blender parts (bpy) will be skipped" >&2
+fi
+PY=${PYTHON:-}
+if [ -z "$PY" ]; then
+  if command -v python3.11 >/dev/null; then PY=python3.11; else PY=python3; fi
 fi
 
 # A venv whose pip does not run (an interrupted first run) is made again.
