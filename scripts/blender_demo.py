@@ -139,12 +139,12 @@ def setup_render(args) -> None:
 def write_splat_view(splats: bpy.types.Object, path: str, width: int, height: int) -> float:
     """The splats from the scene camera, rendered as the viewport overlay renders them (overlay_math), as a PNG."""
     import numpy as np
-    from gs_ibl_addon.blender.overlay_math import SplatOverlay
-    from gs_ibl_addon.blender.splat_object import scene_from_object
+    from gs_ibl_addon.blender.overlay import overlay_for
     from gs_ibl_addon.core.image_io import write_png_preview
     cam = bpy.context.scene.camera
     window = np.array(cam.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=width, y=height))
-    img = SplatOverlay(scene_from_object(splats)).image(np.array(cam.matrix_world.inverted()), window, width, height)
+    # the viewport overlay's own object: it draws with the renderer the bake already uploaded (splat_cache)
+    img = overlay_for(splats).image(np.array(cam.matrix_world.inverted()), window, width, height)
     # a plain sRGB curve, one stop down (no AgX here): enough to see the room and the window
     write_png_preview(path, img.rgba[..., :3], exposure=-1.0)
     return img.render_ms
