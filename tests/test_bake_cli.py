@@ -136,3 +136,14 @@ def test_core_refuses_bad_sizes():
         ViewBatch.pinhole([0, 0, 0], [1, 0, 0], 60, 0, 10)
     with pytest.raises(ValueError, match="irradiance size"):
         bake_probe(shell_scene(SkyGradient(), 500), [0, 0, 0], ProbeSettings(irradiance_size=0))
+
+
+def test_bake_from_a_renderer_alone_matches_bake_from_the_scene(sky_shell):
+    from gs_ibl_addon.core.render.renderer import SplatRenderer
+    settings = ProbeSettings(face_size=32, irradiance_size=8)
+    a = bake_probe(sky_shell, [0, 0, 0], settings)
+    b = bake_probe(None, [0, 0, 0], settings, renderer=SplatRenderer(sky_shell))
+    np.testing.assert_array_equal(a.irradiance, b.irradiance)
+    assert b.splat_count == sky_shell.count
+    with pytest.raises(ValueError, match="needs both a renderer"):
+        bake_probe(None, None, settings, renderer=SplatRenderer(sky_shell))

@@ -130,7 +130,7 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
         raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
     t0 = time.perf_counter()
     cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
-    result = bake_probe(cached.scene, np.array(probe.matrix_world.translation, np.float64),
+    result = bake_probe(None, np.array(probe.matrix_world.translation, np.float64),
                         probe_settings(probe.gs_ibl_probe), renderer=cached.renderer, progress=progress)
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]

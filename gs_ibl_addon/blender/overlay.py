@@ -35,7 +35,7 @@ def overlay_for(obj: bpy.types.Object) -> SplatOverlay:
         return ov
     if ov is not None:
         ov.close()  # its images only: the renderer belongs to splat_cache
-    ov = SplatOverlay(splats.scene, renderer=splats.renderer)
+    ov = SplatOverlay(renderer=splats.renderer)
     _overlays[splat_cache.uid(obj)] = ov
     return ov
 

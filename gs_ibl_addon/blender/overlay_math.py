@@ -114,7 +114,9 @@ class SplatOverlay:
     A renderer passed in stays its owner's (close() leaves it open); one made here is closed with the overlay.
     """
 
-    def __init__(self, scene: SplatScene, renderer=None) -> None:
+    def __init__(self, scene: SplatScene | None = None, renderer=None) -> None:
+        if scene is None and renderer is None:
+            raise ValueError("SplatOverlay needs splats: a scene to upload or a renderer holding them")
         self._owns_renderer = renderer is None
         if renderer is None:
             from ..core.render.renderer import SplatRenderer

@@ -15,15 +15,14 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from ..core.scene import SplatScene
 from .splat_object import scene_from_object
 
 
 @dataclass
 class CachedSplats:
     key: tuple
-    scene: SplatScene  # in world space; bake_probe takes it with the renderer (splat count, default position)
-    renderer: object  # core.render.renderer.SplatRenderer holding ``scene``
+    renderer: object  # core.render.renderer.SplatRenderer holding the object's splats in world space (GPU only:
+    # no CPU copy is kept, which for millions of splats would double what Blender's mesh already holds)
 
 
 _entries: dict[int, CachedSplats] = {}  # uid(object) -> entry
@@ -56,9 +55,8 @@ def get(obj: bpy.types.Object) -> CachedSplats:
     if entry is not None and entry.key == key:
         return entry
     release(uid(obj))
-    scene = scene_from_object(obj)
     from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
-    entry = CachedSplats(key, scene, SplatRenderer(scene))
+    entry = CachedSplats(key, SplatRenderer(scene_from_object(obj)))
     _entries[uid(obj)] = entry
     uploads += 1
     return entry

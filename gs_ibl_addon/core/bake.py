@@ -95,10 +95,14 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     return result
 
 
-def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings | dict | None = None,
+def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSettings | dict | None = None,
                renderer: SplatRenderer | None = None,
                progress: Callable[[str, float], None] | None = None) -> ProbeResult:
-    """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX)."""
+    """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX).
+
+    ``scene`` may be None when ``renderer`` already holds the splats and ``probe_position`` is given: a caller that
+    keeps splats on the GPU (Blender's splat_cache) then needs no CPU copy of them.
+    """
     s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
     method = METHOD_ALIASES.get(str(s.method).lower())
     if method is None:
@@ -108,13 +112,17 @@ def bake_probe(scene: SplatScene, probe_position=None, settings: ProbeSettings |
                          f"{s.irradiance_size} 1 or more")
     if not 0 < s.tolerance < 1:
         raise ValueError(f"tolerance {s.tolerance} must be a fraction between 0 and 1 (0.01 = 1%)")
+    if scene is None and (renderer is None or probe_position is None):
+        raise ValueError("bake_probe without a scene needs both a renderer holding the splats and a probe position")
     pos = default_probe_position(scene) if probe_position is None else np.asarray(probe_position, np.float64)
     say = progress or (lambda _msg, _frac: None)
     t0 = time.perf_counter()
-    say(f"uploading {scene.count:,} splats", 0.0)
-    r = renderer or SplatRenderer(scene)
+    r = renderer
+    if r is None:
+        say(f"uploading {scene.count:,} splats", 0.0)
+        r = SplatRenderer(scene)
     try:
-        result = _search_and_filter(r, scene.count, pos, s, method, say)
+        result = _search_and_filter(r, r.scene_count, pos, s, method, say)
     finally:
         if renderer is None:  # ours: give its GPU buffers back now, not whenever Python collects it
             r.close()
