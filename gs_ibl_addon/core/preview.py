@@ -35,7 +35,7 @@ def write_preview(result: ProbeResult, path: str | os.PathLike, title: str = "")
 
     rad = np.asarray(result.radiance)
     face = rad.shape[1]
-    rad_ll = cube_to_latlong(rad, max(256, 4 * face))
+    rad_ll = cube_to_latlong(rad, 1024)  # a display image: 1024 columns show a 13-inch figure in full
     irr_ll = cube_to_latlong(result.irradiance[..., :3], 256)
     sphere = lit_sphere(result.irradiance)
     # one exposure for all panels, from the irradiance (what lights meshes), so they compare by eye
