@@ -12,6 +12,9 @@ layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
 layout(std430, binding = 2) readonly buffer InstVal { uint inst_val[]; };
 layout(std430, binding = 3) readonly buffer Prepared { vec4 prepared[]; };
 layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks > 1: partials, chunk-major
+// Depth: the alpha-weighted sum of each contribution's distance along the view axis, sum(T alpha z); divided by
+// the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
+layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
 layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
@@ -41,7 +44,7 @@ void main() {
     uint lid = gl_LocalInvocationIndex;
     bool done = !inside;
     vec3 color = vec3(0.0);
-    float T = 1.0;
+    float T = 1.0, zsum = 0.0;
     for (uint start = range.x; start < range.y; start += 256u) {
         barrier();
         if (lid == 0u) s_done = 0u;
@@ -66,6 +69,7 @@ void main() {
             if (m > s_cut[k]) continue;  // outside the footprint (3DGS: alpha < 1/255)
             float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
             color += T * alpha * s_col[k].rgb;
+            zsum += T * alpha * (-dot(ol, dl) / dot(dl, dl));  // closest approach along d; d's forward part is 1
             T *= 1.0 - alpha;
             // Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then composes chunk by chunk, and a
             // nearly opaque last splat does not leave up to 1% of transmittance behind.
@@ -74,7 +78,12 @@ void main() {
     }
     uint pixel = vw.extra.x + py * vw.dims.x + px;
     if (inside) {
-        if (p.chunks == 1u) image[pixel] = vec4(color, 1.0 - T);
-        else image[chunk * p.total_pixels + pixel] = vec4(color, T);
+        if (p.chunks == 1u) {
+            image[pixel] = vec4(color, 1.0 - T);
+            depth[pixel] = T < 1.0 ? zsum / (1.0 - T) : 0.0;
+        } else {
+            image[chunk * p.total_pixels + pixel] = vec4(color, T);
+            depth[chunk * p.total_pixels + pixel] = zsum;
+        }
     }
 }

@@ -45,6 +45,7 @@ DEPTH_KEY_BITS = 24  # distance float bits >> 8 (DEPTH_KEY_SHIFT in shaders/spla
 @dataclass
 class RenderResult:
     images: list[np.ndarray]  # per view (H, W, 4) float32: premultiplied linear RGB, alpha = coverage
+    depths: list[np.ndarray] = field(default_factory=list)  # per view (H, W): view-space z of what is seen, 0: none
     timings_ms: dict[str, float] = field(default_factory=dict)  # GPU time per stage (timestamp queries)
     instances: int = 0  # (tile, splat) pairs rasterised
     wall_ms: float = 0.0
@@ -124,12 +125,15 @@ class SplatRenderer:
                 b.destroy()
             ranges = Buffer(self.ctx, (total_tiles + 1) * 8, "ranges")  # + the missed-tile key's run
             image = Buffer(self.ctx, total_pixels * 16, "image")
+            depth = Buffer(self.ctx, total_pixels * 4, "depth")
             views = Buffer(self.ctx, max(view_bytes, 6 * 80), "views")
             chunks = raster_chunks(total_tiles)
             partial = Buffer(self.ctx, total_pixels * 16 * chunks if chunks > 1 else 16, "raster-partials")
+            partial_depth = Buffer(self.ctx, total_pixels * 4 * chunks if chunks > 1 else 16, "raster-partial-depth")
             self._frame = {"tiles": total_tiles, "pixels": total_pixels, "ranges": ranges, "image": image,
-                           "views": views, "chunks": chunks, "partial": partial,
-                           "buffers": (ranges, image, views, partial)}
+                           "depth": depth, "views": views, "chunks": chunks, "partial": partial,
+                           "partial_depth": partial_depth,
+                           "buffers": (ranges, image, depth, views, partial, partial_depth)}
 
     def render(self, batch: ViewBatch, timestamps: bool = False) -> RenderResult:
         t0 = time.perf_counter()
@@ -144,12 +148,14 @@ class SplatRenderer:
                 break
             self._ensure_capacity(int(needed * 1.25) + 1024)
         image = fr["image"].read(np.float32, total_pixels * 4)
-        images, off = [], 0
+        depth = fr["depth"].read(np.float32, total_pixels)
+        images, depths, off = [], [], 0
         for v in batch.views:
             npx = v.width * v.height
             images.append(image[off * 4:(off + npx) * 4].reshape(v.height, v.width, 4))
+            depths.append(depth[off:off + npx].reshape(v.height, v.width))
             off += npx
-        return RenderResult(images, timings, needed, (time.perf_counter() - t0) * 1e3)
+        return RenderResult(images, depths, timings, needed, (time.perf_counter() - t0) * 1e3)
 
     def _record_and_submit(self, batch: ViewBatch, total_tiles: int, timestamps: bool) -> dict[str, float]:
         c, fr = self.ctx, self._frame
@@ -160,6 +166,7 @@ class SplatRenderer:
             rec.fill(self.count)
             rec.fill(fr["ranges"])
             rec.fill(fr["image"], 0, total_tiles and fr["pixels"] * 16)
+            rec.fill(fr["depth"], 0, total_tiles and fr["pixels"] * 4)
             rec.timestamp("clear")
             if n:
                 rec.dispatch(c.pipeline("gs_preprocess", 10, 36),
@@ -187,12 +194,14 @@ class SplatRenderer:
                              groups(self.capacity, 256, c))
                 rec.timestamp("ranges")
             chunks, npx = fr["chunks"], fr["pixels"]
-            rec.dispatch(c.pipeline("gs_raster", 5, 16),
+            rec.dispatch(c.pipeline("gs_raster", 6, 16),
                          [fr["views"], fr["ranges"], self.inst_val, self.prepared,
-                          fr["partial"] if chunks > 1 else fr["image"]],
+                          fr["partial"] if chunks > 1 else fr["image"],
+                          fr["partial_depth"] if chunks > 1 else fr["depth"]],
                          groups(total_tiles * chunks, 1, c), pack("IIII", nv, total_tiles, chunks, npx))
             if chunks > 1:
-                rec.dispatch(c.pipeline("gs_merge", 2, 8), [fr["partial"], fr["image"]], groups(npx, 256, c),
+                rec.dispatch(c.pipeline("gs_merge", 4, 8),
+                             [fr["partial"], fr["image"], fr["partial_depth"], fr["depth"]], groups(npx, 256, c),
                              pack("II", chunks, npx))
             rec.timestamp("raster")
         return rec.timings_ms

@@ -68,14 +68,17 @@ def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: flo
                           alive)
 
 
-def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """For splats ``index`` and rays (P, 3): (m (S, P), in_front (S, P)). m is the squared distance of the ray's
-    line to the centre in the whitened frame, |o' x d'|^2 / |d'|^2; the closest point must lie ahead (o'.d' < 0)."""
+def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice,
+                    dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For splats ``index`` and rays (P, 3): (m, t, in_front), each (S, P). m is the squared distance of the ray's
+    line to the centre in the whitened frame, |o' x d'|^2 / |d'|^2; t = -o'.d' / |d'|^2 is where along the ray
+    (in units of d) the closest approach lies, which must be ahead (t > 0)."""
     dl = np.einsum("sij,pj->spi", p.whiten[index], dirs)
     ol = p.origin_local[index][:, None, :]
     cr = np.cross(ol, dl)
-    m = np.sum(cr * cr, -1) / np.sum(dl * dl, -1)
-    return m, np.sum(ol * dl, -1) < 0
+    dd = np.sum(dl * dl, -1)
+    od = np.sum(ol * dl, -1)
+    return np.sum(cr * cr, -1) / dd, -od / dd, od < 0
 
 
 DEPTH_KEY_SHIFT = 8  # as in shaders/splat_common.glsl
