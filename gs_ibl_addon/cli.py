@@ -77,6 +77,8 @@ def cmd_render(a) -> int:
     _progress("rendering", 0.3)
     res = SplatRenderer(s).render(batch, timestamps=True)
     write_exr(a.out, res.images[0])
+    if a.depth:
+        write_exr(a.depth, res.depths[0])
     if a.png:
         write_png_preview(a.png, res.images[0][..., :3], a.exposure)
     _progress(f"wrote {a.out} ({res.instances:,} splat-tile pairs, GPU {res.timings_ms.get('total', 0):.2f} ms)", 1.0)
@@ -174,6 +176,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="image size in pixels")
     q.add_argument("--out", required=True, help="output EXR path")
     q.add_argument("--png", help="also write an 8-bit sRGB preview PNG here")
+    q.add_argument("--depth", help="also write a one-channel EXR of depth here: distance along the view axis of what "
+                                   "each pixel shows (coverage-weighted), 0 where it shows nothing")
     q.add_argument("--exposure", type=float, default=0.0, help="exposure (stops) of the PNG preview")
     q.set_defaults(fn=cmd_render)
 

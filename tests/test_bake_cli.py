@@ -93,9 +93,11 @@ def test_render_and_cubemap_commands(tmp_path):
     ply = tmp_path / "room.ply"
     assert main(["sample", str(ply)]) == 0
     assert main(["render", str(ply), "--camera", "0", "-2", "1.5", "--look-at", "0", "2", "1", "--size", "64", "48",
-                 "--out", str(tmp_path / "v.exr"), "--png", str(tmp_path / "v.png")]) == 0
+                 "--out", str(tmp_path / "v.exr"), "--png", str(tmp_path / "v.png"), "--depth", str(tmp_path / "z.exr")]) == 0
     img = read_exr(tmp_path / "v.exr")
     assert img.shape == (48, 64, 4) and img[..., 3].min() > 0.99  # inside a closed room every pixel is covered
+    z = read_exr(tmp_path / "z.exr")[..., 0]
+    assert z.shape == (48, 64) and 0.5 < z.min() and z.max() < 10  # the room's walls, a few metres away
     assert main(["cubemap", str(ply), "--probe", "0", "0", "1.5", "--face-size", "16", "--out", str(tmp_path / "c")]) == 0
     assert len([f for f in os.listdir(tmp_path / "c") if f.startswith("face_")]) == 6
 
