@@ -58,10 +58,9 @@ def _ensure_extension() -> None:
 
 
 def _material(name: str, colour, metallic: float = 0.0, roughness: float = 0.5) -> bpy.types.Material:
+    from gs_ibl_addon.blender.datablocks import node_tree
     mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:  # Blender < 5
-        mat.use_nodes = True
-    bsdf = next(n for n in mat.node_tree.nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
+    bsdf = next(n for n in node_tree(mat).nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
     bsdf.inputs["Metallic"].default_value = metallic
     bsdf.inputs["Roughness"].default_value = roughness

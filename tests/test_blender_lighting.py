@@ -17,6 +17,7 @@ bpy = pytest.importorskip("bpy")
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
 from gs_ibl_addon.blender import world as gw  # noqa: E402
+from gs_ibl_addon.blender.datablocks import node_tree  # noqa: E402
 from gs_ibl_addon.core.cubemap import latlong_directions  # noqa: E402
 
 RES = 48
@@ -61,10 +62,7 @@ def _scene(engine: str):
 
 def _diffuse_material(sphere, albedo):
     mat = bpy.data.materials.new("diffuse")
-    if mat.node_tree is None:  # Blender < 5
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
+    nt = node_tree(mat, clear=True)
     bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
     bsdf.inputs["Color"].default_value = (*albedo, 1.0)
     bsdf.inputs["Roughness"].default_value = 0.0  # Lambert
@@ -148,8 +146,7 @@ def test_keep_background_camera_sees_previous_world(tmp_path):
     albedo = 0.5
     _diffuse_material(sphere, (albedo,) * 3)
     user = bpy.data.worlds.new("user sky")
-    if user.node_tree is None:
-        user.use_nodes = True
+    node_tree(user)
     old_bg = (0.1, 0.7, 0.2)
     user.node_tree.nodes["Background"].inputs["Color"].default_value = (*old_bg, 1.0)
     scene.world = user
@@ -172,10 +169,7 @@ def test_irradiance_node_group_matches_analytic_cycles(tmp_path):
     irr = analytic_irradiance_over_pi(A, B, latlong_directions(2 * h, h).reshape(-1, 3)).reshape(h, 2 * h, 3)
     group = gw.irradiance_group(gw.latlong_image("irradiance", irr))
     mat = bpy.data.materials.new("irr")
-    if mat.node_tree is None:  # Blender < 5
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
+    nt = node_tree(mat, clear=True)
     g = nt.nodes.new("ShaderNodeGroup")
     g.node_tree = group
     g.inputs["Albedo"].default_value = (1, 1, 1, 1)

@@ -17,7 +17,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.scene import SplatScene, sh_dc_to_rgb
-from .datablocks import MARKER, find_ours
+from .datablocks import MARKER, find_ours, node_tree
 
 # The splat object's MARKER is a dict {"source": path, "sh_degree": d, "version": 1}; the proxy's material and
 # node tree carry these roles (found by them, never by name: datablocks.py).
@@ -64,10 +64,7 @@ def _proxy_material() -> bpy.types.Material:
         return mat
     mat = bpy.data.materials.new(PROXY_MATERIAL)
     mat[MARKER] = PROXY_MATERIAL_ROLE
-    if mat.node_tree is None:
-        mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
+    nt = node_tree(mat, clear=True)
     attr = nt.nodes.new("ShaderNodeAttribute")
     attr.attribute_name = "gs_color"
     emit = nt.nodes.new("ShaderNodeEmission")

@@ -18,7 +18,7 @@ import os
 import bpy
 import numpy as np
 
-from .datablocks import MARKER, find_ours, is_ours
+from .datablocks import MARKER, find_ours, is_ours, node_tree
 
 WORLD_NAME = "GS-IBL World"
 IRRADIANCE_GROUP = "GS-IBL Irradiance"
@@ -136,9 +136,7 @@ def build_world(radiance: bpy.types.Image, strength: float = 1.0, keep_backgroun
         if background_from is not None:
             world.color = background_from.color
     world[MARKER] = "world"
-    if world.node_tree is None:  # before Blender 5 a new World has no node tree until use_nodes is set
-        world.use_nodes = True
-    nt = world.node_tree
+    nt = node_tree(world)
     out, prev_shader = _background_output(world)
     if out is None:
         out = nt.nodes.new("ShaderNodeOutputWorld")
