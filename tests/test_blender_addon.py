@@ -11,7 +11,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 import gs_ibl_addon  # noqa: E402
-from gs_ibl_addon.core.scene import SH_C0  # noqa: E402
+from gs_ibl_addon.core.scene import sh_dc_to_rgb  # noqa: E402
 from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -100,7 +100,7 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
     np.testing.assert_allclose(back.sh, src.sh, atol=1e-5)
     colour = np.empty(500 * 4, np.float32)
     obj.data.attributes["gs_color"].data.foreach_get("color", colour)
-    np.testing.assert_allclose(colour.reshape(-1, 4)[:, :3], np.maximum(SH_C0 * src.sh[:, 0] + 0.5, 0), atol=1e-5)
+    np.testing.assert_allclose(colour.reshape(-1, 4)[:, :3], np.maximum(sh_dc_to_rgb(src.sh[:, 0]), 0), atol=1e-5)
 
 
 def test_scene_from_object_applies_world_transform(blender):

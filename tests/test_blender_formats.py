@@ -19,7 +19,7 @@ from gs_ibl_addon.core.formats.compressed_ply import CHUNK_SIZE, write_compresse
 from gs_ibl_addon.core.formats.ply import write_ply  # noqa: E402
 from gs_ibl_addon.core.formats.splat import write_splat  # noqa: E402
 from gs_ibl_addon.core.formats.spz import read_spz, write_spz  # noqa: E402
-from gs_ibl_addon.core.scene import SH_C0, SplatScene  # noqa: E402
+from gs_ibl_addon.core.scene import SplatScene, rgb_to_sh_dc  # noqa: E402
 
 N = 600  # three compressed-PLY chunks, the last one partial
 SPZ_STEP = 0.5 / 4096  # 24-bit fixed point with 12 fractional bits (positions within +-2048)
@@ -32,7 +32,7 @@ def make_scene(n: int = N, degree: int = 1, seed: int = 0) -> SplatScene:
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     rgb = rng.uniform(0.05, 0.95, (n, 3))
     sh = np.zeros((n, (degree + 1) ** 2, 3))
-    sh[:, 0] = (rgb - 0.5) / SH_C0
+    sh[:, 0] = rgb_to_sh_dc(rgb)
     sh[:, 1:] = rng.uniform(-0.5, 0.5, (n, sh.shape[1] - 1, 3))
     return SplatScene(rng.uniform(-3, 3, (n, 3)).astype(np.float32),
                       np.exp(rng.uniform(-5, -1, (n, 3))).astype(np.float32), q.astype(np.float32),
