@@ -267,7 +267,7 @@ class Recorder:
     def timestamp(self, label: str) -> None:
         if self.query_pool is None or len(self.labels) >= self.MAX_STAMPS:
             return
-        self.vk.vkCmdWriteTimestamp(self.cmd, self.vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | 0,
+        self.vk.vkCmdWriteTimestamp(self.cmd, self.vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                                     self.query_pool, len(self.labels))
         self.labels.append(label)
 
