@@ -13,6 +13,7 @@ bpy = pytest.importorskip("bpy")
 import gs_ibl_addon  # noqa: E402
 from gs_ibl_addon.core.scene import sh_dc_to_rgb  # noqa: E402
 from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
+from gs_ibl_addon.core.image_io import read_exr  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -250,6 +251,11 @@ def test_unpacked_images_never_overwrite_a_file_not_ours(blender, tmp_path):
                                                 "gs_ibl_GS-IBL_Probe_radiance.exr",
                                                 "gs_ibl_GS-IBL_Probe_radiance_1.exr", "scene.blend"]
         np.testing.assert_allclose(gw.image_latlong_pixels(s.radiance_image), k * rad, rtol=1e-6)
+        # the file itself holds the linear floats (read by OpenImageIO, not by Blender, which would undo its own
+        # encoding): what a compositor or another renderer will see
+        on_disk = read_exr(bpy.path.abspath(s.radiance_image.filepath))
+        assert on_disk.dtype == np.float32
+        np.testing.assert_allclose(on_disk[..., :3], k * rad, rtol=1e-6)
     # a file counts as ours only for the image that wrote it: any other writer moves on to a free name
     assert gw.our_file_path(str(tmp_path), "gs_ibl_GS-IBL_Probe_radiance", s.radiance_image) == \
         str(tmp_path / "gs_ibl_GS-IBL_Probe_radiance_1.exr")

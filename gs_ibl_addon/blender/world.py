@@ -78,9 +78,8 @@ def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: 
         folder = save_dir or (bpy.path.abspath("//") if bpy.data.filepath else None)
         if not folder:
             raise ValueError("save the .blend first (baked images are written next to it), or pack the images")
-        from ..core.image_io import write_exr
         path = our_file_path(folder, bpy.path.clean_name(file_stem or f"gs_ibl_{role}"), img)
-        write_exr(path, px[..., :3])  # 32-bit float (Image.save would write half floats)
+        _save_exr(path, px[..., :3])
         if img is None:
             img = bpy.data.images.load(path, check_existing=False)
             img.name = name or f"GS-IBL {role.capitalize()}"
@@ -95,6 +94,32 @@ def latlong_image(role: str, pixels: np.ndarray, name: str | None = None, pack: 
         img[WRITTEN_FILE] = bpy.path.relpath(path) if bpy.data.filepath else path
     img.update()
     return img
+
+
+def _save_exr(path: str, rgb: np.ndarray) -> None:
+    """(H, W, 3) linear RGB, top row first, as a 32-bit float EXR written by Blender itself: not every Blender has
+    OpenImageIO's Python module (the bpy 4.2 module has none).
+
+    The image is marked as data (Non-Color) before its pixels are set: saved as "Linear Rec.709", Blender 5.0
+    writes the EXR with an sRGB-like curve applied (0.5 -> 0.74) that only its own reader undoes; and setting the
+    colour space after the pixels empties the buffer. Written under a temporary name and moved into place, so a
+    failed save never leaves half a file."""
+    h, w = rgb.shape[:2]
+    tmp = bpy.data.images.new("gs_ibl_save", w, h, alpha=False, float_buffer=True)
+    tmp.colorspace_settings.is_data = True
+    part = f"{path}.part.exr"
+    try:
+        rgba = np.ones((h, w, 4), np.float32)
+        rgba[..., :3] = rgb[::-1]
+        tmp.pixels.foreach_set(rgba.ravel())
+        tmp.filepath_raw = part
+        tmp.file_format = "OPEN_EXR"
+        tmp.save()
+        os.replace(part, path)
+    finally:
+        bpy.data.images.remove(tmp)
+        if os.path.exists(part):
+            os.remove(part)
 
 
 def image_latlong_pixels(img: bpy.types.Image) -> np.ndarray:
