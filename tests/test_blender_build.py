@@ -77,8 +77,9 @@ def test_exclude_matcher_agrees_with_blenders():
         assert be.excluded(p.rstrip("/"), is_dir, patterns) == matcher.test_path(p), p
 
 
-# The Pythons Blender bundles: 3.11 in 4.2-5.0, 3.13 from 5.1. Intel Macs end with 4.5 LTS (so: no cp313 there).
-PYTHONS = {"cp311", "cp313"}
+# The Pythons Blender runs on: 3.11 in 4.2-5.0, 3.13 from 5.1 (official builds), 3.14 (Linux distributions' builds,
+# e.g. Debian sid's 5.2). Official builds for Intel Macs end with 4.5 LTS (so: no cp313 there).
+PYTHONS = {"cp311", "cp313", "cp314"}
 NOT_SHIPPED = {("macos-x64", "cp313")}
 
 
@@ -107,7 +108,7 @@ def test_zip_has_one_cffi_wheel_per_platform_and_python(tmp_path):
     assert all(n.startswith("wheels/cffi-") for n in compiled), compiled
     size = out.stat().st_size
     print(f"\n[zip] {out.name} ({how}): {size / 1e6:.2f} MB, {len(pairs)} cffi wheels for {len(platforms)} platforms")
-    assert size < 4e6  # one zip for all platforms stays small (measured 2.75 MB)
+    assert size < 5e6  # one zip for all platforms stays small (measured 3.96 MB with 17 cffi wheels)
 
 
 def test_platform_mapping_agrees_with_blenders():
@@ -228,3 +229,112 @@ def test_installs_with_blenders_extension_installer(tmp_path, write_3dgs_ply):
     r = subprocess.run([sys.executable, str(script), str(out), str(ply)], cwd=tmp_path, env=env,
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "INSTALLED-OK" in r.stdout, r.stdout[-3000:] + r.stderr[-3000:]
+
+
+# ---------------------------------------------------------------------------------------------- self-contained zip
+
+# What every Blender the manifest admits provides: its own modules, and numpy (bundled by official builds, a
+# dependency of Debian's package and of the bpy module).
+BLENDER_PROVIDES = {"bpy", "bpy_extras", "bpy_types", "gpu", "gpu_extras", "mathutils", "bmesh", "idprop", "numpy"}
+# Imported lazily (inside functions) by modules the extension loads, but only on the command line's paths: the
+# name, and why Blender never gets there.
+CLI_ONLY = {"matplotlib": "core/preview.py draws the command line's preview PNG",
+            "OpenImageIO": "core/image_io.py reads and writes the command line's EXR/PNG files; in Blender, images "
+                           "are written by Blender itself (blender/world.py)"}
+# Imported by the extension, provided by official Blender builds and the bpy module, and by the standard library
+# from Python 3.14 (Linux distributions' builds): core/formats/zstd.py falls back to compression.zstd.
+OPTIONAL_WITH_FALLBACK = {"zstandard": "compression.zstd"}
+
+
+def _module_name(rel: str) -> str:
+    parts = rel[:-3].split("/")
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(source: str, module: str, is_package: bool) -> tuple[set[str], set[str], set[str]]:
+    """(top-level names imported when the module loads, top-level names imported inside functions, modules of this
+    package imported anywhere) of ``source``."""
+    import ast
+    tree = ast.parse(source)
+    lazy_nodes = {id(n) for f in ast.walk(tree) if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))
+                  for n in ast.walk(f)}
+    eager, lazy, inside = set(), set(), set()
+    base = module.split(".") if is_package else module.split(".")[:-1]
+    for node in ast.walk(tree):
+        names = set()
+        if isinstance(node, ast.Import):
+            names = {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level == 0:
+                names = {node.module.split(".")[0]}
+            else:
+                pkg = base[:len(base) - (node.level - 1)]
+                target = ".".join(pkg + (node.module.split(".") if node.module else []))
+                inside.add(target)
+                inside |= {f"{target}.{a.name}" for a in node.names}  # "from . import bake" names a module
+        (lazy if id(node) in lazy_nodes else eager).update(names)
+    return eager, lazy, inside
+
+
+def _zip_modules(names: set[str], read) -> dict[str, tuple[set[str], set[str], set[str]]]:
+    mods = {}
+    for n in names:
+        if n.endswith(".py") and not n.startswith("wheels/"):
+            mods[_module_name(n)] = _imports(read(n).decode(), _module_name(n), n.endswith("__init__.py"))
+    return mods
+
+
+def _wheel_top_levels(z: zipfile.ZipFile, name: str) -> set[str]:
+    """Top-level importable names a wheel inside the zip installs (from its RECORD)."""
+    import io
+    with zipfile.ZipFile(io.BytesIO(z.read(name))) as w:
+        record = next(n for n in w.namelist() if n.endswith(".dist-info/RECORD"))
+        tops = set()
+        for line in w.read(record).decode().splitlines():
+            top = line.split(",")[0].split("/")[0]
+            if not top.endswith((".dist-info", ".data")):
+                tops.add(top[:-3] if top.endswith(".py") else top.split(".")[0])
+        return tops
+
+
+def test_every_import_travels_in_the_zip(tmp_path):
+    """Every module the extension imports is the standard library's, Blender's own, or in a wheel of the zip.
+
+    The bpy module runs in our venv and sees every package we installed, so only this check (and the real-Blender
+    matrix) catches an extension that imports a module no Blender has (plyfile was one)."""
+    out, _ = be.build(tmp_path / "gs_ibl.zip", Path(CACHE), "zipfile")
+    with zipfile.ZipFile(out) as z:
+        names = set(z.namelist())
+        mods = _zip_modules(names, z.read)
+        bundled = set().union(*(_wheel_top_levels(z, n) for n in names if n.startswith("wheels/")))
+    assert "vulkan" in bundled and "plyfile" in bundled and "_cffi_backend" in bundled
+    # what Blender loads: the package's register() and everything it reaches inside the package
+    reach, todo = set(), [m for m in mods if m in ("", "blender") or m.startswith("blender.")]
+    while todo:
+        m = todo.pop()
+        if m in reach or m not in mods:
+            continue
+        reach.add(m)
+        todo += [t for t in mods[m][2] if t in mods]
+    assert "core.formats.ply" in reach and "core.render.renderer" in reach  # the graph is followed
+    allowed = (set(sys.stdlib_module_names) | BLENDER_PROVIDES | bundled | set(OPTIONAL_WITH_FALLBACK)
+               | {f.split(".")[0] for f in OPTIONAL_WITH_FALLBACK.values()})
+    missing = {f"{m or '__init__'}: {name}" for m in reach for name in mods[m][0] - allowed}
+    missing |= {f"{m or '__init__'}: {name} (in a function)" for m in reach
+                for name in mods[m][1] - allowed - set(CLI_ONLY)}
+    assert not missing, f"imported by the extension but in no wheel of the zip: {sorted(missing)}"
+    # the command line's own modules may use more, but only what CLI_ONLY names with a reason
+    other = {name for m in mods if m not in reach for name in mods[m][0] | mods[m][1]} - allowed
+    assert other <= set(CLI_ONLY), f"new imports outside Blender's reach: {sorted(other - set(CLI_ONLY))}"
+
+
+def test_zstd_fallback_is_the_standard_librarys():
+    """The one optional import has its fallback where the extension needs it (Python 3.14, no zstandard)."""
+    from gs_ibl_addon.core.formats import zstd
+    src = open(zstd.__file__).read()
+    for module, fallback in OPTIONAL_WITH_FALLBACK.items():
+        assert f"import {module}" in src and fallback.split(".")[0] in src
+    data = bytes(range(256)) * 64
+    assert zstd.decompress(zstd.compress(data, 12), len(data)) == data
+    with pytest.raises(zstd.ZstdError):
+        zstd.decompress(b"not zstd at all", 100)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.image_io import linear_to_srgb
+from ..core.colour import linear_to_srgb
 from ..core.render.views import View, ViewBatch
 from ..core.scene import SplatScene
 

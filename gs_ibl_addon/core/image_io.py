@@ -10,6 +10,8 @@ import os
 
 import numpy as np
 
+from .colour import linear_to_srgb
+
 
 class ImageIOError(IOError):
     """An image could not be read or written: the message names the file and what failed."""
@@ -84,12 +86,6 @@ def read_exr(path: str | os.PathLike) -> np.ndarray:
     finally:
         inp.close()
     return np.asarray(pixels, np.float32).reshape(spec.height, spec.width, spec.nchannels)
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """The sRGB transfer curve on [0, 1] linear values."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
 def write_png_preview(path: str | os.PathLike, hdr_rgb: np.ndarray, exposure: float = 0.0) -> None:

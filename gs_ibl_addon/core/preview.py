@@ -23,7 +23,7 @@ def lit_sphere(irradiance_cube: np.ndarray, size: int = 256, albedo: float = 0.8
 
 
 def _tonemap(x: np.ndarray, exposure: float) -> np.ndarray:
-    from .image_io import linear_to_srgb
+    from .colour import linear_to_srgb
     return np.clip(linear_to_srgb(np.clip(x * 2.0 ** exposure, 0, 1)), 0, 1)
 
 

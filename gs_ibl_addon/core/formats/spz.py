@@ -34,6 +34,7 @@ import numpy as np
 
 from ..scene import SplatScene
 from ..sh import degree_of, sh_basis
+from . import zstd
 from . import fail
 
 MAGIC = 0x5053474E
@@ -152,13 +153,7 @@ def _read_v4(path: str, raw: bytes) -> tuple[int, int, int, int, int, list, str 
         raise _fail(path, f"the table of contents at byte {toc} lies outside the {len(raw)}-byte file: "
                           "truncated or damaged")
     system = _parse_extensions(path, raw[_V4_HEADER.size:toc], _V4_HEADER.size) if flags & 0x2 else None
-    try:
-        import zstandard  # ships with Blender and with the bpy module
-    except ImportError:
-        raise _fail(path, "SPZ version 4 is ZSTD-compressed and the Python package 'zstandard' is missing",
-                    todo="install zstandard, or convert the file to SPZ version 3 or PLY") from None
     streams, at = [], toc_end
-    dctx = zstandard.ZstdDecompressor()
     for i, size in enumerate(sizes):
         packed, unpacked = struct.unpack_from("<QQ", raw, toc + 16 * i)
         if unpacked != size:
@@ -168,8 +163,11 @@ def _read_v4(path: str, raw: bytes) -> tuple[int, int, int, int, int, list, str 
             raise _fail(path, f"stream {i} ends at byte {at + packed}, past the end of the {len(raw)}-byte file: "
                               "truncated")
         try:
-            out = dctx.decompress(raw[at:at + packed], max_output_size=size)
-        except zstandard.ZstdError as e:
+            out = zstd.decompress(raw[at:at + packed], size)
+        except zstd.ZstdMissing as e:
+            raise _fail(path, f"SPZ version 4 is ZSTD-compressed and {e}",
+                        todo="install the 'zstandard' package, or convert the file to SPZ version 3 or PLY") from None
+        except zstd.ZstdError as e:
             raise _fail(path, f"stream {i} does not decompress ({e})") from None
         if len(out) != size:
             raise _fail(path, f"stream {i} decompresses to {len(out)} bytes, expected {size}")
@@ -305,10 +303,8 @@ def write_spz(path: str | os.PathLike, scene: SplatScene, version: int = 3, coor
         header = _LEGACY_HEADER.pack(MAGIC, version, n, degree, frac, 0, 0)
         data = gzip.compress(header + b"".join(streams), compresslevel=6, mtime=0)
     else:
-        import zstandard
-        cctx = zstandard.ZstdCompressor(level=12)
         streams = [s for s in streams if s]
-        packed = [cctx.compress(s) for s in streams]
+        packed = [zstd.compress(s, 12) for s in streams]
         toc = b"".join(struct.pack("<QQ", len(c), len(s)) for c, s in zip(packed, streams))
         data = _V4_HEADER.pack(MAGIC, 4, n, degree, frac, 0, len(streams), _V4_HEADER.size) + toc + b"".join(packed)
     with open(path, "wb") as f:
