@@ -58,7 +58,7 @@ def _ensure_extension() -> None:
 
 
 def _material(name: str, colour, metallic: float = 0.0, roughness: float = 0.5) -> bpy.types.Material:
-    from gs_ibl_addon.blender.datablocks import node_tree
+    from gs_ibl_addon.blender.compat import node_tree
     mat = bpy.data.materials.new(name)
     bsdf = next(n for n in node_tree(mat).nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     bsdf.inputs["Base Color"].default_value = (*colour, 1.0)

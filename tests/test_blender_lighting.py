@@ -17,7 +17,7 @@ bpy = pytest.importorskip("bpy")
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
 from gs_ibl_addon.blender import world as gw  # noqa: E402
-from gs_ibl_addon.blender.datablocks import node_tree  # noqa: E402
+from gs_ibl_addon.blender.compat import node_tree  # noqa: E402
 from gs_ibl_addon.core.cubemap import latlong_directions  # noqa: E402
 
 RES = 48

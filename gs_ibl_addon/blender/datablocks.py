@@ -14,16 +14,6 @@ def is_ours(idb, role: str) -> bool:
     return idb is not None and idb.get(MARKER) == role and idb.library is None
 
 
-def node_tree(idb, clear: bool = False):
-    """The node tree of a material or World, made where Blender < 5 has none until use_nodes is set; emptied
-    when ``clear``."""
-    if idb.node_tree is None:
-        idb.use_nodes = True
-    if clear:
-        idb.node_tree.nodes.clear()
-    return idb.node_tree
-
-
 def find_ours(collection, role: str):
     """The first local datablock of ``collection`` (e.g. bpy.data.worlds) marked with ``role``, or None."""
     return next((idb for idb in collection if is_ours(idb, role)), None)

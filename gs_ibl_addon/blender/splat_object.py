@@ -17,7 +17,8 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.scene import SplatScene, sh_dc_to_rgb
-from .datablocks import MARKER, find_ours, node_tree
+from .compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
+from .datablocks import MARKER, find_ours
 
 # The splat object's MARKER is a dict {"source": path, "sh_degree": d, "version": 1}; the proxy's material and
 # node tree carry these roles (found by them, never by name: datablocks.py).
@@ -98,7 +99,7 @@ def _proxy_tree() -> bpy.types.NodeTree:
     L = tree.links
     L.new(gin.outputs["Fraction"], rnd.inputs["Probability"])
     L.new(gin.outputs["Geometry"], pts.inputs["Mesh"])
-    L.new(rnd.outputs[3], pts.inputs["Selection"])  # the BOOLEAN output
+    L.new(node_output(rnd, "BOOLEAN"), pts.inputs["Selection"])
     L.new(gin.outputs["Radius"], pts.inputs["Radius"])
     L.new(pts.outputs["Points"], setmat.inputs["Geometry"])
     L.new(setmat.outputs["Geometry"], gout.inputs[0])
@@ -109,11 +110,10 @@ def _add_proxy(obj: bpy.types.Object, scene: SplatScene) -> None:
     tree = _proxy_tree()
     mod = obj.modifiers.new(PROXY_MODIFIER, "NODES")
     mod.node_group = tree
-    ids = {item.name: item.identifier for item in tree.interface.items_tree if item.item_type == "SOCKET"
-           and item.in_out == "INPUT"}
-    mod[ids["Fraction"]] = float(min(1.0, PROXY_POINTS / max(scene.count, 1)))
+    ids = modifier_input_identifiers(tree)
+    set_modifier_input(mod, ids["Fraction"], float(min(1.0, PROXY_POINTS / max(scene.count, 1))))
     radius = float(np.median(scene.scales.mean(1))) if scene.count else 0.01
-    mod[ids["Radius"]] = max(radius, 1e-4)
+    set_modifier_input(mod, ids["Radius"], max(radius, 1e-4))
     if scene.count > BOUNDS_ABOVE:
         obj.display_type = "BOUNDS"
 

@@ -18,7 +18,8 @@ import os
 import bpy
 import numpy as np
 
-from .datablocks import MARKER, find_ours, is_ours, node_tree
+from .compat import node_tree
+from .datablocks import MARKER, find_ours, is_ours
 
 WORLD_NAME = "GS-IBL World"
 IRRADIANCE_GROUP = "GS-IBL Irradiance"
