@@ -123,7 +123,8 @@ def test_bake_headless_from_saved_blend(blender, tmp_path, write_3dgs_ply):
 
 
 def test_update_when_moved(blender, tmp_path, write_3dgs_ply):
-    """The depsgraph handler notes a moved probe and schedules one throttled timer; the timer re-bakes there."""
+    """The depsgraph handler notes a really moved probe and (re)starts one debounce timer; the timer re-bakes once;
+    the bake's own updates, and updates that move nothing, schedule nothing (once, every bake scheduled the next)."""
     from gs_ibl_addon.blender import bake as gb
     splats = _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
@@ -146,16 +147,30 @@ def test_update_when_moved(blender, tmp_path, write_3dgs_ply):
     assert len(gb._pending) == 1
     # Timers only run in Blender's event loop (not in the bpy module): run the timer's function as Blender would.
     bpy.app.timers.unregister(gb.run_pending)
+    before = gb.auto_bakes
     assert gb.run_pending() is None and not gb._pending and gb.last_auto_error is None
+    assert gb.auto_bakes == before + 1
     _, irr1 = _world_images()
     assert not np.allclose(irr0, irr1, rtol=0.01)
     from gs_ibl_addon.blender.splat_object import scene_from_object
     core = bake_probe(scene_from_object(splats), np.array(probe.matrix_world.translation),
                       ProbeSettings(face_size=16, irradiance_size=8))
     np.testing.assert_allclose(irr1, cube_to_latlong(core.irradiance, 64), rtol=1e-5, atol=1e-6)
-    # the next move waits out the interval
-    assert gb.throttle_delay(gb._last_bake, 2.0, gb._last_bake + 0.5) == pytest.approx(1.5)
-    assert gb.throttle_delay(gb._last_bake, 2.0, gb._last_bake + 3.0) == 0.0
+    # what the bake wrote (images, World, the probe's report) and updates that move nothing schedule nothing
+    bpy.context.view_layer.update()
+    probe.location = probe.location  # a transform update to the same place
+    probe.rotation_euler = (0.3, 0.0, 0.0)  # a probe's rotation does not change its light
+    s.strength = 1.5
+    bpy.context.view_layer.update()
+    assert not gb._pending and not bpy.app.timers.is_registered(gb.run_pending)
+    # moved and moved back before the timer fired: the timer finds nothing to do
+    probe.location = (0.0, 0.0, 3.0)
+    bpy.context.view_layer.update()
+    assert gb._pending and bpy.app.timers.is_registered(gb.run_pending)
+    probe.location = (0.0, 0.0, 3.5)
+    bpy.context.view_layer.update()
+    bpy.app.timers.unregister(gb.run_pending)
+    assert gb.run_pending() is None and gb.auto_bakes == before + 1
 
 
 def test_report_gives_the_filters_gpu_time():

@@ -1,12 +1,11 @@
 """Baking a probe into Blender: probe properties -> core.bake.bake_probe -> images, World, node group.
 
 Used by the Bake operator, by headless scripts (``bpy.ops.gs_ibl.bake_probe()`` or ``bake_into_world``) and by
-the "Update When Moved" handler, which re-bakes a probe when it or its splat object moves, at most once per
-``update_interval`` seconds (a depsgraph_update_post handler notes what moved; a timer does the bake).
+the "Update When Moved" handler, which re-bakes a probe once after it or its splat object moved and then stayed
+still for ``update_interval`` seconds (a depsgraph_update_post handler notes what moved; a timer does the bake).
 """
 from __future__ import annotations
 
-import math
 import time
 from typing import Callable
 
@@ -138,6 +137,7 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     radiance = result_latlong(result, "radiance", max(2 * face, 32))
     irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
     apply_probe_images(scene, probe, radiance, irradiance)
+    _baked[(scene.name, probe.name)] = bake_state(probe, splats)
     lines, warning = summary(result, time.perf_counter() - t0)
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([warning] if warning else []))
     return result, ", ".join(lines), warning
@@ -146,13 +146,19 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
 # ---------------------------------------------------------------------------------------------- update when moved
 
 _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
-_last_bake = -math.inf  # time.monotonic() of the last automatic bake
+_baked: dict[tuple[str, str], tuple] = {}  # (scene name, probe name) -> bake_state() of its last bake
 last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
+auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
 
 
-def throttle_delay(last: float, interval: float, now: float) -> float:
-    """Seconds to wait before the next automatic bake so that bakes are at least ``interval`` apart."""
-    return max(0.0, last + interval - now)
+def bake_state(probe: bpy.types.Object, splats: bpy.types.Object | None) -> tuple:
+    """What a bake's light depends on that a move changes: the probe's position and the splats' placement and data.
+
+    A re-bake is due only when this differs from the last bake's: depsgraph updates also report objects whose
+    transform did not change (a bake writing the probe's own properties is one), which once made every bake
+    schedule the next."""
+    return (tuple(round(float(c), 9) for c in probe.matrix_world.translation),
+            splat_cache.data_key(splats) if splats is not None else None)
 
 
 def _moved_names(depsgraph) -> set[str]:
@@ -162,26 +168,34 @@ def _moved_names(depsgraph) -> set[str]:
 
 @persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
-    """Notes auto-updating probes whose probe or splat object moved, and schedules one throttled re-bake."""
+    """Notes auto-updating probes whose probe or splat object really moved and (re)starts one debounce timer: the
+    re-bake runs once the objects have stayed still for the probe's Update Delay, so a drag bakes once."""
     moved = _moved_names(depsgraph)
     if not moved:
         return
-    interval = None
+    delay = None
     for obj in scene.objects:
         if not is_probe(obj) or not obj.gs_ibl_probe.auto_update:
             continue
         splats = find_splats(scene, obj)
-        if obj.name in moved or (splats is not None and splats.name in moved):
-            _pending.add((scene.name, obj.name))
-            iv = obj.gs_ibl_probe.update_interval
-            interval = iv if interval is None else min(interval, iv)
-    if interval is not None and not bpy.app.timers.is_registered(run_pending):
-        bpy.app.timers.register(run_pending, first_interval=throttle_delay(_last_bake, interval, time.monotonic()))
+        if obj.name not in moved and (splats is None or splats.name not in moved):
+            continue
+        key = (scene.name, obj.name)
+        if bake_state(obj, splats) == _baked.get(key):
+            continue
+        _pending.add(key)
+        d = obj.gs_ibl_probe.update_interval
+        delay = d if delay is None else min(delay, d)
+    if delay is not None:
+        if bpy.app.timers.is_registered(run_pending):
+            bpy.app.timers.unregister(run_pending)  # still moving: start the wait again
+        bpy.app.timers.register(run_pending, first_interval=delay)
 
 
 def run_pending() -> None:
-    """Timer: re-bake every probe noted by on_depsgraph_update. Errors go to the console and the probe's report."""
-    global _last_bake, last_auto_error
+    """Timer: re-bake every probe noted by on_depsgraph_update whose state still differs from its last bake.
+    Errors go to the console and the probe's report."""
+    global last_auto_error, auto_bakes
     jobs = sorted(_pending)
     _pending.clear()
     for scene_name, probe_name in jobs:
@@ -189,7 +203,10 @@ def run_pending() -> None:
         probe = scene.objects.get(probe_name) if scene is not None else None
         if probe is None or not is_probe(probe):
             continue
+        if bake_state(probe, find_splats(scene, probe)) == _baked.get((scene_name, probe_name)):
+            continue  # moved back to where it was baked
         try:
+            auto_bakes += 1
             _, text, warning = bake_into_world(scene, probe)
             last_auto_error = None
             print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
@@ -197,18 +214,27 @@ def run_pending() -> None:
             last_auto_error = f"{probe_name}: {e}"
             probe.gs_ibl_probe.last_report = f"Automatic re-bake failed:\n{e}"
             print(f"GS-IBL (update when moved): {last_auto_error}")
-    _last_bake = time.monotonic()
     return None  # one-shot; the handler registers it again when something moves
+
+
+@persistent
+def on_load_pre(*_args) -> None:
+    _pending.clear()
+    _baked.clear()  # names of another file's probes
 
 
 def register_handlers() -> None:
     if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_load_pre not in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.append(on_load_pre)
 
 
 def unregister_handlers() -> None:
     while on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    while on_load_pre in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.remove(on_load_pre)
     if bpy.app.timers.is_registered(run_pending):
         bpy.app.timers.unregister(run_pending)
-    _pending.clear()
+    on_load_pre()

@@ -56,9 +56,10 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     pack_images: BoolProperty(name="Pack Images", default=True,
                               description="Keep baked images inside the .blend; off: save EXR files next to it")
     auto_update: BoolProperty(name="Update When Moved", default=False,
-                              description="Re-bake when the probe or its splat object is moved (throttled)")
-    update_interval: FloatProperty(name="Update Interval", default=1.0, min=0.0, soft_max=10.0, unit="TIME_ABSOLUTE",
-                                   description="Seconds between automatic re-bakes at most")
+                              description="Re-bake once after the probe or its splat object was moved")
+    update_interval: FloatProperty(name="Update Delay", default=0.5, min=0.0, soft_max=10.0, unit="TIME_ABSOLUTE",
+                                   description="Seconds the probe and its splats must stay still before the "
+                                               "automatic re-bake (a drag bakes once, at its end)")
     # Shown after a bake (read-only in the panel): what the last bake did.
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"})
     # What the last bake of this probe wrote: re-bakes update these in place, Strength edits this World only.
