@@ -146,10 +146,11 @@ def cmd_convert(a) -> int:
 
 
 def cmd_sample(a) -> int:
+    from .core.formats.axes import BLENDER_AXES, axes_comment
     from .core.formats.ply import write_ply
     from .core.synthetic import sample_environment
     s = sample_environment().with_sh_degree(0)
-    write_ply(a.out, s)
+    write_ply(a.out, s, comments=(axes_comment(*BLENDER_AXES),))  # made Z up: imports upright
     print(f"wrote {a.out}: {s.count:,} splats (the generated sample environment)")
     return 0
 

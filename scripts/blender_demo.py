@@ -80,7 +80,7 @@ def build_scene(tmp: str, face_size: int = 256) -> tuple[bpy.types.Object, bpy.t
     _ensure_extension()
     ply = os.path.join(tmp, "sample_environment.ply")
     write_ply(ply, sample_environment())
-    bpy.ops.gs_ibl.import_splats(filepath=ply, axis_preset="BLENDER")  # synthetic scenes are already Z up
+    bpy.ops.gs_ibl.import_splats(filepath=ply)  # the default (Auto) reads the sample's declared axes: Z up
     splats = bpy.context.active_object
     splats.name = "Sample Environment"
     # A row of meshes on the floor (z = 0) in the middle of the room, facing the camera (which looks along +Y).

@@ -133,6 +133,24 @@ def test_custom_axes_and_scale(blender, tmp_path, write_3dgs_ply):
     np.testing.assert_allclose(m[:3, :3] @ [0, 1, 0], [0, 0, 1], atol=1e-6)
 
 
+def test_default_orientation_brings_the_sample_upright(blender, tmp_path, write_3dgs_ply):
+    """The default preset (Auto) takes the axes a file declares, as the bundled sample (made Z up) does, and treats
+    a file that declares none as 3DGS training output (OpenCV: y down, z forward)."""
+    from gs_ibl_addon.blender.importer import import_matrix
+    from gs_ibl_addon.core.formats.axes import declared_axes
+    sample = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "samples", "room.ply")
+    assert declared_axes(sample) == ("Y", "Z")
+    assert bpy.ops.gs_ibl.import_splats(filepath=sample, show_proxy=False) == {"FINISHED"}
+    np.testing.assert_allclose(np.array(bpy.context.active_object.matrix_world), np.identity(4), atol=1e-6)
+    plain = tmp_path / "capture.ply"
+    write_3dgs_ply(plain, random_scene(10, sh_degree=0))
+    assert declared_axes(plain) is None
+    assert bpy.ops.gs_ibl.import_splats(filepath=str(plain), show_proxy=False) == {"FINISHED"}
+    m = np.array(bpy.context.active_object.matrix_world)
+    np.testing.assert_allclose(m, import_matrix("OPENCV", "Z", "-Y", 1.0), atol=1e-6)
+    np.testing.assert_allclose(m[:3, :3] @ [0, -1, 0], [0, 0, 1], atol=1e-6)  # the file's -Y is up
+
+
 @pytest.mark.parametrize("content, expect", [
     (b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\nend_header\n", "f_dc_0"),
     (b"not a splat file at all", "not a splat file"),

@@ -414,3 +414,22 @@ def test_guitar_converts_to_standard_ply(guitar, tmp_path):
     np.testing.assert_allclose(back.opacities, scene.opacities, atol=1e-6)
     np.testing.assert_allclose(back.sh, scene.sh, atol=1e-5)
     np.testing.assert_allclose(angle(back.rotations, scene.rotations), 0, atol=1e-3)
+
+
+def test_axes_declaration_round_trips(tmp_path):
+    """A PLY written with the axes comment says its axes; a damaged or foreign declaration is not believed."""
+    from gs_ibl_addon.core.formats.axes import axes_comment, declared_axes
+    from gs_ibl_addon.core.formats.ply import read_ply, write_ply
+    from gs_ibl_addon.core.synthetic import random_scene
+    scene = random_scene(20, sh_degree=1)
+    path = tmp_path / "a.ply"
+    write_ply(path, scene, comments=(axes_comment("-Z", "Y"),))
+    assert declared_axes(path) == ("-Z", "Y")
+    np.testing.assert_array_equal(read_ply(path).positions, scene.positions)  # the comment changes no data
+    write_ply(path, scene)
+    assert declared_axes(path) is None
+    with pytest.raises(ValueError, match="two different axes"):
+        axes_comment("Y", "-Y")
+    bad = tmp_path / "b.ply"
+    bad.write_bytes(b"ply\nformat ascii 1.0\ncomment gs_ibl axes forward=Q up=Z\nend_header\n")
+    assert declared_axes(bad) is None and declared_axes(tmp_path / "missing.ply") is None

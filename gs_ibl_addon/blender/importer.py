@@ -9,6 +9,7 @@ from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatPrope
 from bpy_extras.io_utils import ImportHelper, axis_conversion
 
 from ..core.formats import EXTENSIONS, SplatFormatError, read_scene
+from ..core.formats.axes import declared_axes
 from ..core.formats.spz import read_spz
 from .splat_object import create_splat_object
 
@@ -23,10 +24,20 @@ AXIS_PRESETS = {
 _FILTER = ";".join("*" + e for e in EXTENSIONS)
 
 
-def import_matrix(preset: str, forward: str, up: str, scale: float) -> np.ndarray:
-    """Object matrix that turns file coordinates into Blender's (Z up), times a uniform scale."""
-    if preset != "CUSTOM":
-        forward, up = AXIS_PRESETS[preset]
+def file_axes(preset: str, path: str, forward: str = "Z", up: str = "-Y") -> tuple[str, str]:
+    """(forward, up) of the file for an Orientation preset: AUTO takes what the file declares (formats/axes.py)
+    and falls back to 3DGS / OpenCV, the axes of training output."""
+    if preset == "CUSTOM":
+        return forward, up
+    if preset == "AUTO":
+        return declared_axes(path) or AXIS_PRESETS["OPENCV"]
+    return AXIS_PRESETS[preset]
+
+
+def import_matrix(preset: str, forward: str, up: str, scale: float, path: str = "") -> np.ndarray:
+    """Object matrix that turns the coordinates of the file at ``path`` into Blender's (Z up), times a uniform
+    scale."""
+    forward, up = file_axes(preset, path, forward, up)
     m = np.identity(4)
     m[:3, :3] = np.array(axis_conversion(from_forward=forward, from_up=up).to_3x3()) * scale
     return m
@@ -49,12 +60,14 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
 
     axis_preset: EnumProperty(
         name="Orientation",
-        items=[("OPENCV", "3DGS / OpenCV (Y down, Z forward)",
+        items=[("AUTO", "Auto", "The axes the file declares (files gs-ibl wrote for scenes it made, such as the "
+                "bundled sample); otherwise 3DGS / OpenCV"),
+               ("OPENCV", "3DGS / OpenCV (Y down, Z forward)",
                 "Training output of 3DGS and COLMAP: rotates the scene so the file's -Y is Blender's up (+Z)"),
                ("OPENGL", "OpenGL (Y up, -Z forward)", "Y-up files: the file's +Y becomes Blender's +Z"),
                ("BLENDER", "Blender (Z up)", "No rotation"),
                ("CUSTOM", "Custom", "Choose the file's forward and up axes")],
-        default="OPENCV")
+        default="AUTO")
     axis_forward: EnumProperty(name="Forward", items=_AXES, default="Z")
     axis_up: EnumProperty(name="Up", items=_AXES, default="-Y")
     global_scale: FloatProperty(name="Scale", default=1.0, min=1e-4, max=1e4, soft_min=0.01, soft_max=100.0)
@@ -99,7 +112,6 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         if self.axis_preset == "CUSTOM" and self.axis_forward.lstrip("-") == self.axis_up.lstrip("-"):
             self.report({"ERROR"}, "Forward and Up must be different axes")
             return {"CANCELLED"}
-        matrix = import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale)
         # Read everything first: a bad file cancels the whole import before anything is created.
         scenes = []
         for path in self._paths():
@@ -110,6 +122,7 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
                 return {"CANCELLED"}
         for path, scene in scenes:
             name = os.path.splitext(os.path.basename(path))[0] or "Splats"
+            matrix = import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale, path)
             obj = create_splat_object(context, scene, name, matrix, proxy=self.show_proxy)
             repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
             self.report({"INFO"}, f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r}"

@@ -228,8 +228,10 @@ def _invert_exactly(forward, y: np.ndarray, guess: np.ndarray, lo: float, hi: fl
     return best
 
 
-def write_ply(path: str | os.PathLike, scene: SplatScene, ascii: bool = False, byte_order: str = "<") -> None:
-    """Write ``scene`` in the standard 3DGS layout (raw values: logit opacity, log scale; normals written as 0).
+def write_ply(path: str | os.PathLike, scene: SplatScene, ascii: bool = False, byte_order: str = "<",
+              comments: tuple[str, ...] = ()) -> None:
+    """Write ``scene`` in the standard 3DGS layout (raw values: logit opacity, log scale; normals written as 0),
+    with ``comments`` in the header after ours (e.g. the axes declaration of formats/axes.py).
 
     ``read_ply`` of the result gives back the scene's positions, SH and unit quaternions bit-for-bit, and opacities
     and scales bit-for-bit wherever the float32 value is reachable as the activation of a float32 raw value (always
@@ -252,4 +254,4 @@ def write_ply(path: str | os.PathLike, scene: SplatScene, ascii: bool = False, b
     rows[:, e + 4:e + 8] = scene.rotations
     records = rows.view(np.dtype([(name, "f4") for name in names])).reshape(n)
     PlyData([PlyElement.describe(records, "vertex")], text=ascii, byte_order=byte_order,
-            comments=["written by gs-ibl (standard 3DGS layout)"]).write(path)
+            comments=["written by gs-ibl (standard 3DGS layout)", *comments]).write(path)
