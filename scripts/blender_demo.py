@@ -27,6 +27,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 if ROOT not in sys.path:
     sys.path.insert(0, ROOT)
 
+from gs_ibl_addon.core.formats.axes import BLENDER_AXES, axes_comment  # noqa: E402
 from gs_ibl_addon.core.formats.ply import write_ply  # noqa: E402
 from gs_ibl_addon.core.synthetic import sample_environment  # noqa: E402
 
@@ -79,7 +80,7 @@ def build_scene(tmp: str, face_size: int = 256) -> tuple[bpy.types.Object, bpy.t
     bpy.ops.wm.read_factory_settings(use_empty=True)
     _ensure_extension()
     ply = os.path.join(tmp, "sample_environment.ply")
-    write_ply(ply, sample_environment())
+    write_ply(ply, sample_environment(), comments=(axes_comment(*BLENDER_AXES),))  # made Z up
     bpy.ops.gs_ibl.import_splats(filepath=ply)  # the default (Auto) reads the sample's declared axes: Z up
     splats = bpy.context.active_object
     splats.name = "Sample Environment"
