@@ -7,10 +7,12 @@
 #
 #   scripts/blender_roots.sh ensure NAME...   make what is missing (a stamp holds the recipe's hash: a changed
 #                                             recipe remakes its entry; an interrupted one is made again)
+#   scripts/blender_roots.sh ready NAME       exit status 0 when NAME is made (with the current recipe)
 #   scripts/blender_roots.sh path NAME        where it is
 #   scripts/blender_roots.sh chroot NAME CMD  run CMD inside a root with /proc, /dev, /sys mounted and this checkout
 #                                             bound read-only at /src; the root's /tmp is `path NAME`/tmp here
-# Cached under $GS_IBL_ROOTS (default /var/cache/gs-ibl); made from scratch: ~3 min per root, ~3 min per bpy venv.
+# Cached under $GS_IBL_ROOTS (default /var/cache/gs-ibl); made from scratch: ~3 min per root, ~1 min per bpy venv.
+# A root whose recipe changed but whose Debian suite did not is topped up in place (apt-get install), not remade.
 set -euo pipefail
 ROOTS=${GS_IBL_ROOTS:-/var/cache/gs-ibl}
 MIRROR=${GS_IBL_DEBIAN_MIRROR:-http://deb.debian.org/debian}
@@ -19,9 +21,10 @@ SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
 APT_OPTS=(-o Acquire::Check-Valid-Until=false -o Acquire::Check-Date=false -o APT::Install-Recommends=false)
 
 BPY42=4.2.0
+NUMPY42=1.26.4  # what Blender 4.2 LTS bundles; bpy 4.2.0 asks for any numpy, so pip would take 2.x
 BPY50=5.0.1
 BPY53=5.3.0
-SID_PACKAGES="blender xvfb xauth imagemagick python3-numpy python3-openimageio python3-cffi python3-attr \
+SID_PACKAGES="blender libegl1 xvfb xauth imagemagick python3-numpy python3-openimageio python3-cffi python3-attr \
 python3-typing-extensions python3-requests mesa-vulkan-drivers libvulkan1 libgl1-mesa-dri unzip"
 TRIXIE_PACKAGES="libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libxxf86vm1 libsm6 libgl1 libegl1 \
 mesa-vulkan-drivers libvulkan1"
@@ -29,7 +32,7 @@ CATTRS=25.3.0  # Blender's extensions add-on imports cattrs, which Debian does n
 
 recipe() {  # what an entry is made from: its stamp
   case "$1" in
-    bpy42) echo "venv bpy==$BPY42 v1" ;;
+    bpy42) echo "venv bpy==$BPY42 numpy==$NUMPY42 v1" ;;
     bpy50) echo "venv bpy==$BPY50 v1" ;;
     trixie) echo "trixie $TRIXIE_PACKAGES bpy==$BPY53 v1" ;;
     sid) echo "sid $SID_PACKAGES cattrs==$CATTRS v1" ;;
@@ -57,20 +60,25 @@ in_root() {  # a clean environment: only what the root's own programs should see
     PIP_DISABLE_PIP_VERSION_CHECK=1 PIP_DEFAULT_TIMEOUT=180 ${EXTRA_ENV:-} chroot "$r" "$@"
 }
 
-make_root() {  # make_root NAME SUITE PACKAGES
+make_root() {  # make_root NAME SUITE PACKAGES: a changed package list tops the root up, a new suite remakes it
   local name=$1 suite=$2 packages=$3 r="$ROOTS/$1"
-  command -v debootstrap >/dev/null || { $SUDO apt-get update -qq; $SUDO apt-get install -y -qq debootstrap >/dev/null; }
-  for m in src sys dev/pts dev proc; do mountpoint -q "$r/$m" 2>/dev/null && $SUDO umount -l "$r/$m"; done
-  $SUDO rm -rf "$r"
-  echo "[roots] debootstrap $suite into $r"
-  $SUDO debootstrap --variant=minbase --include=ca-certificates "$suite" "$r" "$MIRROR" >/dev/null
-  # the host's extra CAs (a proxy's) let apt and pip inside the root reach the registries
-  if ls /usr/local/share/ca-certificates/*.crt >/dev/null 2>&1; then
-    $SUDO cp /usr/local/share/ca-certificates/*.crt "$r/usr/local/share/ca-certificates/"
-    in_root "$r" update-ca-certificates >/dev/null 2>&1
+  if [ "$(cat "$r/.gs-ibl-base" 2>/dev/null)" != "$suite" ]; then
+    command -v debootstrap >/dev/null || { $SUDO apt-get update -qq; $SUDO apt-get install -y -qq debootstrap >/dev/null; }
+    for m in src sys dev/pts dev proc; do mountpoint -q "$r/$m" 2>/dev/null && $SUDO umount -l "$r/$m"; done
+    $SUDO rm -rf "$r"
+    echo "[roots] debootstrap $suite into $r"
+    $SUDO debootstrap --variant=minbase --include=ca-certificates "$suite" "$r" "$MIRROR" >/dev/null
+    # the host's extra CAs (a proxy's) let apt and pip inside the root reach the registries
+    if ls /usr/local/share/ca-certificates/*.crt >/dev/null 2>&1; then
+      $SUDO cp /usr/local/share/ca-certificates/*.crt "$r/usr/local/share/ca-certificates/"
+      in_root "$r" update-ca-certificates >/dev/null 2>&1
+    fi
+    printf 'Acquire::Check-Valid-Until "false";\nAcquire::Check-Date "false";\nAPT::Install-Recommends "false";\n' \
+      | $SUDO tee "$r/etc/apt/apt.conf.d/99gs-ibl" >/dev/null
+    echo "$suite" | $SUDO tee "$r/.gs-ibl-base" >/dev/null
+  else
+    echo "[roots] topping up $r"  # a root in use by another run stays usable meanwhile
   fi
-  printf 'Acquire::Check-Valid-Until "false";\nAcquire::Check-Date "false";\nAPT::Install-Recommends "false";\n' \
-    | $SUDO tee "$r/etc/apt/apt.conf.d/99gs-ibl" >/dev/null
   mount_root "$r"
   in_root "$r" apt-get "${APT_OPTS[@]}" update -qq
   # shellcheck disable=SC2086
@@ -92,7 +100,8 @@ ensure_one() {
       rm -rf "$ROOTS/$name"
       echo "[roots] venv with bpy==$v only: $ROOTS/$name"
       "$py" -m venv "$ROOTS/$name"
-      "$ROOTS/$name/bin/python" -m pip install -q "bpy==$v"
+      # shellcheck disable=SC2046
+      "$ROOTS/$name/bin/python" -m pip install -q "bpy==$v" $([ "$name" = bpy42 ] && echo "numpy==$NUMPY42")
       ;;
     trixie)
       make_root trixie trixie "python3 python3-venv $TRIXIE_PACKAGES"
@@ -114,6 +123,7 @@ cmd=${1:-}; shift || true
 case "$cmd" in
   ensure) for n in "$@"; do ensure_one "$n"; done ;;
   path) recipe "$1" >/dev/null; echo "$ROOTS/$1" ;;
+  ready) stamp_ok "$1" ;;
   chroot)
     name=$1; shift
     stamp_ok "$name" || { echo "[roots] $name is not made: scripts/blender_roots.sh ensure $name" >&2; exit 1; }
@@ -121,5 +131,5 @@ case "$cmd" in
     mount_root "$r"
     in_root "$r" "$@"
     ;;
-  *) sed -n '2,15p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
+  *) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
 esac

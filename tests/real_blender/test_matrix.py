@@ -1,0 +1,216 @@
+"""The real-Blender matrix: the built zip, installed by Blender's own extension machinery into a fresh user
+directory, then tests/real_blender/scenario.py run inside that Blender (import, probe, bake, EEVEE and Cycles
+frames, save and reload).
+
+Each entry is skipped unless its Blender has been made (`scripts/blender_roots.sh ensure ...`, which
+`scripts/test_real_blender.sh` does), so `pytest tests` on a fresh machine stays fast. Results, logs, renders and
+screenshots of each entry land in build/matrix/<entry>/.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+ROOTS_SH = REPO / "scripts" / "blender_roots.sh"
+OUT = REPO / "build" / "matrix"
+HERE = Path(__file__).resolve().parent
+CAPTURE = REPO / "tests" / "data" / "guitar.compressed.ply"
+CAPTURE_COUNT = 90854  # tests/data/README.md
+TIMEOUT_S = 900
+RESULT_TAG = "GSIBL-MATRIX-RESULT "  # scenario.py's
+PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
+
+
+@dataclass(frozen=True)
+class Entry:
+    name: str
+    root: str  # the blender_roots.sh entry it needs
+    chroot: bool  # runs inside that root (else: a venv on this machine)
+    python: str | None = None  # the bpy module's Python; None: the Blender binary
+    gui: bool = False
+
+
+ENTRIES = [
+    Entry("bpy-4.2", "bpy42", False, python="bin/python"),
+    Entry("bpy-5.0", "bpy50", False, python="bin/python"),
+    Entry("bpy-5.3", "trixie", True, python="/opt/bpy53/bin/python"),
+    Entry("blender-5.2", "sid", True),
+    Entry("blender-5.2-gui", "sid", True, gui=True),
+]
+
+
+def _roots(*args: str, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(["bash", str(ROOTS_SH), *args], capture_output=True, text=True, **kw)
+
+
+def _ready(root: str) -> bool:
+    return _roots("ready", root).returncode == 0
+
+
+def _build_inputs() -> dict[str, Path]:
+    """The zip, built once, and the splat files every entry imports (SPZ and plain PLY made by our CLI)."""
+    OUT.mkdir(parents=True, exist_ok=True)
+    zip_path = OUT / "gs_ibl.zip"
+    subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
+                   capture_output=True, text=True)
+    files = {"room": REPO / "samples" / "room.ply", "capture": CAPTURE,
+             "spz": OUT / "inputs" / "guitar.spz", "ply": OUT / "inputs" / "guitar.ply"}
+    files["spz"].parent.mkdir(exist_ok=True)
+    for key in ("spz", "ply"):
+        files[key].unlink(missing_ok=True)  # the CLI never overwrites
+        subprocess.run([sys.executable, "-m", "gs_ibl_addon", "convert", str(CAPTURE), str(files[key])], cwd=REPO,
+                       check=True, capture_output=True, text=True)
+    return {"zip": zip_path, **files}
+
+
+def _free_display() -> int:
+    """An X display number nobody listens on (abstract sockets are shared with the roots)."""
+    used = Path("/proc/net/unix").read_text()
+    return next(n for n in range(90, 200) if f"/tmp/.X11-unix/X{n}" not in used
+                and not Path(f"/tmp/.X{n}-lock").exists())
+
+
+class Runner:
+    """Runs commands for one entry: on this machine, or in its root where /tmp is `path ROOT`/tmp here."""
+
+    def __init__(self, entry: Entry, host_tmp: Path):
+        self.entry = entry
+        if entry.chroot:
+            root = Path(_roots("path", entry.root, check=True).stdout.strip())
+            self.host = root / "tmp" / "gs-ibl-matrix" / entry.name
+            self.inner = Path("/tmp/gs-ibl-matrix") / entry.name
+        else:
+            self.host = self.inner = host_tmp / entry.name
+            self.venv = Path(_roots("path", entry.root, check=True).stdout.strip())
+        shutil.rmtree(self.host, ignore_errors=True)
+        (self.host / "home").mkdir(parents=True)
+
+    def env(self) -> dict[str, str]:
+        # a fresh user directory: Blender's config, scripts and extensions all live under this HOME
+        return {"PATH": PATH, "HOME": str(self.inner / "home"), "LANG": "C.UTF-8"}
+
+    def run(self, argv: list[str], log: str) -> subprocess.CompletedProcess:
+        if self.entry.chroot:
+            env_args = [f"{k}={v}" for k, v in self.env().items()]
+            cmd = ["bash", str(ROOTS_SH), "chroot", self.entry.root, "env", "-C", str(self.inner), *env_args, *argv]
+            kw = {}
+        else:
+            cmd, kw = argv, {"env": self.env(), "cwd": self.host}  # cwd: this repository is not importable
+        t0 = time.perf_counter()
+        # a session of its own: on a timeout the whole group goes (Blender inside a chroot, Xvfb)
+        p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                             **kw)
+        try:
+            out, err = p.communicate(timeout=TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            os.killpg(p.pid, signal.SIGKILL)
+            out, err = p.communicate()
+            err += f"\n[matrix] killed after {TIMEOUT_S} s"
+        r = subprocess.CompletedProcess(cmd, p.returncode, out, err)
+        (self.host / f"{log}.log").write_text(f"$ {' '.join(cmd)}\n[rc {r.returncode}, "
+                                              f"{time.perf_counter() - t0:.1f} s]\n{r.stdout}\n--- stderr\n{r.stderr}")
+        return r
+
+    def python(self) -> str:
+        p = self.entry.python
+        return p if self.entry.chroot else str(self.venv / p)
+
+
+_INSTALL_BPY = """\
+import sys
+import bpy
+import addon_utils  # importable once bpy is
+r = bpy.ops.extensions.package_install_files(filepath=sys.argv[1], repo="user_default", enable_on_install=True)
+bpy.ops.wm.save_userpref()
+ok = r == {"FINISHED"} and addon_utils.check("bl_ext.user_default.gs_ibl")[1]
+print("installed and enabled" if ok else f"NOT enabled: {r}")
+sys.exit(0 if ok else 1)
+"""
+
+
+def _install(runner: Runner, zip_inner: str) -> subprocess.CompletedProcess:
+    """Blender's own installer: the binary's `extension install-file`, or the same operator in the bpy module."""
+    if runner.entry.python is None:
+        return runner.run(["blender", "--command", "extension", "install-file", "-r", "user_default", "-e",
+                           zip_inner], "install")
+    (runner.host / "install.py").write_text(_INSTALL_BPY)
+    return runner.run([runner.python(), str(runner.inner / "install.py"), zip_inner], "install")
+
+
+def _scenario_cmd(runner: Runner, args_inner: str) -> list[str]:
+    script = str(runner.inner / "scenario.py")
+    if runner.entry.python is not None:
+        return [runner.python(), script, args_inner]
+    if not runner.entry.gui:
+        return ["blender", "-b", "--python", script, "--", args_inner]
+    d = _free_display()
+    # Xvfb for the window, Blender's GUI on it; the scenario quits Blender when done
+    return ["sh", "-c", f"Xvfb :{d} -screen 0 1600x1000x24 -nolisten tcp >xvfb.log 2>&1 & x=$!; sleep 2; "
+            f"DISPLAY=:{d} blender --python {script} -- {args_inner}; rc=$?; kill $x; exit $rc"]
+
+
+@pytest.mark.parametrize("entry", [pytest.param(e, id=e.name) for e in ENTRIES])
+def test_entry(entry: Entry, tmp_path_factory):
+    if not _ready(entry.root):
+        pytest.skip(f"{entry.root} not made: scripts/blender_roots.sh ensure {entry.root} "
+                    "(or bash scripts/test_real_blender.sh)")
+    files = _inputs_once()
+    runner = Runner(entry, tmp_path_factory.mktemp("matrix"))
+    inner = {}
+    for key, path in files.items():
+        shutil.copy(path, runner.host / path.name)
+        inner[key] = str(runner.inner / path.name)
+    shutil.copy(HERE / "scenario.py", runner.host / "scenario.py")
+    args = {"entry": entry.name, "work": str(runner.inner), "user_dir": str(runner.inner / "home"),
+            "result": str(runner.inner / "result.json"),
+            "files": {k: inner[k] for k in ("room", "capture", "spz", "ply")}, "capture_count": CAPTURE_COUNT,
+            "probe_in_room": [0.0, 0.45, 1.0], "face_size": 64, "albedo": 0.8, "size": 48,
+            "eevee_samples": 4, "cycles_samples": 16, "gui_wait_s": 10.0}
+    (runner.host / "args.json").write_text(json.dumps(args, indent=1))
+
+    t0 = time.perf_counter()
+    r = _install(runner, inner["zip"])
+    t_install = time.perf_counter() - t0
+    ok_install = r.returncode == 0
+    t0 = time.perf_counter()
+    r = runner.run(_scenario_cmd(runner, str(runner.inner / "args.json")), "scenario")
+    t_scenario = time.perf_counter() - t0
+    keep = OUT / entry.name
+    shutil.rmtree(keep, ignore_errors=True)
+    shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.spz", "*.zip", "*.blend*"))
+    result_file = runner.host / "result.json"
+    assert result_file.exists(), f"{entry.name}: the scenario wrote no result (rc {r.returncode}); see {keep}"
+    result = json.loads(result_file.read_text())
+    # the scenario's own result line quotes the tracebacks it caught: only what Blender printed counts here
+    console = "\n".join(line for line in (r.stdout + r.stderr).splitlines() if not line.startswith(RESULT_TAG))
+    tracebacks = [console[i:i + 1500] for i in range(len(console)) if console.startswith("Traceback", i)]
+    result["checks"].insert(0, {"name": "install with Blender's installer", "ok": ok_install,
+                                "detail": (keep / "install.log").read_text()[-3000:]})
+    result["checks"].append({"name": "no tracebacks in Blender's console", "ok": not tracebacks,
+                             "detail": "\n...\n".join(tracebacks[:3])})
+    result["timings_s"].update(install=round(t_install, 1), scenario=round(t_scenario, 1))
+    (keep / "result.json").write_text(json.dumps(result, indent=1))
+    print(f"\n[matrix] {entry.name}: {result['info'].get('blender')} Python {result['info'].get('python')}, "
+          f"install {t_install:.0f} s, scenario {t_scenario:.0f} s; timings {result['timings_s']}")
+    failed = [c for c in result["checks"] if not c["ok"]]
+    assert not failed, f"{entry.name} ({keep}): " + "\n\n".join(f"{c['name']}: {c['detail'][-1500:]}" for c in failed)
+
+
+_INPUTS: dict = {}
+
+
+def _inputs_once() -> dict[str, Path]:
+    """inputs() once per session, built only when some entry runs (a skipped matrix builds nothing)."""
+    if not _INPUTS:
+        _INPUTS.update(_build_inputs())
+    return _INPUTS
