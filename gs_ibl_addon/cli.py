@@ -1,7 +1,12 @@
 """Command line: `python -m gs_ibl_addon COMMAND ...` — render, bake and convert splat scenes without Blender.
 
 File conventions (docs/conventions.md has the details):
-  * Splat files: 3DGS PLY (standard or SuperSplat compressed), Niantic SPZ (v2-v4), antimatter15 .splat.
+  * Splat files: 3DGS PLY (standard or SuperSplat compressed), Niantic SPZ (v2-v4), antimatter15 .splat,
+    GaussianSplats3D .ksplat, PlayCanvas SOG (.sog zip or a folder with meta.json), glTF/GLB with
+    KHR_gaussian_splatting (docs/formats.md).
+  * Bad input (a missing file, an option out of range, an output that cannot be written, a size the machine
+    cannot hold) is refused before any work with one line naming the file or option and what to do; exit code 2.
+    Outputs appear only complete (written under a temporary name, then moved into place).
   * Coordinates are the file's own; Blender's Z-up world is assumed for lat-long images (+Z at the top row).
   * Images are scene-linear float EXR (OpenImageIO). Cube faces are +X, -X, +Y, -Y, +Z, -Z with the OpenGL
     orientation; lat-long images use Blender's equirectangular mapping (centre column = +X, u = 0.25 = +Y).
@@ -19,6 +24,7 @@ import time
 import numpy as np
 
 DESCRIPTION = __doc__
+SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
 
 
 def _progress(msg: str, frac: float) -> None:
@@ -39,6 +45,17 @@ def _vec3(values) -> np.ndarray:
     return np.asarray(values, np.float64)
 
 
+def finite_float(text: str) -> float:
+    """argparse type: an ordinary number (NaN and infinity refused, with a message that says so)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not np.isfinite(value):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number; give an ordinary number")
+    return value
+
+
 def positive_int(text: str) -> int:
     """argparse type: an integer >= 1, with a message that says so."""
     try:
@@ -55,10 +72,43 @@ def face_size(text: str) -> int:
     return 0 if text.strip() == "0" else positive_int(text)
 
 
-OUTPUT_WRITERS = {".ply": ("ply", "write_ply"), ".spz": ("spz", "write_spz"), ".splat": ("splat", "write_splat")}
+def fraction(text: str) -> float:
+    """argparse type for --tolerance: a number strictly between 0 and 1."""
+    value = finite_float(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"{value} must lie strictly between 0 and 1 (0.01 = 1%)")
+    return value
+
+
+def field_of_view(text: str) -> float:
+    value = finite_float(text)
+    if not 0 < value < 180:
+        raise argparse.ArgumentTypeError(f"{value} must lie strictly between 0 and 180 degrees")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: the bad argument, what is wrong, where to look (exit code 2)."""
+
+    def error(self, message: str):
+        self.exit(2, f"error: {message} (see {self.prog} --help)\n")
+
+
+OUTPUT_WRITERS = {".ply": ("ply", "write_ply"), ".spz": ("spz", "write_spz"), ".splat": ("splat", "write_splat"),
+                  ".sog": ("sog", "write_sog"), ".glb": ("gltf", "write_glb")}
+# Upper bound of bytes per splat each writer needs (standard PLY with SH degree 3: 62 floats), for the space check.
+OUTPUT_BYTES_PER_SPLAT = 62 * 4
+
+
+def _context():
+    """The Vulkan device, made before any file is read: no device means no work, said at once."""
+    from .core.vk import get_context
+    return get_context()
 
 
 def cmd_info(a) -> int:
+    from .core.formats import check_input
+    check_input(a.scene)
     s = _load(a.scene)
     lo, hi = s.bounds()
     from .core.bake import default_probe_position
@@ -69,34 +119,91 @@ def cmd_info(a) -> int:
 
 
 def cmd_render(a) -> int:
+    from .core.formats import check_input
     from .core.image_io import write_exr, write_png_preview
+    from .core.limits import check_fits, exr_bytes, image_bytes
+    from .core.outputs import check_output_file, written_atomically
     from .core.render.renderer import SplatRenderer
     from .core.render.views import ViewBatch
-    s = _load(a.scene)
-    batch = ViewBatch.pinhole(_vec3(a.camera), _vec3(a.look_at), a.fov, a.size[0], a.size[1], up=_vec3(a.up))
-    _progress("rendering", 0.3)
-    res = SplatRenderer(s).render(batch, timestamps=True)
-    write_exr(a.out, res.images[0])
+    check_input(a.scene)
+    w, h = a.size
+    camera, look_at, up = _vec3(a.camera), _vec3(a.look_at), _vec3(a.up)
+    if np.linalg.norm(look_at - camera) == 0:
+        raise ValueError(f"--look-at {a.look_at}: is the camera position; look at another point")
+    if np.linalg.norm(np.cross(look_at - camera, up)) <= 1e-9 * np.linalg.norm(look_at - camera) * max(
+            np.linalg.norm(up), 1e-300):
+        raise ValueError(f"--up {a.up}: is zero or parallel to the viewing direction; give another up direction")
+    ctx = _context()
+    check_fits("size", max(w, h), image_bytes(w, h), lambda v: image_bytes(v, v * h // max(w, 1)), ctx,
+               f" pixels wide ({w}x{h})")
+    check_output_file(a.out, exr_bytes(w, h, 4), "--out", (".exr",))
     if a.depth:
-        write_exr(a.depth, res.depths[0])
+        check_output_file(a.depth, exr_bytes(w, h, 1), "--depth", (".exr",))
     if a.png:
-        write_png_preview(a.png, res.images[0][..., :3], a.exposure)
+        check_output_file(a.png, 4 * w * h + 4096, "--png", (".png",))
+    s = _load(a.scene)
+    batch = ViewBatch.pinhole(camera, look_at, a.fov, w, h, up=up)
+    _progress("rendering", 0.3)
+    renderer = SplatRenderer(s)
+    try:
+        res = _advise_on_memory(lambda: renderer.render(batch, timestamps=True), f"rendering {w}x{h} pixels of "
+                                f"{s.count:,} splats", "use a smaller --size, or fewer splats")
+    finally:
+        renderer.close()
+    with written_atomically(a.out) as out, _maybe(a.depth) as depth, _maybe(a.png) as png:
+        write_exr(out, res.images[0])
+        if depth:
+            write_exr(depth, res.depths[0])
+        if png:
+            write_png_preview(png, res.images[0][..., :3], a.exposure)
     _progress(f"wrote {a.out} ({res.instances:,} splat-tile pairs, GPU {res.timings_ms.get('total', 0):.2f} ms)", 1.0)
     return 0
 
 
+def _maybe(path: str | None):
+    """written_atomically(path), or a context giving None when the output was not asked for."""
+    import contextlib
+
+    from .core.outputs import written_atomically
+    return written_atomically(path) if path else contextlib.nullcontext(None)
+
+
+def _advise_on_memory(work, what: str, advice: str):
+    """Run ``work()``; an out-of-memory error (numpy's or the GPU's) becomes one MemoryError with advice."""
+    from .core.limits import out_of_memory_advice
+    try:
+        return work()
+    except Exception as e:
+        better = out_of_memory_advice(e, what, advice)
+        if better is None:
+            raise
+        raise better from None
+
+
 def cmd_cubemap(a) -> int:
+    from .core.bake import check_probe_position
     from .core.cubemap import FACE_NAMES
+    from .core.formats import check_input
     from .core.image_io import write_exr
+    from .core.limits import check_fits, cube_bytes, exr_bytes
+    from .core.outputs import check_output_dir, staged_folder
     from .core.probe import cube_to_latlong
     from .core.render.renderer import render_cubemap
+    check_input(a.scene)
+    probe = check_probe_position(a.probe)
+    n = a.face_size
+    ctx = _context()
+    check_fits("face_size", n, cube_bytes(n, 1), lambda v: cube_bytes(v, 1), ctx, "^2 faces")
+    check_output_dir(a.out, 6 * exr_bytes(n, n, 4) + exr_bytes(4 * n, 2 * n, 4), "--out")
     s = _load(a.scene)
-    os.makedirs(a.out, exist_ok=True)
-    _progress(f"rendering six {a.face_size}x{a.face_size} faces", 0.3)
-    cube, res = render_cubemap(s, _vec3(a.probe), a.face_size, timestamps=True)
-    for f, name in enumerate(FACE_NAMES):
-        write_exr(os.path.join(a.out, f"face_{'pos' if name[0] == '+' else 'neg'}{name[1].lower()}.exr"), cube[f])
-    write_exr(os.path.join(a.out, "radiance.exr"), cube_to_latlong(cube, 4 * a.face_size))
+    _progress(f"rendering six {n}x{n} faces", 0.3)
+    cube, res = _advise_on_memory(lambda: render_cubemap(s, probe, n, timestamps=True),
+                                  f"rendering six {n}^2 faces of {s.count:,} splats",
+                                  "use a smaller --face-size, or fewer splats")
+    with staged_folder(a.out) as stage:
+        for f, name in enumerate(FACE_NAMES):
+            write_exr(os.path.join(stage, f"face_{'pos' if name[0] == '+' else 'neg'}{name[1].lower()}.exr"), cube[f])
+        write_exr(os.path.join(stage, "radiance.exr"), cube_to_latlong(cube, 4 * n))
     holes = float(1 - cube[..., 3].mean())
     _progress(f"wrote {a.out}: 6 faces + radiance.exr; GPU {res.timings_ms.get('total', 0):.2f} ms; "
               f"mean uncovered {100 * holes:.2f}%", 1.0)
@@ -104,22 +211,42 @@ def cmd_cubemap(a) -> int:
 
 
 def cmd_bake(a) -> int:
-    from .core.bake import ProbeSettings, bake_probe, default_probe_position
+    from .core.bake import (ProbeSettings, bake_probe, check_fits_device, check_probe_position, check_settings,
+                            default_probe_position, estimate_output_bytes)
+    from .core.formats import check_input
+    from .core.outputs import check_output_dir, check_output_file
     from .core.preview import write_preview
     from .core.probe import write_probe
+    from .core.probe.result import check_probe_folder
+    # Everything that can be known wrong is refused here, before the file is read or anything rendered.
+    check_input(a.scene)
+    settings = ProbeSettings(method=a.method, face_size=a.face_size, irradiance_size=a.irradiance_size,
+                             tolerance=a.tolerance, glossy=a.glossy)
+    check_settings(settings)
+    probe = None if a.probe is None else check_probe_position(a.probe)
+    ctx = _context()
+    check_fits_device(settings, ctx)
+    check_output_dir(a.out, estimate_output_bytes(settings, a.half, a.faces), "--out")
+    check_probe_folder(a.out, "--out")
+    if a.preview:
+        check_output_file(a.preview, 4 << 20, "--preview", (".png",))
     s = _load(a.scene)
-    if a.probe is None:
+    check_fits_device(settings, ctx, s.count, s.sh.shape[1])
+    if probe is None:
         probe = default_probe_position(s)
         print(f"no --probe given: using the splats' opacity-weighted centre of mass {np.round(probe, 4).tolist()}",
               file=sys.stderr)
-    else:
-        probe = _vec3(a.probe)
-    settings = ProbeSettings(method=a.method, face_size=a.face_size, irradiance_size=a.irradiance_size,
-                             tolerance=a.tolerance, glossy=a.glossy)
     result = bake_probe(s, probe, settings, progress=_progress)
-    written = write_probe(result, a.out, half=a.half, cube_faces=a.faces)
-    preview = a.preview or os.path.join(a.out, "preview.png")
-    write_preview(result, preview, title=os.path.basename(a.scene))
+    title = os.path.basename(a.scene)
+
+    def preview(path: str) -> None:
+        write_preview(result, path, title=title)
+
+    with _maybe(a.preview) as outside:
+        if outside:
+            preview(outside)
+        written = write_probe(result, a.out, half=a.half, cube_faces=a.faces,
+                              extra=None if a.preview else {"preview.png": preview})
     t = result.timings_ms
     print(f"method {result.settings['method']} (asked: {a.method}), faces {result.settings['face_size']}^2, "
           f"cubemap GPU {t.get('render_total', 0):.2f} ms, filter {t.get('irradiance', 0):.2f} ms, "
@@ -127,20 +254,27 @@ def cmd_bake(a) -> int:
     if result.hole_fraction > 0.01:
         print(f"warning: {100 * result.hole_fraction:.1f}% of directions from the probe see no splat (holes); "
               "they add no light", file=sys.stderr)
-    print("wrote " + ", ".join(sorted(written)) + f", {os.path.basename(preview)} in {a.out}")
+    print("wrote " + ", ".join(sorted(written)) + (f" and {a.preview}" if a.preview else "") + f" in {a.out}")
     return 0
 
 
 def cmd_convert(a) -> int:
     import importlib
 
-    from .core.formats import SplatFormatError
+    from .core.formats import check_input
+    from .core.outputs import check_output_file, written_atomically
     ext = os.path.splitext(a.output)[1].lower()
-    if ext not in OUTPUT_WRITERS:  # before reading a large input for nothing
-        raise SplatFormatError(f"{a.output}: cannot write '{ext}' files (use {', '.join(OUTPUT_WRITERS)})")
+    if ext not in OUTPUT_WRITERS:
+        raise ValueError(f"output {a.output}: cannot write '{ext}' files (give a name ending in "
+                         f"{', '.join(OUTPUT_WRITERS)})")
+    check_input(a.input, "input")
+    check_output_file(a.output, 0, "output")  # before reading a large input for nothing
     s = _load(a.input)
+    check_output_file(a.output, s.count * OUTPUT_BYTES_PER_SPLAT, "output")
     module, name = OUTPUT_WRITERS[ext]
-    getattr(importlib.import_module(f".core.formats.{module}", __package__), name)(a.output, s)
+    writer = getattr(importlib.import_module(f".core.formats.{module}", __package__), name)
+    with written_atomically(a.output) as tmp:
+        writer(tmp, s)
     print(f"wrote {a.output}: {s.count:,} splats")
     return 0
 
@@ -148,50 +282,53 @@ def cmd_convert(a) -> int:
 def cmd_sample(a) -> int:
     from .core.formats.axes import BLENDER_AXES, axes_comment
     from .core.formats.ply import write_ply
+    from .core.outputs import check_output_file, written_atomically
     from .core.synthetic import sample_environment
+    check_output_file(a.out, 64 << 20, "out", (".ply",))
     s = sample_environment().with_sh_degree(0)
-    write_ply(a.out, s, comments=(axes_comment(*BLENDER_AXES),))  # made Z up: imports upright
+    with written_atomically(a.out) as tmp:
+        write_ply(tmp, s, comments=(axes_comment(*BLENDER_AXES),))  # made Z up: imports upright
     print(f"wrote {a.out}: {s.count:,} splats (the generated sample environment)")
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m gs_ibl_addon", description=DESCRIPTION,
+    p = _Parser(prog="python -m gs_ibl_addon", description=DESCRIPTION,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--device", help="Vulkan device: an index, part of its name, 'gpu' or 'cpu' (lavapipe); "
                                     "default: a discrete GPU, else any (also GS_IBL_DEVICE)")
-    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=_Parser)
 
     q = sub.add_parser("info", help="what a splat file holds (count, SH degree, bounds, repairs made on reading)")
-    q.add_argument("scene", help="splat file (.ply, .spz, .splat)")
+    q.add_argument("scene", help=SCENE_HELP)
     q.set_defaults(fn=cmd_info)
 
     q = sub.add_parser("render", help="render one pinhole view of the splats to an EXR (RGBA, alpha = coverage)")
-    q.add_argument("scene", help="splat file (.ply, .spz, .splat)")
-    q.add_argument("--camera", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="camera position")
-    q.add_argument("--look-at", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="point looked at")
-    q.add_argument("--up", nargs=3, type=float, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"),
+    q.add_argument("scene", help=SCENE_HELP)
+    q.add_argument("--camera", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"), help="camera position")
+    q.add_argument("--look-at", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"), help="point looked at")
+    q.add_argument("--up", nargs=3, type=finite_float, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"),
                    help="up direction (default +Z, Blender's; most 3DGS captures are -Y up: use 0 -1 0)")
-    q.add_argument("--fov", type=float, default=60.0, help="horizontal field of view in degrees (default 60)")
+    q.add_argument("--fov", type=field_of_view, default=60.0, help="horizontal field of view in degrees (default 60)")
     q.add_argument("--size", nargs=2, type=positive_int, default=(640, 480), metavar=("W", "H"),
                    help="image size in pixels")
     q.add_argument("--out", required=True, help="output EXR path")
     q.add_argument("--png", help="also write an 8-bit sRGB preview PNG here")
     q.add_argument("--depth", help="also write a one-channel EXR of depth here: distance along the view axis of what "
                                    "each pixel shows (coverage-weighted), 0 where it shows nothing")
-    q.add_argument("--exposure", type=float, default=0.0, help="exposure (stops) of the PNG preview")
+    q.add_argument("--exposure", type=finite_float, default=0.0, help="exposure (stops) of the PNG preview")
     q.set_defaults(fn=cmd_render)
 
     q = sub.add_parser("cubemap", help="render the six cube faces seen from a probe point to EXRs, plus a lat-long")
-    q.add_argument("scene", help="splat file (.ply, .spz, .splat)")
-    q.add_argument("--probe", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="probe position")
+    q.add_argument("scene", help=SCENE_HELP)
+    q.add_argument("--probe", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"), help="probe position")
     q.add_argument("--face-size", type=positive_int, default=256, help="pixels per face side (default 256)")
     q.add_argument("--out", required=True, help="output folder (face_posx.exr ... face_negz.exr, radiance.exr)")
     q.set_defaults(fn=cmd_cubemap)
 
     q = sub.add_parser("bake", help="bake a light probe: radiance, irradiance (E/pi), SH, probe.json, preview.png")
-    q.add_argument("scene", help="splat file (.ply, .spz, .splat)")
-    q.add_argument("--probe", nargs=3, type=float, metavar=("X", "Y", "Z"),
+    q.add_argument("scene", help=SCENE_HELP)
+    q.add_argument("--probe", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                    help="probe position (default: the splats' opacity-weighted centre of mass)")
     q.add_argument("--method", default="auto", choices=["auto", "sh", "conv", "box", "exact"],
                    help="irradiance filter: auto (= exact, the most accurate at the same cost), exact (every "
@@ -202,7 +339,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="radiance face size (default 0: start at 32 and double until the irradiance changes by "
                         "less than --tolerance)")
     q.add_argument("--irradiance-size", type=positive_int, default=16, help="irradiance cube face size (default 16)")
-    q.add_argument("--tolerance", type=float, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
+    q.add_argument("--tolerance", type=fraction, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
     q.add_argument("--glossy", action="store_true", help="also write GGX prefiltered radiance (ggx_*.exr)")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
@@ -210,8 +347,8 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--preview", help="preview PNG path (default OUT/preview.png)")
     q.set_defaults(fn=cmd_bake)
 
-    q = sub.add_parser("convert", help="convert between splat formats (writes .ply, .spz or .splat)")
-    q.add_argument("input", help="splat file (.ply, .spz, .splat)")
+    q = sub.add_parser("convert", help="convert between splat formats (writes .ply, .spz, .splat, .sog or .glb)")
+    q.add_argument("input", help=SCENE_HELP)
     q.add_argument("output", help="output file; the format follows its extension")
     q.set_defaults(fn=cmd_convert)
 
@@ -221,14 +358,40 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _one_line(e: BaseException) -> str:
+    """The message of a refused input as one line; settings errors name their command-line option."""
+    from .core.bake import BadSetting
+    from .core.limits import TooBig
+    text = " ".join(str(e).split())
+    if isinstance(e, (BadSetting, TooBig)):
+        return f"--{e.option.replace('_', '-')}: {text}"
+    return text
+
+
+def _terminate_as_interrupt() -> None:
+    """SIGTERM (a job killed, a timeout) unwinds like Ctrl-C, so temporary outputs are removed on the way out."""
+    import signal
+    import threading
+
+    def interrupt(_sig, _frame):
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is threading.main_thread() and hasattr(signal, "SIGTERM"):
+        signal.signal(signal.SIGTERM, interrupt)
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.device:
         os.environ["GS_IBL_DEVICE"] = args.device
     from .core.formats import SplatFormatError
     from .core.vk import VulkanUnavailable
+    _terminate_as_interrupt()
     try:
         return args.fn(args)
-    except (SplatFormatError, VulkanUnavailable, OSError, ValueError) as e:
-        print(f"error: {e}", file=sys.stderr)
+    except (SplatFormatError, VulkanUnavailable, OSError, ValueError, MemoryError) as e:
+        print(f"error: {_one_line(e)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("error: interrupted; nothing partial was left in place", file=sys.stderr)
+        return 130

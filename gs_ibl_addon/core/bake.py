@@ -10,7 +10,7 @@ convolution's sampling noise); the 9 SH coefficients are still computed and stor
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -26,6 +26,18 @@ METHOD_ALIASES = {"auto": "exact", "sh": "sh", "conv": "convolve", "convolve": "
                   "exact": "exact"}
 AUTO_FIRST_FACE = 32
 AUTO_MAX_FACE = 1024
+# From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
+# face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
+FACE_BY_FACE_FROM = 1024
+MAX_IRRADIANCE_SIZE = 512  # irradiance is smooth: 16-64 is plenty; beyond this only the filter's cost grows
+
+
+class BadSetting(ValueError):
+    """A bake setting out of range: ``option`` is its ProbeSettings name (the command line shows ``--face-size``)."""
+
+    def __init__(self, option: str, value, message: str) -> None:
+        self.option, self.value = option, value
+        super().__init__(message)
 
 
 @dataclass
@@ -38,6 +50,71 @@ class ProbeSettings:
     glossy: bool = False  # also GGX prefiltered radiance for glossy surfaces (slower)
     max_face_size: int = AUTO_MAX_FACE
     extra: dict = field(default_factory=dict)  # passed through to filter_probe (sample counts, windows...)
+
+
+def check_settings(s: ProbeSettings) -> str:
+    """The internal method name for valid settings; a BadSetting naming the first bad one otherwise. No device,
+    no file: callers run it before reading anything."""
+    method = METHOD_ALIASES.get(str(s.method).lower())
+    if method is None:
+        raise BadSetting("method", s.method, f"unknown irradiance method {s.method!r}: use one of auto, sh, conv, "
+                                             "box, exact")
+    for name, value, low in (("face_size", s.face_size, 0), ("irradiance_size", s.irradiance_size, 1),
+                             ("max_face_size", s.max_face_size, 1)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise BadSetting(name, value, f"{name.replace('_', ' ')} {value!r} must be a whole number, "
+                                          f"{low} or more" + (" (0: search)" if name == "face_size" else ""))
+    if s.irradiance_size > MAX_IRRADIANCE_SIZE:
+        raise BadSetting("irradiance_size", s.irradiance_size,
+                         f"irradiance size {s.irradiance_size} is more than {MAX_IRRADIANCE_SIZE}; irradiance is "
+                         "smooth and 16-64 is plenty: use 64 or less")
+    if not (isinstance(s.tolerance, (int, float)) and 0 < s.tolerance < 1):
+        raise BadSetting("tolerance", s.tolerance, f"tolerance {s.tolerance} must be a fraction between 0 and 1 "
+                                                   "(0.01 = 1%)")
+    return method
+
+
+def check_probe_position(position) -> np.ndarray:
+    """Three finite numbers as float64, or a BadSetting saying what is wrong."""
+    try:
+        pos = np.asarray(position, np.float64).reshape(3)
+    except (TypeError, ValueError):
+        raise BadSetting("probe", position, f"probe position {position!r} must be three numbers X Y Z") from None
+    if not np.all(np.isfinite(pos)):
+        raise BadSetting("probe", position, f"probe position {pos.tolist()} is not finite (NaN or infinity): "
+                                            "give three ordinary numbers")
+    return pos
+
+
+def largest_face(s: ProbeSettings) -> int:
+    """The largest radiance face the bake can render: the fixed size, or the search's limit."""
+    return int(s.face_size) or int(s.max_face_size)
+
+
+def check_fits_device(s: ProbeSettings, ctx=None, splats: int = 0, sh_coeffs: int = 16) -> None:
+    """Refuse face or irradiance sizes the device or host memory cannot hold (limits.TooBig names the option)."""
+    from .limits import check_fits, cube_bytes
+    face = largest_face(s)
+    check_fits("face_size" if s.face_size else "max_face_size", face,
+               cube_bytes(face, s.irradiance_size, splats, sh_coeffs, s.glossy),
+               lambda v: cube_bytes(v, s.irradiance_size, splats, sh_coeffs, s.glossy), ctx,
+               f"^2 faces" + (f" with {splats:,} splats" if splats else ""))
+    check_fits("irradiance_size", s.irradiance_size, cube_bytes(face, s.irradiance_size, splats, sh_coeffs, s.glossy),
+               lambda v: cube_bytes(face, v, splats, sh_coeffs, s.glossy), ctx, "^2 irradiance faces")
+
+
+def estimate_output_bytes(s: ProbeSettings, half: bool = False, cube_faces: bool = False) -> int:
+    """Upper bound of the bytes write_probe (plus a preview PNG) writes for these settings."""
+    from .limits import exr_bytes
+    face = largest_face(s)
+    total = exr_bytes(4 * face, 2 * face, 3, half) + exr_bytes(max(64, 4 * s.irradiance_size),
+                                                                 max(32, 2 * s.irradiance_size), 3, half)
+    levels = [max(4, face >> k) for k in range(5)] if s.glossy else []
+    total += sum(exr_bytes(max(64, 4 * m), max(32, 2 * m), 3, half) for m in levels)
+    if cube_faces:
+        total += 6 * (exr_bytes(face, face, 4, half) + exr_bytes(s.irradiance_size, s.irradiance_size, 3, half)
+                      + sum(exr_bytes(m, m, 3, half) for m in levels))
+    return total + (4 << 20) + (1 << 20)  # preview PNG and probe.json
 
 
 def default_probe_position(scene: SplatScene) -> np.ndarray:
@@ -57,9 +134,19 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                        say: Callable[[str, float], None]) -> ProbeResult:
     """Render (and, with face size 0, search the face size), filter, and add the glossy maps when asked."""
     def probe_at(face: int) -> ProbeResult:
-        res = r.render(ViewBatch.cubemap(pos, face), timestamps=True)
-        timings = {f"render_{k}": v for k, v in res.timings_ms.items()}
-        return filter_probe(np.stack(res.images), irradiance_size=s.irradiance_size, method=method,
+        cube = ViewBatch.cubemap(pos, face)
+        if face < FACE_BY_FACE_FROM:
+            res = r.render(cube, timestamps=True)
+            images, timings = res.images, {f"render_{k}": v for k, v in res.timings_ms.items()}
+        else:
+            images, timings = [], {}
+            for f, view in enumerate(cube.views):
+                say(f"rendering face {f + 1} of 6 ({face}x{face})", 0.2 + 0.6 * f / 6)
+                res = r.render(replace(cube, views=(view,)), timestamps=True)
+                images += res.images
+                for k, v in res.timings_ms.items():
+                    timings[f"render_{k}"] = timings.get(f"render_{k}", 0.0) + v
+        return filter_probe(np.stack(images), irradiance_size=s.irradiance_size, method=method,
                             sh_order=s.sh_order, roughness=None, timings_ms=timings, use_gpu=True, vk_context=r.ctx,
                             splat_count=splat_count, device=r.ctx.device_name, **s.extra)
 
@@ -104,27 +191,29 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     keeps splats on the GPU (Blender's splat_cache) then needs no CPU copy of them.
     """
     s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
-    method = METHOD_ALIASES.get(str(s.method).lower())
-    if method is None:
-        raise ValueError(f"unknown irradiance method {s.method!r}: use one of auto, sh, conv, box, exact")
-    if int(s.face_size) < 0 or int(s.irradiance_size) < 1:
-        raise ValueError(f"face size {s.face_size} must be 0 (search) or more, irradiance size "
-                         f"{s.irradiance_size} 1 or more")
-    if not 0 < s.tolerance < 1:
-        raise ValueError(f"tolerance {s.tolerance} must be a fraction between 0 and 1 (0.01 = 1%)")
+    method = check_settings(s)
     if scene is None and (renderer is None or probe_position is None):
         raise ValueError("bake_probe without a scene needs both a renderer holding the splats and a probe position")
-    pos = default_probe_position(scene) if probe_position is None else np.asarray(probe_position, np.float64)
+    pos = check_probe_position(default_probe_position(scene) if probe_position is None else probe_position)
     say = progress or (lambda _msg, _frac: None)
     t0 = time.perf_counter()
     r = renderer
-    if r is None:
-        say(f"uploading {scene.count:,} splats", 0.0)
-        r = SplatRenderer(scene)
     try:
+        if r is None:
+            say(f"uploading {scene.count:,} splats", 0.0)
+            r = SplatRenderer(scene)
         result = _search_and_filter(r, r.scene_count, pos, s, method, say)
+    except Exception as e:
+        from .limits import out_of_memory_advice
+        n = scene.count if scene is not None else r.scene_count
+        advice = out_of_memory_advice(e, f"baking {largest_face(s)}^2 faces of {n:,} splats",
+                                      "use a smaller face size (or max face size) and irradiance size, "
+                                      "or bake from fewer splats")
+        if advice is None:
+            raise
+        raise advice from None
     finally:
-        if renderer is None:  # ours: give its GPU buffers back now, not whenever Python collects it
+        if renderer is None and r is not None:  # ours: give its GPU buffers back now, not whenever Python collects it
             r.close()
     result.timings_ms["bake_wall"] = (time.perf_counter() - t0) * 1e3
     say("done", 1.0)

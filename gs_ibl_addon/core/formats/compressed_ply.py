@@ -25,7 +25,8 @@ import numpy as np
 from plyfile import PlyData, PlyElement, PlyParseError
 
 from ..scene import SplatScene, rgb_to_sh_dc, sh_dc_to_rgb
-from . import fail
+from . import check_input, fail
+from .ply import parse_header
 
 CHUNK_SIZE = 256
 _CHUNK_BASE = ("min_x", "min_y", "min_z", "max_x", "max_y", "max_z",
@@ -64,7 +65,8 @@ def _column(path: str, element: PlyElement, name: str, dtype: str) -> np.ndarray
 
 def read_compressed_ply(path: str | os.PathLike) -> SplatScene:
     """Decode a SuperSplat compressed PLY into an activated SplatScene (file order kept)."""
-    path = os.fspath(path)
+    path = check_input(path)
+    parse_header(path)  # counts against the file size before plyfile maps or allocates anything
     try:
         # Memory-mapped: plyfile then views each element as one array (without mmap it parses row by row).
         ply = PlyData.read(path, mmap=True)

@@ -17,6 +17,8 @@ Errors (one ``SplatFormatError`` naming the file, the field and what to do; noth
   element, or none of the splat properties) ; missing or misspelt properties (the close name found is suggested);
   a list property where a number is expected; an f_rest count other than 0, 9, 24, 45 or gaps in its numbering;
   a truncated file (fewer bytes or lines than the header promises); zero splats; every splat non-finite.
+  Element counts (negative, or more than the file's size can hold) are checked against the file size straight
+  after the header (``check_counts``), before any array is allocated.
 Repairs (formats/repair.py; done silently to the data, counted in ``scene.repairs``, a key only when its count > 0):
   ``dropped_nonfinite``  splats with NaN/inf in any field used (or whose exp(scale) overflows float32) are dropped;
   ``clamped_scales``     splats with a scale below ``MIN_SCALE`` (exp(raw) zero or subnormal, where 1/scale^2 would
@@ -38,7 +40,7 @@ import numpy as np
 from plyfile import PlyData, PlyElement, PlyListProperty, PlyParseError
 
 from ..scene import SplatScene
-from . import fail
+from . import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 CHUNK_ROWS = 1 << 16  # splats converted per step: bounds temporaries to a few MB whatever the file size
@@ -120,6 +122,35 @@ def _check_header(path: str, ply: PlyData) -> tuple[PlyElement, _Layout]:
     return vertex, layout
 
 
+def _min_row_bytes(element: PlyElement, text: bool, byte_order: str) -> int:
+    """The fewest bytes one row of ``element`` can take: a list counts only its length field; in ASCII a value
+    takes at least one character and one separator."""
+    if text:
+        return 2 * len(element.properties)
+    total = 0
+    for p in element.properties:
+        if isinstance(p, PlyListProperty):
+            total += np.dtype(p.len_dtype).itemsize
+        else:
+            total += np.dtype(p.val_dtype).itemsize
+    return total
+
+
+def check_counts(path: str, ply: PlyData, offset: int) -> None:
+    """Refuse negative element counts, and counts the bytes after the header cannot hold, before any allocation."""
+    have = os.path.getsize(path) - offset
+    need = 0
+    for element in ply.elements:
+        if element.count < 0:
+            raise fail(path, f"the header gives element '{element.name}' a negative count ({element.count}): "
+                             "the file is damaged", "export it again")
+        need += element.count * _min_row_bytes(element, ply.text, ply.byte_order)
+        if need > have:
+            rows = f"{element.count} splats" if element.name == "vertex" else f"{element.count} '{element.name}' rows"
+            raise fail(path, f"the header promises {rows}, at least {need:,} bytes, but only {have:,} bytes follow "
+                             "it: the file is truncated or its header is damaged", "get the file again or export it again")
+
+
 def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
     """Yield the vertex rows as structured arrays, chunk by chunk, memory-mapped (or read) from the file."""
     dtype = vertex.dtype(ply.byte_order)
@@ -143,6 +174,19 @@ def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
         del rows
 
 
+def parse_header(path: str) -> tuple[PlyData, int]:
+    """plyfile's header parser on its own (so a bad layout is refused before any data is read), with the element
+    counts checked against the file size; returns the header and the byte offset of the data."""
+    try:
+        with open(path, "rb") as f:
+            ply = PlyData._parse_header(f)
+            offset = f.tell()
+    except (PlyParseError, UnicodeDecodeError, ValueError) as e:
+        raise fail(path, f"not a readable PLY file (header: {e})", "choose a 3DGS .ply file") from None
+    check_counts(path, ply, offset)
+    return ply, offset
+
+
 def _read_all(path: str, mmap: bool) -> PlyData:
     try:
         return PlyData.read(path, mmap=mmap)
@@ -151,20 +195,14 @@ def _read_all(path: str, mmap: bool) -> PlyData:
             raise fail(path, f"the file is truncated ({e}): the download or copy was probably cut off; "
                              f"get the file again") from None
         raise fail(path, f"the PLY data cannot be parsed ({e}); re-export the file") from None
+    except (ValueError, UnicodeDecodeError) as e:  # e.g. a word where an ASCII PLY needs a number
+        raise fail(path, f"the PLY data cannot be parsed ({e}); re-export the file") from None
 
 
 def read_ply(path: str | os.PathLike) -> SplatScene:
     """Read a standard 3DGS PLY into an activated SplatScene (see the module docstring for errors and repairs)."""
-    path = os.fspath(path)
-    if not os.path.isfile(path):
-        raise fail(path, "no such file")
-    try:
-        with open(path, "rb") as f:
-            # plyfile's header parser on its own, so that a mesh or a bad layout is refused before any data is read.
-            ply = PlyData._parse_header(f)
-            offset = f.tell()
-    except (PlyParseError, UnicodeDecodeError) as e:
-        raise fail(path, f"not a readable PLY file (header: {e}); choose a 3DGS .ply file") from None
+    path = check_input(path)
+    ply, offset = parse_header(path)
     vertex, layout = _check_header(path, ply)
     if ply.text:
         data = _read_all(path, mmap=False)["vertex"].data

@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 
 from ..scene import SplatScene, rgb_to_sh_dc, sh_dc_to_rgb
-from . import fail
+from . import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])
@@ -31,7 +31,7 @@ _fail = partial(fail, todo=_REEXPORT)  # this format's usual advice; a call pass
 
 def read_splat(path: str | os.PathLike) -> SplatScene:
     """Decode a .splat file into an activated SplatScene (SH degree 0)."""
-    path = os.fspath(path)
+    path = check_input(path)
     size = os.path.getsize(path)
     if size == 0:
         raise _fail(path, "the file is empty")

@@ -35,7 +35,7 @@ import numpy as np
 from ..scene import SplatScene
 from ..sh import degree_of, sh_basis
 from . import zstd
-from . import fail
+from . import check_input, fail
 
 MAGIC = 0x5053474E
 COLOR_SCALE = 0.15  # SPZ stores f_dc * 0.15 (not SH_C0) so DC colours a little outside [0, 1] survive
@@ -185,7 +185,7 @@ def read_spz(path: str | os.PathLike, coordinates: str | None = None) -> SplatSc
     ``coordinates`` is the system the file's data is in; by default the file's coordinate-system extension,
     else RUB as the SPZ specification says. Use "RDF" for files written from PLY data without conversion.
     """
-    path = os.fspath(path)
+    path = check_input(path)
     with open(path, "rb") as f:
         raw = f.read()
     if raw[:2] == b"\x1f\x8b":

@@ -5,14 +5,16 @@ Files written by ``write_probe``:
   irradiance.exr      lat-long irradiance, value = E(n)/pi (a white Lambertian surface's outgoing radiance)
   ggx_<k>.exr         lat-long GGX-prefiltered radiance per roughness level (when present)
   faces/<map>_<face>.exr  the cube faces themselves, when cube_faces=True (+X, -X, +Y, -Y, +Z, -Z)
-  probe.json          SH coefficients, settings, splat count, timings, device, hole fraction, conventions
+  probe.json          SH coefficients, settings, splat count, timings, device, hole fraction, conventions, and
+                      "files": what this bake wrote (how the next bake into the folder knows what it may remove)
 """
 from __future__ import annotations
 
 import dataclasses
 import json
 import os
-from typing import Any
+import re
+from typing import Any, Callable
 
 import numpy as np
 
@@ -62,23 +64,94 @@ def _jsonable(v: Any) -> Any:
     return v
 
 
+PROBE_JSON = "probe.json"
+# Names write_probe (and the command line's default preview) can write; an earlier bake's are known by probe.json.
+_OURS = re.compile(r"^(radiance|irradiance|ggx_\d+)\.exr$|^preview\.png$|^probe\.json$"
+                   r"|^faces/(radiance|irradiance|ggx_\d+)_(pos|neg)[xyz]\.exr$")
+
+
+def _looks_ours(out_dir: str) -> list[str]:
+    found = []
+    for folder in (out_dir, os.path.join(out_dir, "faces")):
+        if os.path.isdir(folder):
+            rel = os.path.relpath(folder, out_dir)
+            for name in os.listdir(folder):
+                name = name if rel == "." else f"{rel}/{name}"
+                if _OURS.match(name) and os.path.isfile(os.path.join(out_dir, name)):
+                    found.append(name)
+    return sorted(found)
+
+
+def earlier_bake_files(out_dir: str | os.PathLike) -> list[str] | None:
+    """The files an earlier bake wrote in out_dir, from its probe.json (None: no readable probe.json)."""
+    path = os.path.join(os.fspath(out_dir), PROBE_JSON)
+    try:
+        with open(path, encoding="utf-8") as f:
+            files = json.load(f).get("files")
+    except (OSError, ValueError, AttributeError):
+        return None
+    if not isinstance(files, list):
+        return None
+    # Only plain names under out_dir that we could have written: a hand-edited list never deletes anything else.
+    listed = {str(n).replace(os.sep, "/") for n in files}
+    return sorted(n for n in listed | {PROBE_JSON, "preview.png"} if _OURS.match(n))
+
+
+def check_probe_folder(out_dir: str | os.PathLike, option: str | None = None) -> None:
+    """Refuse an output folder holding probe files that no probe.json says gs-ibl wrote: they would sit, stale,
+    beside the new bake, and we do not delete what we cannot prove is ours."""
+    out_dir = os.fspath(out_dir)
+    if not os.path.isdir(out_dir):
+        return
+    found = _looks_ours(out_dir)
+    known = earlier_bake_files(out_dir)
+    strangers = [n for n in found if known is None or n not in known]
+    if strangers:
+        from ..outputs import OutputError
+        who = f"{option} {out_dir}" if option else out_dir
+        shown = ", ".join(strangers[:4]) + (f" and {len(strangers) - 4} more" if len(strangers) > 4 else "")
+        raise OutputError(f"{who}: holds {shown}, which no probe.json there lists as written by gs-ibl, so a new "
+                          "bake would leave them beside its own files; choose a new or empty folder, or delete them")
+
+
 def write_probe(result: ProbeResult, out_dir: str | os.PathLike, half: bool = False, cube_faces: bool = False,
-                latlong_width: int | None = None) -> dict[str, str]:
+                latlong_width: int | None = None,
+                extra: dict[str, Callable[[str], None]] | None = None) -> dict[str, str]:
     """Write a probe's files into out_dir (created if missing); returns {name: path} of what was written.
 
-    latlong_width defaults to 4 x the radiance face size (enough to keep the cube's detail).
+    latlong_width defaults to 4 x the radiance face size (enough to keep the cube's detail). ``extra`` maps more
+    file names to functions writing them (given the path), e.g. a preview; they are listed in probe.json too.
+    Everything is written into a temporary folder inside out_dir first and moved into place only when all of it
+    is complete; then the files an earlier bake listed in its probe.json that this one did not write are removed,
+    so the folder never mixes two bakes (``check_probe_folder`` refuses folders whose files we cannot vouch for).
     """
+    from ..outputs import remove_quietly, staged_folder
     out_dir = os.fspath(out_dir)
-    os.makedirs(out_dir, exist_ok=True)
+    names: list[str] = []
+
+    def clear_earlier(new: list[str]) -> None:
+        for name in earlier_bake_files(out_dir) or []:
+            if name not in new:
+                remove_quietly(os.path.join(out_dir, name))
+        faces = os.path.join(out_dir, "faces")
+        if os.path.isdir(faces) and not os.listdir(faces) and not any(n.startswith("faces/") for n in new):
+            os.rmdir(faces)
+
+    with staged_folder(out_dir, last=PROBE_JSON, before_move=clear_earlier) as stage:
+        names = _write_all(result, stage, half, cube_faces, latlong_width, extra or {})
+    return {name: os.path.join(out_dir, name) for name in names}
+
+
+def _write_all(result: ProbeResult, out_dir: str, half: bool, cube_faces: bool, latlong_width: int | None,
+               extra: dict[str, Callable[[str], None]]) -> list[str]:
     rad = np.asarray(result.radiance)[..., :3]
     width = latlong_width or 4 * rad.shape[1]
     irr_width = latlong_width or max(64, 4 * result.irradiance.shape[1])
-    written: dict[str, str] = {}
+    written: list[str] = []
 
     def put(name: str, image: np.ndarray) -> None:
-        path = os.path.join(out_dir, name)
-        write_exr(path, image, half=half)
-        written[name] = path
+        write_exr(os.path.join(out_dir, name), image, half=half)
+        written.append(name)
 
     put("radiance.exr", cube_to_latlong(rad, width))
     put("irradiance.exr", cube_to_latlong(result.irradiance[..., :3], irr_width))
@@ -91,7 +164,10 @@ def write_probe(result: ProbeResult, out_dir: str | os.PathLike, half: bool = Fa
         for label, cube in maps:
             for f, fname in enumerate(cubemap.FACE_NAMES):
                 sign = "pos" if fname[0] == "+" else "neg"
-                put(os.path.join("faces", f"{label}_{sign}{fname[1].lower()}.exr"), cube[f])
+                put(f"faces/{label}_{sign}{fname[1].lower()}.exr", cube[f])
+    for name, write in extra.items():
+        write(os.path.join(out_dir, name))
+        written.append(name)
     meta = {
         "conventions": CONVENTIONS,
         "sh_coefficients": None if result.sh_coefficients is None else result.sh_coefficients,
@@ -106,8 +182,7 @@ def write_probe(result: ProbeResult, out_dir: str | os.PathLike, half: bool = Fa
         "hole_fraction": float(result.hole_fraction),
         "files": sorted(written),
     }
-    path = os.path.join(out_dir, "probe.json")
-    with open(path, "w", encoding="utf-8") as f:
+    with open(os.path.join(out_dir, PROBE_JSON), "w", encoding="utf-8") as f:
         json.dump(_jsonable(meta), f, indent=2)
-    written["probe.json"] = path
+    written.append(PROBE_JSON)
     return written
