@@ -95,7 +95,7 @@ class _Parser(argparse.ArgumentParser):
 
 
 OUTPUT_WRITERS = {".ply": ("ply", "write_ply"), ".spz": ("spz", "write_spz"), ".splat": ("splat", "write_splat"),
-                  ".sog": ("sog", "write_sog"), ".glb": ("gltf", "write_glb")}
+                  ".sog": ("sog", "write_sog"), ".glb": ("gltf", "write_glb"), ".ksplat": ("ksplat", "write_ksplat")}
 # Upper bound of bytes per splat each writer needs (standard PLY with SH degree 3: 62 floats), for the space check.
 OUTPUT_BYTES_PER_SPLAT = 62 * 4
 
@@ -146,16 +146,17 @@ def cmd_render(a) -> int:
     _progress("rendering", 0.3)
     renderer = SplatRenderer(s)
     try:
-        res = _advise_on_memory(lambda: renderer.render(batch, timestamps=True), f"rendering {w}x{h} pixels of "
-                                f"{s.count:,} splats", "use a smaller --size, or fewer splats")
+        res = _advise_on_memory(lambda: renderer.render(batch, timestamps=True, depth=bool(a.depth)),
+                                f"rendering {w}x{h} pixels of {s.count:,} splats", "use a smaller --size, or fewer splats")
+        image, depth_image = res.images[0], (res.depths[0] if a.depth else None)  # read back before the close
     finally:
         renderer.close()
     with written_atomically(a.out) as out, _maybe(a.depth) as depth, _maybe(a.png) as png:
-        write_exr(out, res.images[0])
+        write_exr(out, image)
         if depth:
-            write_exr(depth, res.depths[0])
+            write_exr(depth, depth_image)
         if png:
-            write_png_preview(png, res.images[0][..., :3], a.exposure)
+            write_png_preview(png, image[..., :3], a.exposure)
     _progress(f"wrote {a.out} ({res.instances:,} splat-tile pairs, GPU {res.timings_ms.get('total', 0):.2f} ms)", 1.0)
     return 0
 
@@ -347,7 +348,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--preview", help="preview PNG path (default OUT/preview.png)")
     q.set_defaults(fn=cmd_bake)
 
-    q = sub.add_parser("convert", help="convert between splat formats (writes .ply, .spz, .splat, .sog or .glb)")
+    q = sub.add_parser("convert", help="convert between splat formats (writes .ply, .spz, .splat, .sog, .glb or .ksplat)")
     q.add_argument("input", help=SCENE_HELP)
     q.add_argument("output", help="output file; the format follows its extension")
     q.set_defaults(fn=cmd_convert)
