@@ -12,11 +12,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gs_ibl_addon.blender.overlay_math import (SplatOverlay, linear_to_srgb, look_at_view_matrix, overlay_view,
-                                               perspective_matrix, to_display)
+from gs_ibl_addon.blender.overlay_math import (SplatOverlay, ViewMotion, linear_to_srgb, look_at_view_matrix,
+                                               overlay_view, perspective_matrix, to_display, view_key, window_depth)
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.views import ViewBatch
+from gs_ibl_addon.core.scene import SplatScene
 from gs_ibl_addon.core.synthetic import random_scene
 
 TOL = 2e-4  # GPU float32 against the float64 reference (tests/test_renderer.py)
@@ -114,6 +115,72 @@ def test_overlay_image_matches_reference_and_rerenders_only_on_change():
     ovl.close()
 
 
+def _ortho(half: float = 2.0) -> np.ndarray:
+    p = np.identity(4)
+    p[0, 0], p[1, 1], p[2, 2], p[2, 3] = 1 / half, 1.5 / half, -2 / 30, -32 / 30  # near 1, far 31
+    return p
+
+
+@pytest.mark.parametrize("projection", ["perspective", "shifted", "orthographic"])
+def test_window_depth_is_the_depth_buffer_value_of_the_point(projection):
+    """A world point at distance d along the render camera's axis gets the window depth the viewport's depth buffer
+    holds for it: (ndc_z + 1) / 2 of (window @ view @ point), for perspective, shifted and orthographic views."""
+    w, h = 64, 40
+    v = look_at_view_matrix(POS, TARGET)
+    p = {"perspective": perspective_matrix(50.0, w, h, near=0.1, far=40.0),
+         "shifted": perspective_matrix(50.0, w, h, near=0.1, far=40.0, shift_x=0.1, shift_y=-0.05),
+         "orthographic": _ortho()}[projection]
+    ov = overlay_view(v, p, w, h)
+    pts = np.random.default_rng(2).uniform(-1.5, 1.5, (300, 3))
+    clip = p @ v @ np.c_[pts, np.ones(len(pts))].T
+    want = (clip[2] / clip[3] + 1) / 2
+    fwd = ov.batch.views[0].forward
+    dist = (pts - ov.batch.origin) @ fwd  # what the renderer's depth image holds for a splat there
+    got = window_depth(dist, ov)
+    np.testing.assert_allclose(got, want, atol=2e-6)
+    assert window_depth(np.zeros(3), ov).tolist() == [1.0, 1.0, 1.0]  # nothing seen: the far plane
+    assert np.all(window_depth(dist, ov, pull=0.02) < got)  # pulled toward the eye
+
+
+def test_rendered_depth_gives_window_depth_of_the_surface():
+    """The renderer's depth image through window_depth: a wall of opaque splats facing the view lands at the
+    window depth of that plane."""
+    n_side, z_wall = 24, 3.0
+    g = (np.arange(n_side) - (n_side - 1) / 2) * 0.25
+    x, y = np.meshgrid(g, g)
+    n = x.size
+    pos = np.c_[x.ravel(), y.ravel(), np.full(n, -z_wall)].astype(np.float32)  # the plane z = -3 of view space
+    flat = np.array([0.3, 0.3, 0.002], np.float32)
+    scene = SplatScene(pos, np.tile(flat, (n, 1)), np.tile(np.array([1, 0, 0, 0], np.float32), (n, 1)),
+                       np.full(n, 0.99, np.float32), np.zeros((n, 1, 3), np.float32))
+    w, h = 40, 30
+    v, p = np.identity(4), perspective_matrix(40.0, w, h, near=0.5, far=20.0)
+    ovl = SplatOverlay(scene)
+    img = ovl.image(v, p, w, h)
+    covered = img.rgba[..., 3] > 0.99
+    assert covered.mean() > 0.9
+    np.testing.assert_allclose(img.depth[covered], z_wall, rtol=2e-3)  # the splats' thickness (2 mm) apart
+    want = (((p[2, 2] * -z_wall + p[2, 3]) / z_wall) + 1) / 2
+    np.testing.assert_allclose(img.window_depth()[covered], want, atol=2e-4)
+    ovl.close()
+
+
+def test_view_motion_coarse_while_moving_full_once_still():
+    m, full = ViewMotion(settle_s=0.25, moving_scale=0.25), 0.5
+    a, b, c = (view_key(look_at_view_matrix(e, TARGET), perspective_matrix(50, 40, 30), 40, 30)
+               for e in (POS, (2.4, -3.0, 1.6), (2.3, -3.0, 1.6)))
+    assert m.scale("r", a, 10.0, full) == full and m.refine_in(10.0) is None  # first sight: full at once
+    assert m.scale("r", a, 10.5, full) == full  # still
+    assert m.scale("r", b, 10.6, full) == 0.25  # moved: coarse
+    assert m.refine_in(10.6) == pytest.approx(0.25)
+    assert m.scale("r", c, 10.7, full) == 0.25  # moving on
+    assert m.refine_in(10.8) == pytest.approx(0.15)
+    assert m.scale("r", c, 10.8, full) == 0.25  # unchanged, not yet settled
+    assert m.scale("r", c, 10.96, full) == full and m.refine_in(10.96) is None  # settled: full, nothing to refine
+    assert m.scale("other region", b, 11.0, full) == full  # regions are independent
+    assert m.scale("r", a, 11.0, 0.2) == 0.2  # a Resolution below the moving scale is never raised
+
+
 def test_to_display_premultiplied_srgb():
     img = np.array([[[0.25, 0.5, 4.0, 0.5], [0.0, 0.0, 0.0, 0.0]]], np.float32)
     out = to_display(img)
@@ -176,8 +243,45 @@ def test_handler_image_follows_the_splat_object(blender):
     assert overlay.overlay_for(obj) is not first
     assert np.abs(img2.rgba - render_reference(scene_from_object(obj), img2.view.batch)[0]).max() < TOL
     settings = bpy.context.scene.gs_ibl_overlay
-    assert not settings.show and obj.modifiers[PROXY_MODIFIER].show_viewport
-    settings.show = True
-    assert not obj.modifiers[PROXY_MODIFIER].show_viewport
     settings.show = False
-    assert obj.modifiers[PROXY_MODIFIER].show_viewport and not overlay._overlays  # cache freed when off
+    assert not overlay._overlays  # images freed when off
+
+
+@bpy_only
+def test_display_settings_never_upload_again_and_helpers_hide(blender):
+    """Show Splats, Resolution and Exposure are display-only: however often they change (with the depsgraph
+    evaluated in between, as in the GUI), the splats are not read or uploaded again; while the overlay shows, the
+    point proxy draws nothing (fraction 0), and its fraction comes back after. An edit of the mesh still uploads."""
+    bpy = blender
+    from gs_ibl_addon.blender import overlay, splat_cache
+    from gs_ibl_addon.blender.compat import get_modifier_input, modifier_input_identifiers
+    from gs_ibl_addon.blender.splat_object import PROXY_MODIFIER, create_splat_object
+    from mathutils import Matrix
+    obj = create_splat_object(bpy.context, small_scene(), "S")
+    mod = obj.modifiers[PROXY_MODIFIER]
+    frac = modifier_input_identifiers(mod.node_group)["Fraction"]
+    f0 = get_modifier_input(mod, frac)
+    rv3d = SimpleNamespace(view_matrix=Matrix(look_at_view_matrix(POS, TARGET).tolist()),
+                           window_matrix=Matrix(perspective_matrix(60.0, 40, 30).tolist()))
+    bpy.context.view_layer.update()
+    overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+    n0 = splat_cache.uploads
+    settings = bpy.context.scene.gs_ibl_overlay
+    for step in range(3):
+        settings.show = True
+        bpy.context.view_layer.update()
+        assert get_modifier_input(mod, frac) == 0.0 and obj.modifiers[PROXY_MODIFIER].show_viewport
+        settings.exposure = 1.5 - step
+        settings.resolution_scale = 0.3 + 0.2 * step
+        bpy.context.view_layer.update()
+        overlay.splat_image(obj, rv3d, 40, 30, settings.resolution_scale)
+        settings.show = False
+        bpy.context.view_layer.update()
+        assert get_modifier_input(mod, frac) == pytest.approx(f0) and overlay.HIDDEN_KEY not in obj.keys()
+        overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+    assert splat_cache.uploads == n0
+    obj.data.vertices[0].co.x += 0.25  # a real edit
+    obj.data.update()
+    bpy.context.view_layer.update()
+    overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+    assert splat_cache.uploads == n0 + 1

@@ -1,30 +1,59 @@
-"""Viewport overlay: the splats, rendered by our renderer from each 3D View's camera, drawn behind the meshes.
+"""Viewport overlay: the splats, rendered by our renderer from each 3D View's camera, depth-tested against meshes.
 
-A SpaceView3D POST_VIEW draw handler. Per splat object it keeps one SplatOverlay over the object's shared GPU
-renderer (splat_cache: uploaded once, shared with probe bakes, re-uploaded when the object moves or its mesh
-changes) and per viewport region the last image, re-rendered only when the view or window matrix, the region
-size or the resolution changed (overlay_math.SplatOverlay). The image becomes a float GPUTexture drawn as one quad.
+A SpaceView3D POST_VIEW draw handler. Blender calls it after every engine and its own overlays (grid, wires,
+extras) have drawn, with the scene's depth buffer bound. Per splat object it keeps one SplatOverlay over the
+object's shared GPU renderer (splat_cache: uploaded once, shared with probe bakes, re-uploaded only when the
+object moves or its mesh changes) and per viewport region the last image, re-rendered only when the view, the
+region size or the resolution changed (overlay_math). While a view moves it is rendered at a quarter of the
+resolution and refined by one timed redraw once the view has been still for SETTLE_S (overlay_math.ViewMotion).
 
-Depth: our renderer returns colour and coverage, no depth, so the quad is drawn at the far plane with the
-depth test on: meshes always cover the splats (right for meshes inside a captured room; a splat object in
-front of a mesh is hidden behind it). The logic (matrices -> image) lives in overlay_math and is tested
-without a window; only the few gpu calls here need one.
+The image is drawn as one quad by a shader of ours that writes the renderer's depth as fragment depth
+(overlay_math.window_depth), so a mesh in front of the splats hides them and splats in front of a mesh hide it.
+While the overlay shows, splat objects draw nothing of their own (hide_helpers): Blender's lines and points
+(loose vertices as black dots, bounds boxes) land on top of what a POST_VIEW handler draws, whatever its depth.
 """
 from __future__ import annotations
 
+import time
+
 import bpy
 import numpy as np
+from bpy.app.handlers import persistent
 
 from . import splat_cache
-from .overlay_math import SplatOverlay, to_display
+from .overlay_math import DEPTH_PULL, SplatOverlay, ViewMotion, to_display, view_key
+from .compat import get_modifier_input, modifier_input_identifiers, set_modifier_input
 from .splat_object import PROXY_MODIFIER, is_splat_object
 
-FAR_NDC = 0.999999  # depth of the quad: behind every mesh, in front of the cleared background (1.0)
+HIDDEN_KEY = "gs_ibl_proxy_fraction"  # on a splat object while the overlay shows: its proxy's fraction to restore
+ALPHA_CUT = 1.0 / 255.0  # fragments with less coverage are not drawn
+OPAQUE_CUT = 0.5  # the depth pass writes the depth of pixels at least this covered
 
 _handle = None
 _overlays: dict[int, SplatOverlay] = {}  # splat_cache.uid(object) -> its images over the shared renderer
-_textures: dict[tuple[str, int], tuple[int, float, object]] = {}  # (object, region) -> (image id, exposure, tex)
+_textures: dict[tuple[int, int], tuple] = {}  # (object uid, region) -> (image id, exposure, colour tex, depth tex)
+_motion = ViewMotion()
+_refine_scheduled = False
+_shader = None
 last_error: str | None = None
+last_draw: dict = {}  # what the last draw did, per region (scale, render ms): read by tests and the GUI check
+
+_VERTEX = """
+void main() {
+  uv = texCoord;
+  gl_Position = vec4(pos, 0.0, 1.0);
+}
+"""
+_FRAGMENT = """
+void main() {
+  vec4 c = texture(image, uv);
+  if (c.a < alpha_cut) {
+    discard;
+  }
+  fragColor = c;
+  gl_FragDepth = texture(depth_image, uv).r;
+}
+"""
 
 
 def overlay_for(obj: bpy.types.Object) -> SplatOverlay:
@@ -54,45 +83,78 @@ def splat_image(obj: bpy.types.Object, region_3d, width: int, height: int, scale
                                   width, height, scale, slot)
 
 
-def _texture(obj_name: str, slot: int, img, exposure: float):
+def _shader_get():
+    """Our image shader: premultiplied colour plus gl_FragDepth from a depth texture (made once per session)."""
+    global _shader
+    if _shader is None:
+        import gpu
+        iface = gpu.types.GPUStageInterfaceInfo("gs_ibl_overlay_iface")
+        iface.smooth("VEC2", "uv")
+        info = gpu.types.GPUShaderCreateInfo()
+        info.vertex_in(0, "VEC2", "pos")
+        info.vertex_in(1, "VEC2", "texCoord")
+        info.vertex_out(iface)
+        info.sampler(0, "FLOAT_2D", "image")
+        info.sampler(1, "FLOAT_2D", "depth_image")
+        info.push_constant("FLOAT", "alpha_cut")
+        info.fragment_out(0, "VEC4", "fragColor")
+        if hasattr(info, "depth_write"):  # Vulkan/Metal backends must be told; OpenGL needs no declaration
+            info.depth_write("ANY")
+        info.vertex_source(_VERTEX)
+        info.fragment_source(_FRAGMENT)
+        _shader = gpu.shader.create_from_info(info)
+    return _shader
+
+
+def _float_texture(px: np.ndarray, fmt: str):
     import gpu
-    key = (obj_name, slot)
+    px = np.ascontiguousarray(px[::-1], np.float32)  # GPU rows go bottom-up
+    h, w = px.shape[:2]
+    return gpu.types.GPUTexture((w, h), format=fmt, data=gpu.types.Buffer("FLOAT", px.size, px.ravel()))
+
+
+def _textures_for(key: tuple[int, int], img, exposure: float) -> tuple:
     cached = _textures.get(key)
     if cached is not None and cached[0] == id(img) and cached[1] == exposure:
-        return cached[2]
-    px = np.ascontiguousarray(to_display(img.rgba, exposure)[::-1], np.float32)  # GPU rows go bottom-up
-    h, w = px.shape[:2]
-    buf = gpu.types.Buffer("FLOAT", h * w * 4, px.ravel())
-    tex = gpu.types.GPUTexture((w, h), format="RGBA32F", data=buf)
-    _textures[key] = (id(img), exposure, tex)
-    return tex
+        return cached[2], cached[3]
+    colour = _float_texture(to_display(img.rgba, exposure), "RGBA32F")
+    depth = _float_texture(img.window_depth(DEPTH_PULL), "R32F")
+    _textures[key] = (id(img), exposure, colour, depth)
+    return colour, depth
 
 
-def _draw_quad(tex, rect) -> None:
+def _draw_quads(quads: list[tuple]) -> None:
+    """Two passes over the splat objects' images (colour texture, depth texture, NDC rectangle), far first.
+
+    The depth pass writes the depth of the well-covered pixels of every object, so in the colour pass an object
+    is hidden where another one's splats are in front of it, whatever their order (a room drawn after a small
+    capture inside it would otherwise cover it). The colour pass blends each image, premultiplied, where it is
+    not behind a mesh or another object's splats; soft edges blend in the far-first order.
+    """
     import gpu
     from gpu_extras.batch import batch_for_shader
-    from mathutils import Matrix
-    x0, y0, x1, y1 = rect
-    shader = gpu.shader.from_builtin("IMAGE")
-    batch = batch_for_shader(shader, "TRI_FAN", {"pos": ((x0, y0), (x1, y0), (x1, y1), (x0, y1)),
-                                                 "texCoord": ((0, 0), (1, 0), (1, 1), (0, 1))})
-    far = Matrix(((1, 0, 0, 0), (0, 1, 0, 0), (0, 0, 0, FAR_NDC), (0, 0, 0, 1)))  # every vertex at z = FAR_NDC
-    depth_test, depth_mask, blend = gpu.state.depth_test_get(), gpu.state.depth_mask_get(), gpu.state.blend_get()
+    shader = _shader_get()
+    batches = [batch_for_shader(shader, "TRI_FAN", {"pos": ((x0, y0), (x1, y0), (x1, y1), (x0, y1)),
+                                                    "texCoord": ((0, 0), (1, 0), (1, 1), (0, 1))})
+               for _c, _d, (x0, y0, x1, y1) in quads]
+    saved = (gpu.state.depth_test_get(), gpu.state.depth_mask_get(), gpu.state.blend_get())
     gpu.state.depth_test_set("LESS_EQUAL")
-    gpu.state.depth_mask_set(False)
-    gpu.state.blend_set("ALPHA_PREMULT")
     try:
-        with gpu.matrix.push_pop():
-            gpu.matrix.load_identity()
-            with gpu.matrix.push_pop_projection():
-                gpu.matrix.load_projection_matrix(far)
-                shader.bind()
-                shader.uniform_sampler("image", tex)
+        shader.bind()
+        for colour_pass in (False, True):
+            gpu.state.color_mask_set(colour_pass, colour_pass, colour_pass, colour_pass)
+            gpu.state.depth_mask_set(not colour_pass)
+            gpu.state.blend_set("ALPHA_PREMULT" if colour_pass else "NONE")
+            shader.uniform_float("alpha_cut", ALPHA_CUT if colour_pass else OPAQUE_CUT)
+            for (colour, depth, _rect), batch in zip(quads, batches):
+                shader.uniform_sampler("image", colour)
+                shader.uniform_sampler("depth_image", depth)
                 batch.draw(shader)
     finally:
-        gpu.state.depth_test_set(depth_test)
-        gpu.state.depth_mask_set(depth_mask)
-        gpu.state.blend_set(blend)
+        gpu.state.color_mask_set(True, True, True, True)
+        gpu.state.depth_test_set(saved[0])
+        gpu.state.depth_mask_set(saved[1])
+        gpu.state.blend_set(saved[2])
 
 
 def draw_callback() -> None:
@@ -103,13 +165,23 @@ def draw_callback() -> None:
     if settings is None or not settings.show or rv3d is None or region is None:
         return
     try:
-        eye = np.linalg.inv(np.array(rv3d.view_matrix))[:3, 3]
+        view, window = np.array(rv3d.view_matrix), np.array(rv3d.window_matrix)
+        eye = np.linalg.inv(view)[:3, 3]
         objs = [o for o in context.visible_objects if is_splat_object(o)]
         objs.sort(key=lambda o: -np.linalg.norm(np.array(o.matrix_world.translation) - eye))  # far first
         slot = region.as_pointer()
+        now = time.monotonic()
+        scale = _motion.scale(slot, view_key(view, window, region.width, region.height), now,
+                              settings.resolution_scale)
+        ms, quads = 0.0, []
         for obj in objs:
-            img = splat_image(obj, rv3d, region.width, region.height, settings.resolution_scale, slot)
-            _draw_quad(_texture(obj.name, slot, img, settings.exposure), img.view.ndc_rect)
+            img = splat_image(obj, rv3d, region.width, region.height, scale, slot)
+            ms += img.render_ms
+            quads.append((*_textures_for((splat_cache.uid(obj), slot), img, settings.exposure), img.view.ndc_rect))
+        if quads:
+            _draw_quads(quads)
+        last_draw[slot] = {"scale": scale, "render_ms": ms, "objects": len(objs), "time": now}
+        _schedule_refine(now)
         last_error = None
     except Exception as e:  # noqa: BLE001  a draw handler that raises would print on every redraw
         if str(e) != last_error:
@@ -117,7 +189,28 @@ def draw_callback() -> None:
         last_error = str(e)
 
 
-def _tag_redraw() -> None:
+def _schedule_refine(now: float) -> None:
+    """One timer redraws the viewports when a region drawn coarse while moving has been still long enough."""
+    global _refine_scheduled
+    wait = _motion.refine_in(now)
+    if wait is None or _refine_scheduled:
+        return
+    _refine_scheduled = True
+    bpy.app.timers.register(_refine, first_interval=max(wait, 0.02))
+
+
+def _refine() -> float | None:
+    global _refine_scheduled
+    wait = _motion.refine_in(time.monotonic())
+    if wait is not None and wait > 0.0:
+        return wait  # the view moved again meanwhile: wait for it to settle
+    _refine_scheduled = False
+    if wait is not None:
+        tag_redraw()
+    return None
+
+
+def tag_redraw() -> None:
     wm = bpy.context.window_manager
     for window in getattr(wm, "windows", []):
         for area in window.screen.areas:
@@ -125,27 +218,74 @@ def _tag_redraw() -> None:
                 area.tag_redraw()
 
 
-def settings_changed(settings, context) -> None:
-    """Overlay toggled or its resolution changed: hide the point proxies while the overlay shows, redraw."""
+def hide_helpers(show: bool) -> int:
+    """While the overlay shows, splat objects draw nothing of their own; afterwards their point proxy is back.
+
+    In Blender 5.x the lines and points of its overlays (an object's bounds, the black dots of a mesh's loose
+    vertices) are drawn over POST_VIEW drawing whatever its depth, so a display type cannot hide them: the proxy's
+    Fraction goes to 0 instead (no points, and the mesh's own vertices are not drawn while the modifier replaces
+    them). The previous fraction is kept on the object. splat_cache is told that the geometry update Blender
+    reports for this is not an edit, so nothing is uploaded again. Returns how many objects changed.
+    """
+    changed = 0
     for obj in bpy.data.objects:
-        if is_splat_object(obj):
-            mod = obj.modifiers.get(PROXY_MODIFIER)
-            if mod is not None:
-                mod.show_viewport = not settings.show
+        mod = obj.modifiers.get(PROXY_MODIFIER) if is_splat_object(obj) else None
+        if mod is None or mod.node_group is None:
+            continue
+        fraction = modifier_input_identifiers(mod.node_group).get("Fraction")
+        if fraction is None:
+            continue
+        if show and HIDDEN_KEY not in obj.keys():
+            obj[HIDDEN_KEY] = float(get_modifier_input(mod, fraction))
+            set_modifier_input(mod, fraction, 0.0)
+        elif not show and HIDDEN_KEY in obj.keys():
+            set_modifier_input(mod, fraction, float(obj[HIDDEN_KEY]))
+            del obj[HIDDEN_KEY]
+        else:
+            continue
+        splat_cache.proxy_switched(obj)
+        changed += 1
+    return changed
+
+
+def show_changed(settings, context) -> None:
+    """Show Splats toggled: helpers hidden or restored, images freed when off (the uploaded splats stay)."""
+    hide_helpers(settings.show)
     if not settings.show:
         clear_cache()
-    _tag_redraw()
+    tag_redraw()
+
+
+def display_changed(settings, context) -> None:
+    """Resolution or Exposure changed: only the image is redrawn (the texture follows the exposure)."""
+    tag_redraw()
+
+
+@persistent
+def _on_depsgraph_update(scene, depsgraph) -> None:
+    # A splat object imported or appended while the overlay shows is hidden like the others.
+    settings = getattr(scene, "gs_ibl_overlay", None)
+    if settings is not None and settings.show:
+        hide_helpers(True)
 
 
 def register_overlay() -> None:
     global _handle
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(draw_callback, (), "WINDOW", "POST_VIEW")
+    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
 
 
 def unregister_overlay() -> None:
-    global _handle
+    global _handle, _refine_scheduled, _shader
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
+    while _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
+    if _refine_scheduled and bpy.app.timers.is_registered(_refine):
+        bpy.app.timers.unregister(_refine)
+    _refine_scheduled = False
+    _shader = None
     clear_cache()

@@ -6,7 +6,10 @@ so an off-centre projection (camera shift, a zoomed camera view) is rendered as 
 that covers it, with the same pixel size, and drawn as a quad at the NDC rectangle where that frustum lands;
 the GPU clips what lies outside the region. An orthographic view is approximated by a pinhole far behind the
 view (ORTHO_DISTANCE times the view's half width: sizes at depth z shrink by about z / that distance).
-Everything here takes plain 4x4 numpy matrices, so it is tested without a window.
+The renderer's depth image (distance along the view axis) becomes the window depth Blender's depth buffer holds
+(window_depth), so the draw handler can write it as fragment depth and meshes and splats occlude each other.
+While a view keeps changing it is rendered at a lower resolution and refined once it has been still a moment
+(ViewMotion). Everything here takes plain 4x4 numpy matrices, so it is tested without a window.
 """
 from __future__ import annotations
 
@@ -20,6 +23,12 @@ from ..core.render.views import View, ViewBatch
 from ..core.scene import SplatScene
 
 ORTHO_DISTANCE = 100.0
+MOVING_SCALE = 0.25  # resolution while the view moves: ~1/16 of the pixels
+SETTLE_S = 0.25  # a view unchanged this long is still: rendered at the full Resolution setting
+# Splats win depth ties within this fraction of their distance: a splat surface's depth is the mean over its
+# blurry splats, and lines Blender draws on that surface (an object's bounds at the walls of a room) would show
+# through it dashed; a mesh closer than 1 - DEPTH_PULL of the splat distance still hides the splats.
+DEPTH_PULL = 0.02
 
 
 @dataclass(frozen=True)
@@ -27,6 +36,8 @@ class OverlayView:
     batch: ViewBatch
     ndc_rect: tuple[float, float, float, float]  # (x0, y0, x1, y1): where the image's corners land, y up
     perspective: bool
+    window_matrix: np.ndarray  # the viewport's projection (what window_depth maps depths through)
+    depth_offset: float = 0.0  # how far the render origin sits behind the eye along the view axis (ortho only)
 
 
 def _axes(view_matrix: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -64,6 +75,7 @@ def overlay_view(view_matrix, window_matrix, width: int, height: int, scale: flo
         shift = (p[0, 2], p[1, 2])
         origin = eye
         to_tan = 1.0
+        dist = 0.0
     else:
         # ndc_x = P00 x + P03 for a point at view-space x: the view's half width in scene units at any depth
         def tan_of(ndc, axis):
@@ -81,7 +93,66 @@ def overlay_view(view_matrix, window_matrix, width: int, height: int, scale: flo
     # Where +-tan lands in NDC: the inverse of tan_of.
     sx, sy = p[0, 0] / to_tan, p[1, 1] / to_tan
     rect = (-sx * tan_x - shift[0], -sy * tan_y - shift[1], sx * tan_x - shift[0], sy * tan_y - shift[1])
-    return OverlayView(batch, tuple(float(x) for x in rect), perspective)
+    return OverlayView(batch, tuple(float(x) for x in rect), perspective, p.copy(), float(dist))
+
+
+def window_depth(depth: np.ndarray, view: OverlayView, pull: float = 0.0) -> np.ndarray:
+    """The renderer's depth image -> the window depth [0, 1] the viewport's depth buffer holds for those points.
+
+    ``depth`` is the distance along the render camera's view axis (RenderResult.depths; 0 where no splat is seen).
+    That camera looks along the viewport's -z from ``depth_offset`` behind the eye, so view-space z is
+    -(depth - offset); through the window matrix: ndc_z = (P22 z + P23) / (P32 z + P33) (perspective: w = -z,
+    orthographic: w = 1), window = (ndc_z + 1) / 2, OpenGL's default depth range, which Blender uses in every
+    backend. Pixels without splats, and points outside the near/far planes, get 1 (the far plane; the draw
+    discards them, or clipping would have). ``pull`` moves every depth that fraction of its distance closer.
+    """
+    d = np.asarray(depth, np.float64)
+    p = view.window_matrix
+    z = -(d - view.depth_offset) * (1.0 - pull)
+    w = p[3, 2] * z + p[3, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ndc = (p[2, 2] * z + p[2, 3]) / w
+    win = 0.5 * ndc + 0.5
+    inside = (d > 0) & (w > 0) & (win >= 0.0) & (win <= 1.0)
+    return np.where(inside, win, 1.0).astype(np.float32)
+
+
+def view_key(view_matrix, window_matrix, width: int, height: int) -> bytes:
+    """What a viewport's image depends on besides the splats and the resolution."""
+    return (np.asarray(view_matrix, np.float64).tobytes() + np.asarray(window_matrix, np.float64).tobytes()
+            + np.array([width, height], np.float64).tobytes())
+
+
+class ViewMotion:
+    """Per viewport region: render at MOVING_SCALE while its view changes, at the full setting once still.
+
+    ``scale`` is called at every draw with the clock. A view that changed within the last SETTLE_S seconds is
+    moving (a drag redraws it every frame: coarse frames keep it responsive); a region seen for the first time is
+    drawn at full resolution at once. ``refine_in`` says when a region drawn coarse will have been still long
+    enough for its full-resolution image: the handler schedules one redraw then.
+    """
+
+    def __init__(self, settle_s: float = SETTLE_S, moving_scale: float = MOVING_SCALE) -> None:
+        self.settle_s, self.moving_scale = settle_s, moving_scale
+        self._slots: dict[object, list] = {}  # slot -> [key, time of its last change, last drawn coarse]
+
+    def scale(self, slot: object, key: bytes, now: float, full_scale: float) -> float:
+        st = self._slots.get(slot)
+        if st is None:
+            self._slots[slot] = [key, -math.inf, False]
+            return full_scale
+        if st[0] != key:
+            st[0], st[1] = key, now
+        st[2] = now - st[1] < self.settle_s and self.moving_scale < full_scale
+        return self.moving_scale if st[2] else full_scale
+
+    def refine_in(self, now: float) -> float | None:
+        """Seconds until the earliest coarse region settles (0 if one already has), None when none is coarse."""
+        waits = [max(0.0, st[1] + self.settle_s - now) for st in self._slots.values() if st[2]]
+        return min(waits) if waits else None
+
+    def forget(self, slot: object) -> None:
+        self._slots.pop(slot, None)
 
 
 def to_display(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
@@ -105,6 +176,11 @@ class OverlayImage:
     rgba: np.ndarray  # (H, W, 4) premultiplied linear RGBA, row 0 at the top
     view: OverlayView
     render_ms: float
+    depth: np.ndarray | None = None  # (H, W) distance along the view axis (0: no splat), rows as rgba
+    scale: float = 1.0
+
+    def window_depth(self, pull: float = 0.0) -> np.ndarray:
+        return window_depth(self.depth, self.view, pull)
 
 
 class SplatOverlay:
@@ -127,15 +203,14 @@ class SplatOverlay:
 
     def image(self, view_matrix, window_matrix, width: int, height: int, scale: float = 1.0,
               slot: object = 0) -> OverlayImage:
-        key = (np.asarray(view_matrix, np.float64).tobytes() + np.asarray(window_matrix, np.float64).tobytes()
-               + np.array([width, height, scale], np.float64).tobytes())
+        key = view_key(view_matrix, window_matrix, width, height) + np.float64(scale).tobytes()
         last = self._last.get(slot)
         if last is not None and last[0] == key:
             return last[1]
         ov = overlay_view(view_matrix, window_matrix, width, height, scale)
-        res = self.renderer.render(ov.batch)
+        res = self.renderer.render(ov.batch, depth=True)  # the overlay hides splats behind meshes by depth
         self.renders += 1
-        img = OverlayImage(res.images[0], ov, res.wall_ms)
+        img = OverlayImage(res.images[0], ov, res.wall_ms, res.depths[0], scale)
         self._last[slot] = (key, img)
         return img
 

@@ -68,19 +68,27 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     irradiance_image: PointerProperty(type=bpy.types.Image, options={"HIDDEN"})
 
 
-def _overlay_changed(self, context) -> None:
+def _overlay_shown(self, context) -> None:
     from . import overlay
-    overlay.settings_changed(self, context)
+    overlay.show_changed(self, context)
+
+
+def _overlay_display(self, context) -> None:
+    # Display-only: a redraw, never a re-read or re-upload of the splats.
+    from . import overlay
+    overlay.display_changed(self, context)
 
 
 class GSIBL_OverlaySettings(bpy.types.PropertyGroup):
-    show: BoolProperty(name="Show Splats", default=False, update=_overlay_changed,
-                       description="Draw the splats (rendered by GS-IBL's renderer from the view) in 3D Viewports; "
-                                   "they are drawn behind meshes and are not part of F12 renders")
+    show: BoolProperty(name="Show Splats", default=False, update=_overlay_shown,
+                       description="Draw the splats (rendered by GS-IBL's renderer from the view) in 3D Viewports, "
+                                   "in front of or behind meshes by depth; splat objects show as their bounds "
+                                   "meanwhile. Not part of F12 renders")
     resolution_scale: FloatProperty(name="Resolution", default=0.5, min=0.1, max=1.0, subtype="FACTOR",
-                                    update=_overlay_changed,
-                                    description="Fraction of the viewport's resolution the splats are rendered at")
-    exposure: FloatProperty(name="Exposure", default=0.0, soft_min=-10.0, soft_max=10.0, update=_overlay_changed,
+                                    update=_overlay_display,
+                                    description="Fraction of the viewport's resolution the splats are rendered at "
+                                                "once the view is still (a quarter while it moves)")
+    exposure: FloatProperty(name="Exposure", default=0.0, soft_min=-10.0, soft_max=10.0, update=_overlay_display,
                             description="Stops of brightness applied to the splats in the viewport only")
 
 

@@ -27,6 +27,7 @@ class CachedSplats:
 
 _entries: dict[int, CachedSplats] = {}  # uid(object) -> entry
 _mesh_generation: dict[int, int] = {}  # uid(mesh) -> number of geometry edits seen
+_proxy_only: set[int] = set()  # uid(mesh) whose next geometry update only switched the object's point proxy
 uploads = 0  # entries built so far (tests and the console see how often the splats were uploaded)
 
 
@@ -62,6 +63,12 @@ def get(obj: bpy.types.Object) -> CachedSplats:
     return entry
 
 
+def proxy_switched(obj: bpy.types.Object) -> None:
+    """The object's point proxy was switched on or off (a modifier setting, display only): Blender reports that as
+    a geometry update of its mesh, which must not count as an edit of the splats."""
+    _proxy_only.add(uid(obj.data))
+
+
 def release(key: int) -> None:
     entry = _entries.pop(key, None)
     if entry is not None:
@@ -80,7 +87,9 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     for u in depsgraph.updates:
         if u.is_updated_geometry and isinstance(u.id, bpy.types.Mesh):
             mesh = uid(u.id.original)
-            _mesh_generation[mesh] = _mesh_generation.get(mesh, 0) + 1
+            if mesh not in _proxy_only:
+                _mesh_generation[mesh] = _mesh_generation.get(mesh, 0) + 1
+    _proxy_only.clear()  # the switch's update came with this evaluation; later ones are edits again
     if _entries:
         live = {uid(o) for o in bpy.data.objects}
         for gone in [k for k in _entries if k not in live]:

@@ -1,0 +1,254 @@
+"""Run by a real Blender with its GUI (tests/real_blender/test_gui_overlay.py): the viewport overlay as a user sees it.
+
+    blender --python gui_overlay.py -- --out DIR [--src CHECKOUT] [--pictures]
+
+The extension is the one installed in this Blender (from the built zip), or, with --src, the package in a checkout
+(registered directly: for working on the overlay before a zip exists). The scene: the sample room as a splat
+object (its point proxy on, as imported), a grey cube in the room ("Occluder": a mesh in front of splats), a small
+red ball of splats ("Blob") in front of a second grey cube ("Backdrop": splats in front of a mesh). From two views
+it takes screenshots of the whole X screen (ImageMagick's `import`: Blender's own screenshot operator gives black
+images under Xvfb), with steps scheduled by bpy.app.timers so the window draws between them:
+
+  <view>_plain       Show Splats off, Blender's overlays on (grid, helpers)
+  <view>_splats      Show Splats on, Blender's overlays on (what a user sees by default)
+  <view>_clean       Show Splats on, Blender's overlays off (no grid, no helper geometry can be drawn)
+
+and writes DIR/shots.json: per shot the 3D region's place on the screen, the view's matrices, the projected
+centres of the test objects, the splat object's bounds corners and the overlay's own coverage image, which the
+pytest driver uses to find the splat region. --pictures also writes the pictures for docs/img (panel, lit mesh,
+EEVEE and Cycles renders lit and unlit). Failures are written to DIR/error.txt; Blender quits at the end.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+import traceback
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+
+
+def _arg(name: str, default=None):
+    return ARGS[ARGS.index(name) + 1] if name in ARGS else default
+
+
+OUT = os.path.abspath(_arg("--out", "/tmp/gui_overlay"))
+SRC = _arg("--src")
+PICTURES = "--pictures" in ARGS
+SETTLE = float(_arg("--settle", "6"))  # seconds the window gets to draw before a screenshot (llvmpipe is slow)
+os.makedirs(OUT, exist_ok=True)
+
+# The two views: eye, target. A looks into the room past the Occluder and at the Blob in front of the Backdrop;
+# B looks at both from the side, across the floor (where the grid would show).
+VIEWS = {"a": ((0.2, -2.1, 1.45), (0.35, 1.2, 0.75)), "b": ((-2.3, 1.6, 1.9), (0.7, -0.4, 0.6))}
+OCCLUDER = (-0.55, 0.7, 0.35)
+BLOB, BACKDROP = (0.95, 0.1, 0.8), (1.15, 1.3, 0.8)
+BLOB_RGB = (0.9, 0.08, 0.06)
+
+state: dict = {"shots": {}, "log": []}
+
+
+def log(msg: str) -> None:
+    line = f"[gui_overlay {time.strftime('%H:%M:%S')}] {msg}"
+    print(line, flush=True)
+    state["log"].append(line)
+
+
+def package():
+    """The extension's package: the installed one (bl_ext.<repo>.gs_ibl) or the checkout's with --src."""
+    if SRC:
+        sys.path.insert(0, SRC)
+        import gs_ibl_addon
+        gs_ibl_addon.register()
+        return "gs_ibl_addon"
+    names = [m for m in bpy.context.preferences.addons.keys() if m.endswith("gs_ibl")]
+    if not names:
+        raise RuntimeError("the gs_ibl extension is not enabled in this Blender "
+                           f"(enabled: {sorted(bpy.context.preferences.addons.keys())})")
+    return names[0]
+
+
+def mod(pkg: str, name: str):
+    return importlib.import_module(f"{pkg}.{name}")
+
+
+def view3d():
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                region = next(r for r in area.regions if r.type == "WINDOW")
+                return window, area, area.spaces.active, region
+    raise RuntimeError("no 3D Viewport in the window")
+
+
+def blob_scene(pkg: str):
+    synthetic, scene_mod = mod(pkg, "core.synthetic"), mod(pkg, "core.scene")
+    n = 600
+    pos = synthetic.fibonacci_sphere(n).astype(np.float32) * np.float32(0.16)
+    sh = np.zeros((n, 1, 3), np.float32)
+    sh[:, 0] = scene_mod.rgb_to_sh_dc(np.array(BLOB_RGB, np.float32))
+    rot = np.zeros((n, 4), np.float32)
+    rot[:, 0] = 1.0
+    return scene_mod.SplatScene(pos, np.full((n, 3), 0.045, np.float32), rot, np.full(n, 0.95, np.float32), sh,
+                                source="blob")
+
+
+def cube(name: str, location, size: float) -> bpy.types.Object:
+    bpy.ops.mesh.primitive_cube_add(size=size, location=location)
+    obj = bpy.context.active_object
+    obj.name = name
+    return obj
+
+
+def build(pkg: str) -> None:
+    splat_object, formats = mod(pkg, "blender.splat_object"), mod(pkg, "core.formats")
+    for obj in list(bpy.data.objects):  # the startup file's cube, camera and light
+        bpy.data.objects.remove(obj)
+    bpy.context.view_layer.update()
+    room_path = os.path.join(os.path.dirname(importlib.import_module(pkg).__file__), "..", "samples", "room.ply")
+    if not os.path.exists(room_path):
+        room_path = os.path.join(SRC or "/src", "samples", "room.ply")
+    room = formats.read_scene(room_path)  # the sample is stored Z up, as Blender's axes
+    try:
+        state["room"] = splat_object.create_splat_object(bpy.context, room, "Room")
+        state["proxy"] = True
+    except Exception as e:  # noqa: BLE001  a Blender whose node API the proxy does not know yet: note it, go on
+        log(f"point proxy failed ({type(e).__name__}: {e}); the room has no proxy")
+        state["room"] = splat_object.create_splat_object(bpy.context, room, "Room", proxy=False)
+        state["proxy"] = False
+    state["blob"] = splat_object.create_splat_object(bpy.context, blob_scene(pkg), "Blob", proxy=state["proxy"])
+    state["blob"].location = BLOB
+    cube("Occluder", OCCLUDER, 0.5)
+    cube("Backdrop", BACKDROP, 0.7)
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(False)  # nothing selected: no outlines or origins
+    bpy.context.view_layer.objects.active = None
+    bpy.context.scene.cursor.location = (0.0, -30.0, 0.0)  # the 3D cursor out of every view
+    window, area, space, region = view3d()
+    space.show_region_toolbar = False
+    space.show_region_ui = False
+    space.overlay.show_text = False  # the view name and stats would differ between shots for no reason
+    space.show_gizmo = False  # likewise the navigation gizmo
+    log(f"Blender {bpy.app.version_string}, Python {sys.version.split()[0]}, window {window.width}x{window.height}, "
+        f"region {region.width}x{region.height} at ({region.x}, {region.y})")
+
+
+def set_view(name: str) -> None:
+    eye, target = (Vector(v) for v in VIEWS[name])
+    _w, _a, space, region = view3d()
+    r3d = space.region_3d
+    r3d.view_perspective = "PERSP"
+    d = target - eye
+    r3d.view_rotation = d.to_track_quat("-Z", "Y")
+    r3d.view_location = target
+    r3d.view_distance = d.length
+    space.lens = 35.0
+
+
+def set_overlay(show_splats: bool, blender_overlays: bool) -> None:
+    _w, _a, space, _r = view3d()
+    bpy.context.scene.gs_ibl_overlay.show = show_splats
+    space.overlay.show_overlays = blender_overlays
+
+
+def project(r3d, region, p) -> list[float]:
+    """A world point -> pixel (x right, y up) in the region."""
+    clip = np.array(r3d.window_matrix) @ np.array(r3d.view_matrix) @ np.array([*p, 1.0])
+    ndc = clip[:3] / clip[3]
+    return [float((ndc[0] + 1) / 2 * region.width), float((ndc[1] + 1) / 2 * region.height), float(ndc[2])]
+
+
+def record(shot: str, pkg: str) -> None:
+    window, area, space, region = view3d()
+    r3d = space.region_3d
+    path = os.path.join(OUT, f"{shot}.png")
+    subprocess.run(["import", "-window", "root", path], check=True)
+    overlay = mod(pkg, "blender.overlay")
+    room = state["room"]
+    corners = [list(room.matrix_world @ Vector(c)) for c in room.bound_box]
+    info = {"png": path, "window": [window.width, window.height],
+            "region": [region.x, region.y, region.width, region.height],
+            "view_matrix": [list(r) for r in r3d.view_matrix], "window_matrix": [list(r) for r in r3d.window_matrix],
+            "show_splats": bpy.context.scene.gs_ibl_overlay.show, "overlays": space.overlay.show_overlays,
+            "points": {k: project(r3d, region, p) for k, p in
+                       (("occluder", OCCLUDER), ("blob", BLOB), ("backdrop", BACKDROP))},
+            "room_bounds": corners, "room_display": room.display_type,
+            "last_draw": {str(k): v for k, v in overlay.last_draw.items()}, "error": overlay.last_error}
+    if bpy.context.scene.gs_ibl_overlay.show:
+        img = overlay.splat_image(room, r3d, region.width, region.height, bpy.context.scene.gs_ibl_overlay.resolution_scale,
+                                  slot="gui-check")
+        cov = os.path.join(OUT, f"{shot}_coverage.npy")
+        np.save(cov, img.rgba[..., 3])
+        info["coverage"], info["coverage_rect"] = cov, list(img.view.ndc_rect)
+    state["shots"][shot] = info
+    log(f"shot {shot}: {info['last_draw']} error={info['error']}")
+
+
+def steps(pkg: str):
+    """The script: (seconds to wait before it, what to do), one after the other."""
+    yield 1.0, lambda: build(pkg)
+    for name in VIEWS:
+        yield 1.0, lambda name=name: (set_view(name), set_overlay(False, True))
+        yield SETTLE, lambda name=name: record(f"{name}_plain", pkg)
+        yield 0.5, lambda: set_overlay(True, True)
+        yield SETTLE * 2, lambda name=name: record(f"{name}_splats", pkg)
+        yield 0.5, lambda: set_overlay(True, False)
+        yield SETTLE, lambda name=name: record(f"{name}_clean", pkg)
+    yield 0.5, lambda: set_overlay(True, True)
+    if PICTURES:
+        yield from pictures(pkg)
+
+
+def pictures(pkg: str):
+    """Pictures for docs/img: added when the rest works (see docs/blender.md)."""
+    return
+    yield
+
+
+def finish(error: str | None = None) -> None:
+    state["error"] = error
+    with open(os.path.join(OUT, "shots.json"), "w") as f:
+        json.dump({"shots": state["shots"], "log": state["log"], "proxy": state.get("proxy"),
+                   "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error}, f, indent=1)
+    if error:
+        with open(os.path.join(OUT, "error.txt"), "w") as f:
+            f.write(error)
+    bpy.ops.wm.quit_blender()
+
+
+def main() -> None:
+    try:
+        pkg = package()
+    except Exception:  # noqa: BLE001
+        finish(traceback.format_exc())
+        return
+    it = steps(pkg)
+    pending = []
+
+    def tick():
+        # run the action that was waiting, then wait as long as the next one asks before running it
+        try:
+            if pending:
+                pending.pop()()
+            delay, action = next(it)
+        except StopIteration:
+            finish()
+            return None
+        except Exception:  # noqa: BLE001
+            finish(traceback.format_exc())
+            return None
+        pending.append(action)
+        return delay
+
+    bpy.app.timers.register(tick, first_interval=1.0)
+
+
+main()
