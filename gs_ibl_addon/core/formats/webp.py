@@ -50,7 +50,10 @@ def decode(data: bytes) -> np.ndarray:
         try:
             with os.fdopen(fd, "wb") as f:
                 f.write(data)
-            return _decode_oiio(oiio, tmp)
+            try:
+                return _decode_oiio(oiio, tmp)
+            except ValueError as e:  # OpenImageIO names our temporary file: name the image instead
+                raise ValueError(str(e).replace(tmp, "the image")) from None
         finally:
             os.unlink(tmp)
     image = _pillow()
