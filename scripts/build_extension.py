@@ -9,7 +9,10 @@ and then zipped by, in order of preference:
     3. a plain zipfile writer that honours the manifest's [build] paths_exclude_pattern
 Wheels named in the manifest are taken from a cache folder (default build/wheel-cache, or GS_IBL_WHEEL_CACHE);
 only a wheel missing there is fetched, with `pip download` for that wheel's exact Python/platform tags, so a second
-build downloads nothing. The default output is one zip for every platform (Blender installs only the wheels for its
+build downloads nothing. A compiled package (cffi) ships as one wheel per platform tagged py3-none that holds the
+extension module of every Python Blender runs on (FAT_WHEELS): Blender 4.2.0 ignores a wheel's Python tag and
+installs the lexicographically last of several (cp314 on a cp311 Blender), so one wheel per platform is the only
+layout every Blender installs right. The default output is one zip for every platform (Blender installs only the wheels for its
 own platform and Python); --split-platforms makes one zip per platform instead (for extensions.blender.org).
 Compiled shaders (gs_ibl_addon/shaders/*.spv) travel with the package; the GLSL in the repo's shaders/ does not.
 """
@@ -89,10 +92,69 @@ def check_wheels(manifest: dict) -> None:
                              "wheels or drop the platform")
 
 
+# package -> the Python tags whose compiled modules its py3-none-<platform> wheel carries side by side
+FAT_WHEELS = {"cffi": ("cp311", "cp313", "cp314")}
+
+
+def fat_wheel_parts(filename: str) -> list[str]:
+    """The per-Python wheels a fat wheel (FAT_WHEELS) is merged from; [] for any other wheel."""
+    name, version, py, abi, plats = _wheel_tags(filename)
+    if name not in FAT_WHEELS or (py, abi) != ("py3", "none"):
+        return []
+    return [f"{name}-{version}-{t}-{t}-{'.'.join(plats)}.whl" for t in FAT_WHEELS[name]]
+
+
+def _record_line(path: str, data: bytes) -> str:
+    import base64
+    import hashlib
+    digest = base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+    return f"{path},sha256={digest},{len(data)}"
+
+
+def merge_wheels(parts: list[Path], target: Path) -> None:
+    """One wheel holding every file of ``parts`` (wheels of one package and version for several Pythons): the pure
+    files, which must be identical in all, once, and each part's own compiled module. Written reproducibly (fixed
+    times, sorted entries) with its WHEEL tags set to py3-none-<platform> and a fresh RECORD."""
+    files: dict[str, bytes] = {}
+    dist_info = None
+    for part in parts:
+        with zipfile.ZipFile(part) as z:
+            for n in z.namelist():
+                if n.endswith("/"):
+                    continue
+                if ".dist-info/" in n:
+                    dist_info = n.split("/")[0]
+                    if n.endswith(("/RECORD", "/WHEEL")):
+                        continue
+                data = z.read(n)
+                if n in files and files[n] != data:
+                    raise SystemExit(f"{part.name}: {n} differs from the other Pythons' copy: cannot merge")
+                files[n] = data
+    plats = _wheel_tags(target.name)[4]
+    wheel = "Wheel-Version: 1.0\nGenerator: gs-ibl build_extension.py\nRoot-Is-Purelib: false\n" + \
+        "".join(f"Tag: py3-none-{p}\n" for p in plats)
+    files[f"{dist_info}/WHEEL"] = wheel.encode()
+    record = [_record_line(n, d) for n, d in sorted(files.items())] + [f"{dist_info}/RECORD,,"]
+    files[f"{dist_info}/RECORD"] = ("\n".join(record) + "\n").encode()
+    tmp = target.with_suffix(".part")
+    with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as z:
+        for n in sorted(files):
+            info = zipfile.ZipInfo(n, date_time=(2020, 1, 1, 0, 0, 0))
+            info.external_attr = 0o644 << 16
+            info.compress_type = zipfile.ZIP_DEFLATED
+            z.writestr(info, files[n])
+    tmp.replace(target)
+
+
 def fetch_wheel(filename: str, cache: Path) -> Path:
-    """The wheel from the cache, downloaded first (exactly that file's tags) if it is not there."""
+    """The wheel from the cache, downloaded first (exactly that file's tags) if it is not there; a fat wheel is
+    merged from its per-Python wheels."""
     target = cache / filename
     if target.is_file():
+        return target
+    parts = fat_wheel_parts(filename)
+    if parts:
+        merge_wheels([fetch_wheel(p, cache) for p in parts], target)
         return target
     cache.mkdir(parents=True, exist_ok=True)
     name, version, py, abi, plats = _wheel_tags(filename)

@@ -78,37 +78,73 @@ def test_exclude_matcher_agrees_with_blenders():
 
 
 # The Pythons Blender runs on: 3.11 in 4.2-5.0, 3.13 from 5.1 (official builds), 3.14 (Linux distributions' builds,
-# e.g. Debian sid's 5.2). Official builds for Intel Macs end with 4.5 LTS (so: no cp313 there).
+# e.g. Debian sid's 5.2). Each platform's one cffi wheel carries all three.
 PYTHONS = {"cp311", "cp313", "cp314"}
-NOT_SHIPPED = {("macos-x64", "cp313")}
+_BACKEND_PY = {"cpython-311": "cp311", "cpython-313": "cp313", "cpython-314": "cp314",
+               "cp311": "cp311", "cp313": "cp313", "cp314": "cp314"}  # Linux/macOS and Windows module suffixes
 
 
-def _cffi_pairs(names) -> list[tuple[str, str]]:
-    """(Blender platform, python tag) for every cffi wheel among zip entry names; a universal2 wheel counts twice."""
-    pairs = []
-    for n in names:
-        if n.startswith("wheels/cffi-"):
-            base = os.path.basename(n)
-            pairs += [(p, be._wheel_tags(base)[2]) for p in sorted(be.blender_platforms(base))]
-    return pairs
+def _cffi_contents(z: zipfile.ZipFile) -> dict[str, list[str]]:
+    """Blender platform -> python tags of the _cffi_backend modules in that platform's cffi wheel(s), one entry per
+    wheel and module (a duplicate wheel or module shows twice)."""
+    import io
+    out: dict[str, list[str]] = {}
+    for n in z.namelist():
+        if not n.startswith("wheels/cffi-"):
+            continue
+        with zipfile.ZipFile(io.BytesIO(z.read(n))) as w:
+            tags = sorted(_BACKEND_PY[m.split(".")[1].rsplit("-", 1)[0] if m.endswith(".pyd") else
+                                      "-".join(m.split(".")[1].split("-")[:2])]
+                          for m in w.namelist() if m.startswith("_cffi_backend."))
+        for p in be.blender_platforms(os.path.basename(n)):
+            out.setdefault(p, []).extend(tags)
+    return out
 
 
-def test_zip_has_one_cffi_wheel_per_platform_and_python(tmp_path):
-    """Every declared platform gets exactly one cffi wheel per Blender Python, and nothing else is compiled."""
+def test_zip_has_one_cffi_wheel_per_platform_with_every_python(tmp_path):
+    """Every declared platform gets one cffi wheel holding _cffi_backend for each Blender Python (4.2.0 installs
+    the last of several wheels whatever its Python tag), and nothing else is compiled."""
     manifest = be.read_manifest()
     platforms = manifest["platforms"]
     assert {"linux-x64", "windows-x64", "macos-arm64", "macos-x64"} <= set(platforms)
     out, how = be.build(tmp_path / "gs_ibl.zip", Path(CACHE), "auto")
     with zipfile.ZipFile(out) as z:
         names = z.namelist()
-    pairs = _cffi_pairs(names)
-    expected = {(p, py) for p in platforms for py in PYTHONS} - NOT_SHIPPED
-    assert sorted(pairs) == sorted(expected)  # sorted lists, not sets: a duplicate wheel fails too
+        contents = _cffi_contents(z)
+    assert contents == {p: sorted(PYTHONS) for p in platforms}
+    cffi_wheels = [n for n in names if n.startswith("wheels/cffi-")]
+    assert len(cffi_wheels) == len(platforms) and all("-py3-none-" in n for n in cffi_wheels)
     compiled = [n for n in names if n.startswith("wheels/") and not n.endswith("-none-any.whl")]
     assert all(n.startswith("wheels/cffi-") for n in compiled), compiled
     size = out.stat().st_size
-    print(f"\n[zip] {out.name} ({how}): {size / 1e6:.2f} MB, {len(pairs)} cffi wheels for {len(platforms)} platforms")
-    assert size < 5e6  # one zip for all platforms stays small (measured 3.96 MB with 17 cffi wheels)
+    print(f"\n[zip] {out.name} ({how}): {size / 1e6:.2f} MB, {len(cffi_wheels)} cffi wheels for {len(platforms)} "
+          "platforms")
+    assert size < 5e6  # one zip for all platforms stays small (measured 2.9 MB)
+
+
+def test_fat_wheel_is_a_valid_wheel(tmp_path):
+    """The merged wheel's RECORD lists every file with its hash and size, and its pure files are cffi's own."""
+    import base64
+    import hashlib
+    name = next(os.path.basename(w) for w in be.read_manifest()["wheels"] if "cffi" in w and "x86_64.many" in w)
+    parts = be.fat_wheel_parts(name)
+    assert len(parts) == len(PYTHONS)
+    fat = be.fetch_wheel(name, Path(CACHE))
+    with zipfile.ZipFile(fat) as z, zipfile.ZipFile(Path(CACHE) / parts[0]) as one:
+        record = z.read("cffi-2.0.0.dist-info/RECORD").decode().splitlines()
+        listed = {}
+        for line in record:
+            path, digest, size = line.rsplit(",", 2)
+            listed[path] = (digest, size)
+        assert set(listed) == set(z.namelist())
+        for n in z.namelist():
+            if n.endswith("/RECORD"):
+                continue
+            data = z.read(n)
+            want = "sha256=" + base64.urlsafe_b64encode(hashlib.sha256(data).digest()).rstrip(b"=").decode()
+            assert listed[n] == (want, str(len(data))), n
+        assert z.read("cffi/api.py") == one.read("cffi/api.py")
+        assert "Tag: py3-none-manylinux2014_x86_64" in z.read("cffi-2.0.0.dist-info/WHEEL").decode()
 
 
 def test_platform_mapping_agrees_with_blenders():
@@ -155,7 +191,7 @@ def test_second_build_downloads_nothing(tmp_path, monkeypatch):
 
 
 def test_split_platforms_one_valid_zip_each(tmp_path):
-    """--split-platforms: one zip per platform, holding only that platform's cffi wheels, each accepted by Blender."""
+    """--split-platforms: one zip per platform, holding only that platform's cffi wheel, each accepted by Blender."""
     builder = be.bpy_builder()
     if builder is None:
         pytest.skip("bpy module not installed")
@@ -168,8 +204,7 @@ def test_split_platforms_one_valid_zip_each(tmp_path):
         with zipfile.ZipFile(zpath) as z:
             names = z.namelist()
             generated = z.read("blender_manifest.toml").decode()
-        expected = {(platform, py) for py in PYTHONS} - NOT_SHIPPED
-        assert sorted(_cffi_pairs(names)) == sorted(expected), platform
+            assert _cffi_contents(z) == {platform: sorted(PYTHONS)}, platform
         assert {"wheels/vulkan-1.3.275.1-py3-none-any.whl", "wheels/pycparser-3.12-py3-none-any.whl"} <= set(names)
         assert f'platforms = ["{platform}"]' in generated
         r = subprocess.run([sys.executable, str(builder), "validate", str(zpath)], capture_output=True, text=True,
@@ -201,10 +236,10 @@ assert "bl_ext.user_default.gs_ibl" in sys.modules
 site = glob.glob(os.path.join(os.environ["BLENDER_USER_RESOURCES"], "extensions", ".local", "lib", "python*",
                               "site-packages"))[0]
 assert {"vulkan", "cffi", "pycparser"} <= set(os.listdir(site)), os.listdir(site)
-# of the eleven cffi wheels in the zip, exactly the one for this platform and Python was installed
+# of the six cffi wheels in the zip, the one for this platform was installed, with this Python's module in it
 import sysconfig
-backend = glob.glob(os.path.join(site, "_cffi_backend*"))
-assert [os.path.basename(b) for b in backend] == ["_cffi_backend" + sysconfig.get_config_var("EXT_SUFFIX")], backend
+backend = [os.path.basename(b) for b in glob.glob(os.path.join(site, "_cffi_backend*"))]
+assert "_cffi_backend" + sysconfig.get_config_var("EXT_SUFFIX") in backend and len(backend) == 3, backend
 assert bpy.ops.gs_ibl.import_splats(filepath=ply_path) == {"FINISHED"}
 obj = bpy.context.active_object
 assert obj["gs_ibl"]["source"] == ply_path and len(obj.data.vertices) == 20
@@ -236,14 +271,17 @@ def test_installs_with_blenders_extension_installer(tmp_path, write_3dgs_ply):
 # What every Blender the manifest admits provides: its own modules, and numpy (bundled by official builds, a
 # dependency of Debian's package and of the bpy module).
 BLENDER_PROVIDES = {"bpy", "bpy_extras", "bpy_types", "gpu", "gpu_extras", "mathutils", "bmesh", "idprop", "numpy"}
-# Imported lazily (inside functions) by modules the extension loads, but only on the command line's paths: the
-# name, and why Blender never gets there.
-CLI_ONLY = {"matplotlib": "core/preview.py draws the command line's preview PNG",
-            "OpenImageIO": "core/image_io.py reads and writes the command line's EXR/PNG files; in Blender, images "
-                           "are written by Blender itself (blender/world.py)"}
-# Imported by the extension, provided by official Blender builds and the bpy module, and by the standard library
-# from Python 3.14 (Linux distributions' builds): core/formats/zstd.py falls back to compression.zstd.
-OPTIONAL_WITH_FALLBACK = {"zstandard": "compression.zstd"}
+# Imported only by the command line's modules, which the extension loads but never calls there: (module, import)
+# and why Blender never gets there.
+CLI_ONLY = {("core.preview", "matplotlib"): "draws the command line's preview PNG",
+            ("core.image_io", "OpenImageIO"): "reads and writes the command line's EXR/PNG files; in Blender, "
+                                              "images are written by Blender itself (blender/world.py)"}
+# Imported by the extension where some Blenders have them and others not; always inside a function that handles
+# their absence (a fallback, or a message saying what to install).
+OPTIONAL = {"zstandard": "SPZ v4: official builds and the bpy module ship it; else compression.zstd",
+            "compression": "SPZ v4: Python 3.14's compression.zstd (Linux distributions' builds)",
+            "OpenImageIO": "SOG's WebP images: official builds bundle it from 4.0; else Pillow",
+            "PIL": "SOG's WebP images where OpenImageIO is missing; without either the import says what to install"}
 
 
 def _module_name(rel: str) -> str:
@@ -317,14 +355,14 @@ def test_every_import_travels_in_the_zip(tmp_path):
         reach.add(m)
         todo += [t for t in mods[m][2] if t in mods]
     assert "core.formats.ply" in reach and "core.render.renderer" in reach  # the graph is followed
-    allowed = (set(sys.stdlib_module_names) | BLENDER_PROVIDES | bundled | set(OPTIONAL_WITH_FALLBACK)
-               | {f.split(".")[0] for f in OPTIONAL_WITH_FALLBACK.values()})
+    allowed = set(sys.stdlib_module_names) | BLENDER_PROVIDES | bundled
     missing = {f"{m or '__init__'}: {name}" for m in reach for name in mods[m][0] - allowed}
-    missing |= {f"{m or '__init__'}: {name} (in a function)" for m in reach
-                for name in mods[m][1] - allowed - set(CLI_ONLY)}
+    missing |= {f"{m or '__init__'}: {name} (in a function)" for m in reach for name in mods[m][1] - allowed
+                if name not in OPTIONAL and (m, name) not in CLI_ONLY}
     assert not missing, f"imported by the extension but in no wheel of the zip: {sorted(missing)}"
     # the command line's own modules may use more, but only what CLI_ONLY names with a reason
-    other = {name for m in mods if m not in reach for name in mods[m][0] | mods[m][1]} - allowed
+    other = {(m, name) for m in mods if m not in reach for name in mods[m][0] | mods[m][1]
+             if name not in allowed}
     assert other <= set(CLI_ONLY), f"new imports outside Blender's reach: {sorted(other - set(CLI_ONLY))}"
 
 
@@ -332,8 +370,7 @@ def test_zstd_fallback_is_the_standard_librarys():
     """The one optional import has its fallback where the extension needs it (Python 3.14, no zstandard)."""
     from gs_ibl_addon.core.formats import zstd
     src = open(zstd.__file__).read()
-    for module, fallback in OPTIONAL_WITH_FALLBACK.items():
-        assert f"import {module}" in src and fallback.split(".")[0] in src
+    assert "import zstandard" in src and "from compression import zstd" in src
     data = bytes(range(256)) * 64
     assert zstd.decompress(zstd.compress(data, 12), len(data)) == data
     with pytest.raises(zstd.ZstdError):
