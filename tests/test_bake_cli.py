@@ -149,3 +149,73 @@ def test_bake_from_a_renderer_alone_matches_bake_from_the_scene(sky_shell):
     assert b.splat_count == sky_shell.count
     with pytest.raises(ValueError, match="needs both a renderer"):
         bake_probe(None, None, settings, renderer=SplatRenderer(sky_shell))
+
+
+def _bake_args(ply, out, *extra):
+    return ["bake", str(ply), "--probe", "0", "0", "0", "--face-size", "16", "--irradiance-size", "4",
+            "--out", str(out), *extra]
+
+
+def test_rebake_removes_the_earlier_bakes_files_and_nothing_else(tmp_path, sky_shell):
+    ply = tmp_path / "sky.ply"
+    write_ply(ply, sky_shell)
+    out = tmp_path / "probe"
+    assert main(_bake_args(ply, out, "--glossy", "--faces")) == 0
+    assert (out / "ggx_0.exr").exists() and (out / "faces").is_dir()
+    (out / "notes.txt").write_text("the user's own file")
+    assert main(_bake_args(ply, out)) == 0
+    names = sorted(os.listdir(out))
+    assert names == ["irradiance.exr", "notes.txt", "preview.png", "probe.json", "radiance.exr"], names
+    assert json.loads((out / "probe.json").read_text())["files"] == ["irradiance.exr", "preview.png", "radiance.exr"]
+
+
+def test_a_failed_write_leaves_the_earlier_bake_whole(tmp_path, sky_shell, monkeypatch, capsys):
+    import gs_ibl_addon.core.probe.result as result_module
+    ply = tmp_path / "sky.ply"
+    write_ply(ply, sky_shell)
+    out = tmp_path / "probe"
+    assert main(_bake_args(ply, out)) == 0
+    before = {n: (out / n).read_bytes() for n in os.listdir(out)}
+    calls = []
+
+    def failing_write(path, image, half=False):
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device", path)
+        return real_write(path, image, half=half)
+
+    real_write = result_module.write_exr
+    monkeypatch.setattr(result_module, "write_exr", failing_write)
+    assert main(_bake_args(ply, out, "--glossy")) == 2
+    assert "No space left" in capsys.readouterr().err
+    assert {n: (out / n).read_bytes() for n in os.listdir(out)} == before  # old bake intact, nothing partial
+
+
+def test_out_of_memory_becomes_advice(sky_shell, monkeypatch):
+    from gs_ibl_addon.core.render import renderer as renderer_module
+
+    def no_memory(self, batch, timestamps=False):
+        raise MemoryError("cannot allocate 4096.0 MiB for buffer 'image'")
+
+    monkeypatch.setattr(renderer_module.SplatRenderer, "render", no_memory)
+    with pytest.raises(MemoryError, match="smaller face size"):
+        bake_probe(sky_shell, [0, 0, 0], ProbeSettings(face_size=32, irradiance_size=4))
+
+
+def test_big_faces_render_one_at_a_time_with_progress_and_the_same_result(sky_shell, monkeypatch):
+    import gs_ibl_addon.core.bake as bake_module
+    settings = ProbeSettings(face_size=32, irradiance_size=4)
+    whole = bake_probe(sky_shell, [0, 0, 0], settings)
+    monkeypatch.setattr(bake_module, "FACE_BY_FACE_FROM", 32)
+    said = []
+    split = bake_probe(sky_shell, [0, 0, 0], settings, progress=lambda msg, frac: said.append((msg, frac)))
+    assert [m for m, _ in said if m.startswith("rendering face")] == [f"rendering face {f} of 6 (32x32)"
+                                                                     for f in range(1, 7)]
+    assert [f for _, f in said] == sorted(f for _, f in said)
+    np.testing.assert_allclose(split.radiance, whole.radiance, atol=1e-6)
+
+
+def test_nan_probe_is_refused_by_the_core_too(sky_shell):
+    from gs_ibl_addon.core.bake import BadSetting
+    with pytest.raises(BadSetting, match="not finite"):
+        bake_probe(sky_shell, [np.nan, 0, 1], ProbeSettings(face_size=16))
