@@ -39,3 +39,26 @@ def append_csv(path: str, rows: list[dict]) -> None:
         if new:
             w.writeheader()
         w.writerows(rows)
+
+
+def hold_gpu_clock():
+    """Open a CUDA context (torch) in this process: an NVIDIA GPU then holds its SM clock instead of falling to
+    its idle clock under low-duty Vulkan work (shared/NOTES-vulkan-and-gpu.md). Returns the tensor that keeps the
+    context alive, or None where torch or CUDA is missing."""
+    try:
+        import torch
+        if not torch.cuda.is_available():
+            return None
+        return torch.zeros(1, device="cuda")
+    except Exception:
+        return None
+
+
+def gpu_clock() -> int | str:
+    """The SM clock (MHz) of NVIDIA GPU 0 by NVML now, or '' where NVML is missing."""
+    try:
+        import pynvml
+        pynvml.nvmlInit()
+        return int(pynvml.nvmlDeviceGetClockInfo(pynvml.nvmlDeviceGetHandleByIndex(0), pynvml.NVML_CLOCK_SM))
+    except Exception:
+        return ""

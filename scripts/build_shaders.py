@@ -1,5 +1,9 @@
 """Compile shaders/*.comp (GLSL 450) to gs_ibl_addon/shaders/*.spv where a source or an include changed.
 
+First shaders/constants.glsl is written from gs_ibl_addon/core/vk/constants.py (the numbers Python and GLSL share),
+so the two cannot drift; tests/test_kernels.py checks it is current and that every kernel's bindings, push
+constants and local size in the SPIR-V match gs_ibl_addon/core/vk/kernels.py.
+
 The SPIR-V is committed, so an installed extension and a machine without glslc still work. What each .spv was
 built from is recorded as a hash (gs_ibl_addon/shaders/sources.json), not judged by file times: a fresh clone
 gives every file the same time, and another glslc version would otherwise rewrite committed files for nothing.
@@ -7,6 +11,7 @@ gives every file the same time, and another glslc version would otherwise rewrit
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import pathlib
 import shutil
@@ -17,6 +22,16 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 SRC = ROOT / "shaders"
 DST = ROOT / "gs_ibl_addon" / "shaders"
 RECORD = DST / "sources.json"
+CONSTANTS_PY = ROOT / "gs_ibl_addon" / "core" / "vk" / "constants.py"
+CONSTANTS_GLSL = SRC / "constants.glsl"
+
+
+def constants_glsl() -> str:
+    """shaders/constants.glsl as constants.py says it should read (loaded by path: no package imports)."""
+    spec = importlib.util.spec_from_file_location("gs_ibl_constants", CONSTANTS_PY)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.glsl_source()
 
 
 def source_hash(comp: pathlib.Path) -> str:
@@ -28,6 +43,10 @@ def source_hash(comp: pathlib.Path) -> str:
 
 
 def main() -> int:
+    text = constants_glsl()
+    if not CONSTANTS_GLSL.exists() or CONSTANTS_GLSL.read_text() != text:
+        CONSTANTS_GLSL.write_text(text)
+        print(f"[shaders] wrote {CONSTANTS_GLSL.relative_to(ROOT)}")
     glslc = shutil.which("glslc")
     DST.mkdir(parents=True, exist_ok=True)
     record = json.loads(RECORD.read_text()) if RECORD.exists() else {}

@@ -9,7 +9,7 @@ layout(std430, binding = 0) readonly buffer Partial { vec4 partial[]; };
 layout(std430, binding = 1) writeonly buffer Image { vec4 image[]; };
 layout(std430, binding = 2) readonly buffer PartialDepth { float partial_depth[]; };  // sum(T alpha z) per chunk
 layout(std430, binding = 3) writeonly buffer Depth { float depth[]; };
-layout(push_constant) uniform P { uint chunks; uint total_pixels; } p;
+layout(push_constant) uniform P { uint chunks; uint total_pixels; uint write_depth; } p;
 const float T_MIN = 1e-4;
 
 void main() {
@@ -20,9 +20,9 @@ void main() {
     for (uint k = 0u; k < p.chunks && t >= T_MIN; ++k) {
         vec4 part = partial[k * p.total_pixels + i];
         c += t * part.rgb;
-        z += t * partial_depth[k * p.total_pixels + i];
+        if (p.write_depth != 0u) z += t * partial_depth[k * p.total_pixels + i];
         t *= part.w;
     }
     image[i] = vec4(c, 1.0 - t);
-    depth[i] = t < 1.0 ? z / (1.0 - t) : 0.0;
+    if (p.write_depth != 0u) depth[i] = t < 1.0 ? z / (1.0 - t) : 0.0;
 }

@@ -14,8 +14,10 @@ layout(std430, binding = 6) writeonly buffer TileCount { uint tile_count[]; };
 layout(std430, binding = 7) writeonly buffer DepthKey { uint depth_key[]; };
 layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
 layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // per splat and view, for gs_emit
+// The origin travels in a buffer, not a push constant, so a recorded command buffer serves any probe position.
+layout(std430, binding = 10) readonly buffer Origin { vec4 origin; };
 layout(push_constant) uniform P {
-    vec3 origin; uint n; float pixel_angle; float near; uint sh_k; uint n_views;
+    uint n; float pixel_angle; float near; uint sh_k; uint n_views;
     uint energy_preserving;  // 1: the dilation keeps each splat's integral (probes); 0: 3DGS's look (views)
 } p;
 
@@ -58,7 +60,7 @@ void main() {
     depth_key[i] = 0xFFFFFFFFu;
     tile_count[i] = 0u;
     vec4 po = pos_op[i];
-    vec3 mu = po.xyz - p.origin;
+    vec3 mu = po.xyz - origin.xyz;
     float dist = length(mu);
     vec3 sc = scale[i].xyz;
     vec3 s2 = dilated_scale2(sc, dist, p.pixel_angle);

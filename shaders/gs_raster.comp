@@ -15,7 +15,8 @@ layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks
 // Depth: the alpha-weighted sum of each contribution's distance along the view axis, sum(T alpha z); divided by
 // the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
 layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
-layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; } p;
+// write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
+layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
@@ -80,10 +81,10 @@ void main() {
     if (inside) {
         if (p.chunks == 1u) {
             image[pixel] = vec4(color, 1.0 - T);
-            depth[pixel] = T < 1.0 ? zsum / (1.0 - T) : 0.0;
+            if (p.write_depth != 0u) depth[pixel] = T < 1.0 ? zsum / (1.0 - T) : 0.0;
         } else {
             image[chunk * p.total_pixels + pixel] = vec4(color, T);
-            depth[chunk * p.total_pixels + pixel] = zsum;
+            if (p.write_depth != 0u) depth[chunk * p.total_pixels + pixel] = zsum;
         }
     }
 }

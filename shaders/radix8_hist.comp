@@ -17,7 +17,7 @@ void main() {
     h[lid + 128u] = 0u;
     barrier();
     uint n = count[p.count_index];
-    uint base = block * 4096u;
+    uint base = block * SORT_BLOCK;
     for (uint i = 0u; i < 32u; ++i) {
         uint idx = base + i * 128u + lid;
         if (idx < n) atomicAdd(h[(keys[idx] >> p.shift) & 255u], 1u);

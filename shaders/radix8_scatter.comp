@@ -29,7 +29,7 @@ void main() {
     for (uint s = 0u; s < MAX_SG; ++s) { sg_count[s * 256u + lid] = 0u; sg_count[s * 256u + lid + 128u] = 0u; }
     running[lid] = 0u;
     running[lid + 128u] = 0u;
-    uint base = block * 4096u;
+    uint base = block * SORT_BLOCK;
     for (uint round = 0u; round < 32u; ++round) {
         uint idx = base + round * 128u + lid;
         if (base + round * 128u >= n) break;  // uniform: the rest of the block is empty

@@ -17,7 +17,7 @@ void main() {
     if (lid < 16u) h[lid] = 0u;
     barrier();
     uint n = count[p.count_index];
-    uint base = block * 4096u;
+    uint base = block * SORT_BLOCK;
     for (uint i = 0u; i < 16u; ++i) {
         uint idx = base + i * 256u + lid;
         if (idx < n) atomicAdd(h[(keys[idx] >> p.shift) & 15u], 1u);

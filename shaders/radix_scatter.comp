@@ -20,7 +20,7 @@ void main() {
     uint block = linear_group();
     if (block >= p.n_blocks) return;
     uint n = count[p.count_index];
-    uint base = block * 4096u + lid * 16u;
+    uint base = block * SORT_BLOCK + lid * 16u;
     for (uint d = 0u; d < 16u; ++d) cnt[d * 256u + lid] = 0u;
     uint k[16];
     for (uint i = 0u; i < 16u; ++i) {

@@ -10,7 +10,7 @@ layout(push_constant) uniform P { uint n; } p;
 void main() {
     uint g = linear_group();
     uint add = sums[g];
-    uint base = g * 1024u + gl_LocalInvocationID.x;
+    uint base = g * SCAN_BLOCK + gl_LocalInvocationID.x;
     for (uint i = 0u; i < 4u; ++i) {
         uint idx = base + i * 256u;
         if (idx < p.n) data[idx] += add;

@@ -10,7 +10,7 @@ shared uint partial[256];
 
 void main() {
     uint lid = gl_LocalInvocationID.x;
-    uint base = linear_group() * 1024u + lid * 4u;
+    uint base = linear_group() * SCAN_BLOCK + lid * 4u;
     uint v[4];
     uint run = 0u;
     for (int i = 0; i < 4; ++i) {

@@ -9,13 +9,7 @@ struct View {
     uvec4 extra;       // first pixel of this view in the output, tiles_y
 };
 
-const uint TILE = 16u;
-const uint MAX_VIEWS = 6u;
-// vec4s per prepared splat: three rows of W with the origin in the splat frame, colour + opacity, footprint cutoff
-const uint PREP = 5u;
-// Depth keys drop the low 8 mantissa bits of the distance (relative precision 3e-5): three 8-bit sort passes
-// instead of four, and an order only splats within 0.003% of the same distance can swap.
-const uint DEPTH_KEY_SHIFT = 8u;
+// TILE, MAX_VIEWS, PREP (vec4s per prepared splat) and DEPTH_KEY_SHIFT come from constants.glsl.
 const float DILATION_PX2 = 0.3;
 
 mat3 quat_to_mat(vec4 q) {  // q = (w, x, y, z), unit; returns columns

@@ -182,7 +182,7 @@ def test_report_gives_the_filters_gpu_time():
         result = bake_probe(scene, (0.0, 0.0, 0.0), ProbeSettings(method="exact", face_size=16, irradiance_size=8,
                                                                   glossy=glossy))
         t = result.timings_ms
-        assert {"irradiance_wall", "sh_project_wall", "upload"} <= set(t)
+        assert "filter_wall" in t and "upload" not in t  # the rendered frame is filtered where it is, on the GPU
         assert any(k.startswith("irradiance.") for k in t)
         want = t["irradiance"] + t["sh_project"] + (t["ggx"] if glossy else 0.0)
         assert ("ggx" in t) == glossy

@@ -173,7 +173,7 @@ def test_chunked_raster_composes_like_one_pass(monkeypatch, max_chunks):
     scene = random_scene(800, seed=12, sh_degree=1, extent=1.5)
     batch = ViewBatch.cubemap([0.05, 0.0, 0.1], 16)
     r = SplatRenderer(scene)
-    assert r.render(batch) is not None and r._frame["chunks"] == max_chunks
+    assert r.render(batch) is not None and r.chunks == max_chunks
     assert_matches_reference(scene, batch)
 
 
@@ -183,7 +183,7 @@ def test_depth_matches_reference_and_known_distances(monkeypatch, max_chunks):
     monkeypatch.setattr(renderer_module, "MAX_RASTER_CHUNKS", max_chunks)
     scene = random_scene(400, seed=21, sh_degree=1, extent=2.0)
     batch = ViewBatch.pinhole([0.0, -6.0, 0.5], [0, 0, 0], 50, 40, 30)
-    gpu = SplatRenderer(scene).render(batch)
+    gpu = SplatRenderer(scene).render(batch, depth=True)
     images, depths = render_reference(scene, batch, with_depth=True)
     covered = images[0][..., 3] > 0.01
     assert covered.mean() > 0.2
@@ -194,5 +194,5 @@ def test_depth_matches_reference_and_known_distances(monkeypatch, max_chunks):
     q = np.array([[1, 0, 0, 0]] * 2, np.float32)
     two = SplatScene(np.array([[0, 4, 0], [0, 9, 0]], np.float32), np.array([[1, 0.01, 1]] * 2, np.float32), q,
                      np.array([0.99, 0.99], np.float32), rgb_to_sh_dc(np.full((2, 1, 3), 0.5, np.float32)))
-    img = SplatRenderer(two).render(ViewBatch.pinhole([0, 0, 0], [0, 1, 0], 40, 32, 32)).depths[0]
+    img = SplatRenderer(two).render(ViewBatch.pinhole([0, 0, 0], [0, 1, 0], 40, 32, 32), depth=True).depths[0]
     assert abs(img[16, 16] - 4.0495) < 0.01

@@ -136,8 +136,12 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     def probe_at(face: int) -> ProbeResult:
         cube = ViewBatch.cubemap(pos, face)
         if face < FACE_BY_FACE_FROM:
+            # The frame stays on the GPU: the filter reads back the irradiance only, the radiance is read once,
+            # for the face size kept (below).
             res = r.render(cube, timestamps=True)
-            images, timings = res.images, {f"render_{k}": v for k, v in res.timings_ms.items()}
+            return filter_probe(res.frame, irradiance_size=s.irradiance_size, method=method, sh_order=s.sh_order,
+                                roughness=None, timings_ms={f"render_{k}": v for k, v in res.timings_ms.items()},
+                                read_radiance=False, splat_count=splat_count, device=r.ctx.device_name, **s.extra)
         else:
             images, timings = [], {}
             for f, view in enumerate(cube.views):
@@ -170,9 +174,14 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             result = finer
             if change <= s.tolerance:
                 break
+    frame = None
+    if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
+        frame = r.last_frame
+        result.radiance = np.stack(frame.read_images())
     if s.glossy:
         say("prefiltering glossy maps", 0.85)
-        result.prefiltered, ggx_ms = gpu_ggx_prefilter(np.asarray(result.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
+        result.prefiltered, ggx_ms = gpu_ggx_prefilter(frame if frame is not None else np.asarray(result.radiance),
+                                                       GLOSSY_ROUGHNESS, ctx=r.ctx)
         result.roughness = list(GLOSSY_ROUGHNESS)
         result.timings_ms["ggx"] = ggx_ms.get("total", 0.0)
     result.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,

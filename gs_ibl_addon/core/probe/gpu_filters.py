@@ -9,11 +9,17 @@
   gpu_ggx_prefilter     -> ggx.ggx_prefilter                      shaders/probe_downsample.comp + probe_ggx.comp
 
 Cubes travel as packed float32 RGB (alpha is split off first: holes are black, as in numpy). Every filter takes
-a numpy cube or a GpuCube (``upload_cube``): several filters of one cube then share one upload. The SH
-reduction runs per workgroup on the GPU; the last few dozen group partials are added on the host in
-float64. Solid angles come from core.cubemap (float64, uploaded as float32), never recomputed in GLSL; likewise
-the GGX sample table (directions, weights, mip lods) comes from ggx.ggx_samples, so both paths share one sequence.
-Each function returns (result, timings_ms) with GPU timestamps per stage where the device has them.
+a numpy cube, a GpuCube (``upload_cube``: several filters of one cube then share one upload) or a GpuFrame straight
+from the renderer (core.render.renderer): a frame's RGBA is split into the RGB cube on the GPU (probe_split_alpha),
+so nothing crosses to the host but the filter's result. The SH reduction runs per workgroup on the GPU; the last
+few dozen group partials are added on the host in float64. Solid angles come from core.cubemap (float64, uploaded
+as float32 once per context and size), never recomputed in GLSL; likewise the GGX sample table (directions,
+weights, mip lods) comes from ggx.ggx_samples, so both paths share one sequence. Scratch buffers come from the
+context's pool. Each function returns (result, timings_ms) with GPU timestamps per stage where the device has them.
+
+``FilterPlan`` is what filter_probe uses: [split] -> SH projection -> irradiance, recorded once per source and
+settings and submitted again for each probe; it reads back the SH partials, the hole partials and the small
+irradiance cube only.
 """
 from __future__ import annotations
 
@@ -23,7 +29,8 @@ import numpy as np
 
 from .. import cubemap
 from ..vk import Buffer, Recorder, get_context
-from ..vk.compute import groups, pack
+from ..vk.compute import Program, groups
+from ..vk.kernels import KERNELS
 from .box import box_level_size, halving_sizes
 from .convolve import check_steps
 from .ggx import DEFAULT_ROUGHNESS, ggx_samples, level_sizes
@@ -31,7 +38,8 @@ from .reference import integration_size
 from .sampling import split_alpha
 from .sh_project import cosine_lobe_coefficients, window_factors
 
-SH_GROUPS_MAX = 64  # workgroups of the SH reduction: enough to fill a GPU, few enough to sum on the host
+SH_GROUPS_MAX = 64  # workgroups of the SH and hole reductions: enough to fill a GPU, few enough to sum on the host
+PLANS_KEPT = 16  # recorded filter plans per context
 
 
 def _rgb32(cube: np.ndarray) -> np.ndarray:
@@ -41,9 +49,38 @@ def _rgb32(cube: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(rgb, np.float32)
 
 
+def _is_frame(obj) -> bool:
+    return hasattr(obj, "image") and hasattr(obj, "batch")  # render.renderer.GpuFrame (not imported: no cycle)
+
+
+def _table(ctx, key: tuple, make) -> Buffer:
+    """A constant table (solid angles, texel directions) uploaded once per context and kept in ctx.cache."""
+    b = ctx.cache.get(key)
+    if b is None or not b.alive:
+        a = np.ascontiguousarray(make(), np.float32)
+        b = ctx.cache[key] = Buffer(ctx, a.nbytes, f"table-{key[0]}")
+        b.write(a)
+    return b
+
+
+def omega_table(ctx, n: int) -> Buffer:
+    return _table(ctx, ("omega", n), lambda: cubemap.texel_solid_angles(n))
+
+
+def texel_table(ctx, k: int) -> Buffer:
+    """(direction, dOmega / pi) per texel of a k^2 cube: probe_integrate's input."""
+    return _table(ctx, ("texels", k), lambda: np.concatenate(
+        [cubemap.face_directions(k).reshape(-1, 3), np.tile(cubemap.texel_solid_angles(k).reshape(-1) / math.pi, 6)[:, None]], 1))
+
+
+def _reduction_groups(n: int) -> int:
+    return max(1, min(SH_GROUPS_MAX, -(-6 * n * n // 256)))
+
+
 class _Scratch:
-    """The buffers one filter call allocates: ``with _Scratch(ctx) as s:`` destroys them all when the block ends,
-    however it ends (a failed recording is never submitted, so nothing on the GPU still uses them)."""
+    """The buffers one filter call uses, taken from the context's pool: ``with _Scratch(ctx) as s:`` returns them
+    all when the block ends, however it ends (a failed recording is never submitted, so nothing on the GPU still
+    uses them)."""
 
     def __init__(self, ctx) -> None:
         self.ctx = ctx
@@ -54,10 +91,10 @@ class _Scratch:
 
     def __exit__(self, *exc) -> None:
         while self.buffers:
-            self.buffers.pop().destroy()
+            self.buffers.pop().close()
 
     def empty(self, nbytes: int, name: str) -> Buffer:
-        b = Buffer(self.ctx, nbytes, name)
+        b = self.ctx.scratch(nbytes, name)
         self.buffers.append(b)
         return b
 
@@ -67,19 +104,48 @@ class _Scratch:
         b.write(a)
         return b
 
-    def source(self, cube) -> tuple[Buffer, int]:
-        """(buffer, face size) of a numpy cube (uploaded, owned here) or a GpuCube (the caller's)."""
+    def source(self, rec: Recorder, cube) -> tuple[Buffer, int]:
+        """(RGB buffer, face size) of a numpy cube (uploaded), a GpuCube (the caller's) or a GpuFrame (split on the
+        GPU into a scratch buffer, recorded into ``rec``)."""
         if isinstance(cube, GpuCube):
             return cube.buffer, cube.size
+        if _is_frame(cube):
+            cube.check()
+            n = cube.face_size
+            rgb = self.empty(6 * n * n * 12, "probe-radiance")
+            hole = self.empty(SH_GROUPS_MAX * 4, "probe-hole-partial")
+            record_split(rec, cube.image, rgb, hole, n)
+            return rgb, n
         rgb = _rgb32(cube)
         return self.upload(rgb, "probe-radiance"), int(rgb.shape[1])
 
 
-class GpuCube:
-    """A radiance cube uploaded once (packed float32 RGB, holes black); pass it to any filter here instead of
-    the numpy cube to skip the per-call upload. ``close()`` frees it."""
+def record_split(rec: Recorder, frame_image: Buffer, rgb: Buffer, hole_partial: Buffer, n: int) -> None:
+    """Record frame RGBA -> packed RGB cube, and the hole partials (sum them, / 4pi: the hole fraction)."""
+    ctx = rec.ctx
+    g = _reduction_groups(n)
+    rec.dispatch(KERNELS["probe_split_alpha"], [frame_image, omega_table(ctx, n), rgb, hole_partial], g,
+                 n=n, n_groups=g)
+    rec.timestamp("split")
 
-    def __init__(self, cube: np.ndarray, ctx=None) -> None:
+
+class GpuCube:
+    """A radiance cube on the GPU (packed float32 RGB, holes black); pass it to any filter here instead of the numpy
+    cube to skip the per-call upload. Made from a numpy cube (uploaded once) or a GpuFrame (split on the GPU, no
+    host transfer; ``hole_fraction`` then read back from the few partials). ``close()`` (or ``with``) frees it."""
+
+    def __init__(self, cube, ctx=None) -> None:
+        self.hole_fraction = 0.0
+        if _is_frame(cube):
+            cube.check()
+            self.ctx = cube.ctx
+            self.size = n = cube.face_size
+            self.buffer = Buffer(self.ctx, 6 * n * n * 12, "probe-radiance")
+            with self.ctx.scratch(SH_GROUPS_MAX * 4, "probe-hole-partial") as hole:
+                with Recorder(self.ctx) as rec:
+                    record_split(rec, cube.image, self.buffer, hole, n)
+                self.hole_fraction = hole_fraction(hole, n)
+            return
         self.ctx = ctx or get_context()
         rgb = _rgb32(cube)
         self.size = int(rgb.shape[1])
@@ -93,29 +159,44 @@ class GpuCube:
     def close(self) -> None:
         self.buffer.destroy()
 
+    def __enter__(self) -> "GpuCube":
+        return self
 
-def upload_cube(cube: np.ndarray, ctx=None) -> GpuCube:
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def hole_fraction(partial: Buffer, n: int) -> float:
+    return float(partial.read(np.float32, _reduction_groups(n)).astype(np.float64).sum() / (4.0 * np.pi))
+
+
+def upload_cube(cube, ctx=None) -> GpuCube:
     return GpuCube(cube, ctx)
 
 
 def _context(cube, ctx):
-    return cube.ctx if isinstance(cube, GpuCube) else (ctx or get_context())
+    if isinstance(cube, GpuCube) or _is_frame(cube):
+        return cube.ctx
+    return ctx or get_context()
 
 
 def _face_size(cube) -> int:
-    return cube.size if isinstance(cube, GpuCube) else int(np.shape(cube)[1])
+    if isinstance(cube, GpuCube):
+        return cube.size
+    if _is_frame(cube):
+        return cube.face_size
+    return int(np.shape(cube)[1])
 
 
 def _downsample(rec: Recorder, scratch: _Scratch, sizes: list[int], src: Buffer) -> list[Buffer]:
     """Record 2x2 solid-angle downsampling (box.downsample_cube) along ``sizes`` (box.halving_sizes, starting at
     src's face size): one buffer per size, src first, each later one made from the one before."""
     ctx = scratch.ctx
-    down = ctx.pipeline("probe_downsample", 3, 4)
     levels = [src]
     for child, parent in zip(sizes, sizes[1:]):
-        omega = scratch.upload(cubemap.texel_solid_angles(child), f"probe-omega-{child}")
         dst = scratch.empty(6 * parent * parent * 3 * 4, f"probe-mip-{parent}")
-        rec.dispatch(down, [levels[-1], omega, dst], groups(6 * parent * parent, 64, ctx), pack("I", child))
+        rec.dispatch(KERNELS["probe_downsample"], [levels[-1], omega_table(ctx, child), dst],
+                     groups(6 * parent * parent, 64, ctx), n=child)
         levels.append(dst)
     return levels
 
@@ -124,39 +205,57 @@ def _read_cube(buf: Buffer, size: int) -> np.ndarray:
     return buf.read(np.float32, 6 * size * size * 3).reshape(6, size, size, 3).astype(np.float64)
 
 
+def _sh_partials(partial: Buffer, n_groups: int) -> np.ndarray:
+    return partial.read(np.float32, n_groups * 27).reshape(n_groups, 9, 3).astype(np.float64).sum(axis=0)
+
+
+def _record_sh_project(rec: Recorder, src: Buffer, n: int, part: Buffer) -> int:
+    g = _reduction_groups(n)
+    rec.dispatch(KERNELS["probe_sh_project"], [src, omega_table(rec.ctx, n), part], g, n=n, n_groups=g)
+    return g
+
+
 def gpu_sh_project(cube, ctx=None) -> tuple[np.ndarray, dict[str, float]]:
-    """Order-2 SH coefficients (9, 3) of a radiance cube (numpy or GpuCube) on the GPU."""
+    """Order-2 SH coefficients (9, 3) of a radiance cube (numpy, GpuCube or GpuFrame) on the GPU."""
     ctx = _context(cube, ctx)
     with _Scratch(ctx) as scratch:
-        src, n = scratch.source(cube)
-        n_groups = max(1, min(SH_GROUPS_MAX, -(-6 * n * n // 256)))
-        omega = scratch.upload(cubemap.texel_solid_angles(n), "probe-omega")
-        part = scratch.empty(n_groups * 27 * 4, "probe-sh-partial")
+        part = scratch.empty(SH_GROUPS_MAX * 27 * 4, "probe-sh-partial")
         with Recorder(ctx, timestamps=True) as rec:
-            rec.dispatch(ctx.pipeline("probe_sh_project", 3, 8), [src, omega, part], n_groups,
-                         pack("II", n, n_groups))
+            src, n = scratch.source(rec, cube)
+            n_groups = _record_sh_project(rec, src, n, part)
             rec.timestamp("sh_project")
-        coeffs = part.read(np.float32, n_groups * 27).reshape(n_groups, 9, 3).astype(np.float64).sum(axis=0)
+        coeffs = _sh_partials(part, n_groups)
     return coeffs, rec.timings_ms
+
+
+def _sh_scaled(coeffs: np.ndarray, window: str, window_width: float | None) -> np.ndarray:
+    if coeffs.shape != (9, 3):
+        raise ValueError(f"GPU SH irradiance takes order-2 RGB coefficients (9, 3), got {coeffs.shape}")
+    band = cosine_lobe_coefficients(2) / math.pi * window_factors(2, window, window_width)
+    return coeffs * np.repeat(band, [1, 3, 5])[:, None]
 
 
 def gpu_sh_irradiance(coeffs: np.ndarray, size: int, window: str = "none", window_width: float | None = None,
                       clamp: bool = True, ctx=None) -> tuple[np.ndarray, dict[str, float]]:
     """Irradiance cube (6, size, size, 3) of E/pi from order-2 radiance SH (9, 3), evaluated on the GPU."""
     ctx = ctx or get_context()
-    if coeffs.shape != (9, 3):
-        raise ValueError(f"GPU SH irradiance takes order-2 RGB coefficients (9, 3), got {coeffs.shape}")
-    band = cosine_lobe_coefficients(2) / math.pi * window_factors(2, window, window_width)
-    scaled = coeffs * np.repeat(band, [1, 3, 5])[:, None]
+    scaled = _sh_scaled(coeffs, window, window_width)
     with _Scratch(ctx) as scratch:
         cb = scratch.upload(scaled, "probe-sh")
         out = scratch.empty(6 * size * size * 3 * 4, "probe-irradiance")
         with Recorder(ctx, timestamps=True) as rec:
-            rec.dispatch(ctx.pipeline("probe_sh_irradiance", 2, 8), [cb, out], groups(6 * size * size, 64, ctx),
-                         pack("II", size, int(clamp)))
+            rec.dispatch(KERNELS["probe_sh_irradiance"], [cb, out], groups(6 * size * size, 64, ctx),
+                         m=size, clamp_negative=int(clamp))
             rec.timestamp("sh_irradiance")
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
+
+
+def _record_convolve(rec: Recorder, src: Buffer, n: int, out: Buffer, size: int, phi_steps: int,
+                     theta_steps: int) -> None:
+    rec.dispatch(KERNELS["probe_convolve"], [src, out], groups(6 * size * size, 64, rec.ctx),
+                 n=n, m=size, phi_steps=phi_steps, theta_steps=theta_steps)
+    rec.timestamp("convolve")
 
 
 def gpu_cosine_convolve(cube, size: int, phi_steps: int = 64, theta_steps: int = 16,
@@ -165,14 +264,19 @@ def gpu_cosine_convolve(cube, size: int, phi_steps: int = 64, theta_steps: int =
     check_steps(phi_steps, theta_steps)
     ctx = _context(cube, ctx)
     with _Scratch(ctx) as scratch:
-        src, n = scratch.source(cube)
         out = scratch.empty(6 * size * size * 3 * 4, "probe-irradiance")
         with Recorder(ctx, timestamps=True) as rec:
-            rec.dispatch(ctx.pipeline("probe_convolve", 2, 16), [src, out], groups(6 * size * size, 64, ctx),
-                         pack("IIII", n, size, phi_steps, theta_steps))
-            rec.timestamp("convolve")
+            src, n = scratch.source(rec, cube)
+            _record_convolve(rec, src, n, out, size, phi_steps, theta_steps)
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
+
+
+def _record_box(rec: Recorder, scratch: _Scratch, src: Buffer, n: int, out: Buffer, size: int, level: int) -> None:
+    small = _downsample(rec, scratch, halving_sizes(n, level), src)[-1]
+    rec.timestamp("downsample")
+    rec.dispatch(KERNELS["probe_cube_read"], [small, out], groups(6 * size * size, 64, rec.ctx), n=level, m=size)
+    rec.timestamp("read")
 
 
 def gpu_box_irradiance(cube, size: int, level_size: int | None = None,
@@ -181,16 +285,20 @@ def gpu_box_irradiance(cube, size: int, level_size: int | None = None,
     level = box_level_size(_face_size(cube), size, level_size)
     ctx = _context(cube, ctx)
     with _Scratch(ctx) as scratch:
-        src, n = scratch.source(cube)
         out = scratch.empty(6 * size * size * 3 * 4, "probe-irradiance")
         with Recorder(ctx, timestamps=True) as rec:
-            small = _downsample(rec, scratch, halving_sizes(n, level), src)[-1]
-            rec.timestamp("downsample")
-            rec.dispatch(ctx.pipeline("probe_cube_read", 2, 8), [small, out], groups(6 * size * size, 64, ctx),
-                         pack("II", level, size))
-            rec.timestamp("read")
+            src, n = scratch.source(rec, cube)
+            _record_box(rec, scratch, src, n, out, size, level)
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
+
+
+def _record_exact(rec: Recorder, scratch: _Scratch, src: Buffer, n: int, out: Buffer, size: int, k: int) -> None:
+    small = _downsample(rec, scratch, halving_sizes(n, k), src)[-1]
+    rec.timestamp("downsample")
+    rec.dispatch(KERNELS["probe_integrate"], [small, texel_table(rec.ctx, k), out], groups(6 * size * size, 1, rec.ctx),
+                 n=k, m=size)
+    rec.timestamp("integrate")
 
 
 def gpu_exact_irradiance(cube, size: int, downsample_to: int | None = 32,
@@ -200,18 +308,11 @@ def gpu_exact_irradiance(cube, size: int, downsample_to: int | None = 32,
     normal. numpy reference: reference.exact_irradiance(box.downsample_cube^k(cube), face_directions(size))."""
     k = integration_size(_face_size(cube), downsample_to)
     ctx = _context(cube, ctx)
-    texels = np.concatenate([cubemap.face_directions(k).reshape(-1, 3),
-                             np.tile(cubemap.texel_solid_angles(k).reshape(-1) / math.pi, 6)[:, None]], 1)
     with _Scratch(ctx) as scratch:
-        src, n = scratch.source(cube)
-        tex = scratch.upload(texels, "probe-texels")
         out = scratch.empty(6 * size * size * 3 * 4, "probe-irradiance")
         with Recorder(ctx, timestamps=True) as rec:
-            small = _downsample(rec, scratch, halving_sizes(n, k), src)[-1]
-            rec.timestamp("downsample")
-            rec.dispatch(ctx.pipeline("probe_integrate", 3, 8), [small, tex, out], groups(6 * size * size, 1, ctx),
-                         pack("II", k, size))
-            rec.timestamp("integrate")
+            src, n = scratch.source(rec, cube)
+            _record_exact(rec, scratch, src, n, out, size, k)
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
 
@@ -222,9 +323,10 @@ def _mip_chain(rec: Recorder, scratch: _Scratch, src: Buffer, n: int) -> tuple[B
     chain = scratch.empty(sum(6 * s * s * 3 * 4 for s in sizes), "probe-mip-chain")
     rec.copy(src, chain, 6 * n * n * 3 * 4)
     offset = 6 * n * n * 3 * 4
-    for mip in _downsample(rec, scratch, sizes, src)[1:]:
-        rec.copy(mip, chain, mip.nbytes, 0, offset)
-        offset += mip.nbytes
+    for size, mip in zip(sizes[1:], _downsample(rec, scratch, sizes, src)[1:]):
+        nbytes = 6 * size * size * 3 * 4  # pooled buffers may be larger than the level
+        rec.copy(mip, chain, nbytes, 0, offset)
+        offset += nbytes
     return chain, len(sizes)
 
 
@@ -261,16 +363,83 @@ def gpu_ggx_prefilter(cube, roughness: tuple[float, ...] = DEFAULT_ROUGHNESS, si
     ctx = _context(cube, ctx)
     total = int(sum(6 * m * m for m in sizes))
     with _Scratch(ctx) as scratch:
-        src, n = scratch.source(cube)
         sb, lb = scratch.upload(samp, "probe-ggx-samples"), scratch.upload(lods, "probe-ggx-lods")
         vb = scratch.upload(levels, "probe-ggx-levels", np.uint32)
         out = scratch.empty(total * 3 * 4, "probe-ggx")
         with Recorder(ctx, timestamps=True) as rec:
+            src, n = scratch.source(rec, cube)
             chain, n_mips = _mip_chain(rec, scratch, src, n)
             rec.timestamp("mips")
-            rec.dispatch(ctx.pipeline("probe_ggx", 5, 16), [chain, sb, lb, vb, out], groups(total, 1, ctx),
-                         pack("IIII", n, n_mips, len(sizes), total))
+            rec.dispatch(KERNELS["probe_ggx"], [chain, sb, lb, vb, out], groups(total, 1, ctx),
+                         n=n, n_mips=n_mips, n_levels=len(sizes), total=total)
             rec.timestamp("ggx")
         flat = out.read(np.float32, total * 3).reshape(total, 3).astype(np.float64)
     cubes = [flat[first:first + 6 * m * m].reshape(6, m, m, 3) for m, first in levels[:, :2].astype(np.int64)]
     return cubes, rec.timings_ms
+
+
+class FilterPlan:
+    """filter_probe's GPU stages as one recorded program: [split a frame] -> SH order-2 projection -> irradiance
+    (sh: evaluated afterwards from the coefficients; convolve, box, exact: in the same program). ``run()`` submits
+    it and reads back only the SH and hole partials and the irradiance cube (6 * size^2 RGB).
+
+    Made and cached per context by ``plan_for``: the source buffer (a renderer's frame image, or a pooled upload)
+    and the settings are the key, so a bake's probes and a benchmark's repeats record once.
+    """
+
+    def __init__(self, ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, params: dict) -> None:
+        self.ctx, self.n, self.size, self.method, self.params = ctx, n, size, method, params
+        self.is_frame = is_frame
+        self._scratch = _Scratch(ctx)
+        s = self._scratch
+        self.sh_partial = s.empty(SH_GROUPS_MAX * 27 * 4, "probe-sh-partial")
+        self.hole_partial = s.empty(SH_GROUPS_MAX * 4, "probe-hole-partial") if is_frame else None
+        self.out = s.empty(6 * size * size * 12, "probe-irradiance") if method != "sh" else None
+        rec = Recorder(ctx, timestamps=True, reusable=True)
+        if is_frame:
+            rgb = s.empty(6 * n * n * 12, "probe-radiance")
+            record_split(rec, src, rgb, self.hole_partial, n)
+        else:
+            rgb = src
+        self.sh_groups = _record_sh_project(rec, rgb, n, self.sh_partial)
+        rec.timestamp("sh_project")
+        if method == "convolve":
+            check_steps(params["phi_steps"], params["theta_steps"])
+            _record_convolve(rec, rgb, n, self.out, size, params["phi_steps"], params["theta_steps"])
+        elif method == "box":
+            _record_box(rec, s, rgb, n, self.out, size, box_level_size(n, size, params["box_level_size"]))
+        elif method == "exact":
+            _record_exact(rec, s, rgb, n, self.out, size, integration_size(n, params["downsample_to"]))
+        self.program: Program = rec.program()
+
+    @property
+    def valid(self) -> bool:
+        return self.program.valid
+
+    def run(self) -> tuple[np.ndarray, np.ndarray | None, float, dict[str, float]]:
+        """(SH coefficients (9, 3), irradiance cube or None for the sh method, hole fraction, GPU timings)."""
+        timings = self.program.run()
+        coeffs = _sh_partials(self.sh_partial, self.sh_groups)
+        irr = None if self.out is None else _read_cube(self.out, self.size)
+        hole = hole_fraction(self.hole_partial, self.n) if self.hole_partial is not None else 0.0
+        return coeffs, irr, hole, timings
+
+    def close(self) -> None:
+        self.program.close()
+        self._scratch.__exit__(None, None, None)
+
+
+def plan_for(ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, **params) -> FilterPlan:
+    """The cached FilterPlan for this source buffer and these settings (recorded on first use or when stale)."""
+    key = ("filter-plan", src.serial, is_frame, n, method, size, tuple(sorted(params.items())))
+    plan = ctx.cache.pop(key, None)
+    if plan is not None and not plan.valid:
+        plan.close()
+        plan = None
+    if plan is None:
+        plan = FilterPlan(ctx, src, is_frame, n, method, size, params)
+        plans = [k for k in ctx.cache if k[0] == "filter-plan"]
+        for old in plans[:max(0, len(plans) - PLANS_KEPT + 1)]:  # the least recently used go
+            ctx.cache.pop(old).close()
+    ctx.cache[key] = plan
+    return plan

@@ -9,10 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..vk import Buffer, Recorder
-from ..vk.compute import groups, pack
-
-SCAN_BLOCK = 1024
-SORT_BLOCK = 4096
+from ..vk.compute import groups
+from ..vk.constants import SCAN_BLOCK, SORT_BLOCK
+from ..vk.kernels import KERNELS
 
 
 class Scanner:
@@ -34,19 +33,18 @@ class Scanner:
         """Scan ``data[:n]`` in place; returns the buffer whose first uint is the grand total."""
         if n > self.capacity:
             raise ValueError(f"scan of {n} > capacity {self.capacity}")
-        blk = self.ctx.pipeline("scan_block", 2, 4)
-        add = self.ctx.pipeline("scan_add", 2, 4)
+        blk, add = KERNELS["scan_block"], KERNELS["scan_add"]
         chain = []
         cur, length = data, max(1, int(n))
         for _, sums in self.levels:
-            rec.dispatch(blk, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), pack("I", length))
+            rec.dispatch(blk, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), n=length)
             chain.append((cur, sums, length))
             nb = -(-length // SCAN_BLOCK)
             if nb == 1:
                 break
             cur, length = sums, nb
         for cur, sums, length in reversed(chain[:-1]):
-            rec.dispatch(add, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), pack("I", length))
+            rec.dispatch(add, [cur, sums], groups(length, SCAN_BLOCK, self.ctx), n=length)
         return chain[-1][1]
 
     def destroy(self) -> None:
@@ -81,16 +79,15 @@ class RadixSorter:
     def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int) -> None:
         """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy)."""
         prefix = "radix8" if self.digit_bits == 8 else "radix"
-        hist_p = self.ctx.pipeline(f"{prefix}_hist", 3, 12)
-        scat_p = self.ctx.pipeline(f"{prefix}_scatter", 6, 12)
+        hist_k, scat_k = KERNELS[f"{prefix}_hist"], KERNELS[f"{prefix}_scatter"]
         g = groups(self.n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
         passes = max(1, -(-int(bits) // self.digit_bits))
         for i in range(passes):
-            push = pack("III", self.n_blocks, self.digit_bits * i, count_index)
-            rec.dispatch(hist_p, [src_k, self.hist, count], g, push)
+            push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index}
+            rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
             self.scanner.record(rec, self.hist, self.bins * self.n_blocks)
-            rec.dispatch(scat_p, [src_k, src_v, dst_k, dst_v, self.hist, count], g, push)
+            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g, **push)
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
         if src_k is not keys:
             rec.copy(src_k, keys, self.capacity * 4)

@@ -1,5 +1,10 @@
 """The GPU splat renderer: scene buffers uploaded once, then any batch of views rendered in one submission.
 
+``render(batch)`` returns a RenderResult whose ``frame`` (GpuFrame) stays on the GPU: the probe filters take it
+as it is, and only what is looked at (``images``, ``depths``) is read back. Depth is written only when asked.
+Each batch shape is recorded once into a Program and submitted again for every later render of that shape (the
+probe position travels in a buffer), so a render costs the host one submit and one wait.
+
 Stages (each a compute dispatch, timed with timestamp queries when asked):
   preprocess   per splat, once for all views: cull, ray-evaluation frame, SH colour, tiles touched, depth key
   sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces)
@@ -13,12 +18,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from ..scene import SplatScene
 from ..vk import Buffer, Recorder, get_context
-from ..vk.compute import groups, pack
+from ..vk.compute import Program, groups
+from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
+from ..vk.kernels import KERNELS
 from .gpu_sort import RadixSorter, Scanner
 from .splat_math import DEFAULT_NEAR
 from .views import ViewBatch
@@ -39,19 +47,91 @@ def raster_chunks(total_tiles: int) -> int:
     return int(min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, total_tiles))))
 
 
-DEPTH_KEY_BITS = 24  # distance float bits >> 8 (DEPTH_KEY_SHIFT in shaders/splat_common.glsl)
+PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
 
-@dataclass
+class StaleFrame(RuntimeError):
+    """A GpuFrame read after its renderer rendered again (the frame's buffers now hold the newer image)."""
+
+
+@dataclass(eq=False)
+class GpuFrame:
+    """One rendered batch on the GPU: ``image`` holds premultiplied linear RGB + coverage (float32 RGBA) per pixel,
+    views one after another (a cubemap: faces +X, -X, +Y, -Y, +Z, -Z, rows top first); ``depth`` the view-space z
+    per pixel (0: nothing seen) when the render was asked for it, else None.
+
+    The buffers belong to the renderer and are reused by its next render: a frame is valid until then (reading a
+    stale one raises StaleFrame). Filters take it without a host round trip (probe.gpu_filters).
+    """
+    renderer: "SplatRenderer"
+    batch: ViewBatch
+    image: Buffer
+    depth: Buffer | None
+    generation: int
+
+    @property
+    def ctx(self):
+        return self.renderer.ctx
+
+    @property
+    def pixels(self) -> int:
+        return sum(v.width * v.height for v in self.batch.views)
+
+    @property
+    def face_size(self) -> int:
+        """The face size of a cubemap frame (six square views)."""
+        v = self.batch.views
+        if len(v) != 6 or any(x.width != v[0].width or x.height != v[0].width for x in v):
+            raise ValueError("this frame is not a cubemap (six square faces)")
+        return v[0].width
+
+    def check(self) -> None:
+        if self.generation != self.renderer.generation or not self.image.alive:
+            raise StaleFrame("this frame was overwritten by a later render of the same renderer; "
+                             "read it (or filter it) before rendering again")
+
+    def _split(self, flat: np.ndarray, channels: int) -> list[np.ndarray]:
+        out, off = [], 0
+        for v in self.batch.views:
+            npx = v.width * v.height
+            out.append(flat[off * channels:(off + npx) * channels].reshape((v.height, v.width, channels)[:2 + (channels > 1)]))
+            off += npx
+        return out
+
+    def read_images(self) -> list[np.ndarray]:
+        """Per view (H, W, 4) float32, read back from the GPU."""
+        self.check()
+        return self._split(self.image.read(np.float32, self.pixels * 4), 4)
+
+    def read_depths(self) -> list[np.ndarray]:
+        """Per view (H, W) float32, read back from the GPU; the render must have been asked for depth."""
+        self.check()
+        if self.depth is None:
+            raise ValueError("this frame has no depth: render(batch, depth=True) writes it")
+        return self._split(self.depth.read(np.float32, self.pixels), 1)
+
+
+@dataclass(eq=False)
 class RenderResult:
-    images: list[np.ndarray]  # per view (H, W, 4) float32: premultiplied linear RGB, alpha = coverage
-    depths: list[np.ndarray] = field(default_factory=list)  # per view (H, W): view-space z of what is seen, 0: none
+    frame: GpuFrame
     timings_ms: dict[str, float] = field(default_factory=dict)  # GPU time per stage (timestamp queries)
     instances: int = 0  # (tile, splat) pairs rasterised
     wall_ms: float = 0.0
 
+    @cached_property
+    def images(self) -> list[np.ndarray]:
+        """Per view (H, W, 4) float32: premultiplied linear RGB, alpha = coverage (read back on first use)."""
+        return self.frame.read_images()
+
+    @cached_property
+    def depths(self) -> list[np.ndarray]:
+        """Per view (H, W): view-space z of what is seen, 0: none (renders asked with depth=True)."""
+        return self.frame.read_depths()
+
 
 def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
+    if len(batch.views) > MAX_VIEWS:
+        raise ValueError(f"a batch holds at most {MAX_VIEWS} views, got {len(batch.views)}")
     rows = []
     tile_base = pixel_base = 0
     for v in batch.views:
@@ -70,156 +150,185 @@ def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
 
 
 class SplatRenderer:
-    """Holds one scene on the GPU. ``render(batch)`` draws a pinhole view or a whole cubemap in one go."""
+    """Holds one scene on the GPU. ``render(batch)`` draws a pinhole view or a whole cubemap in one go.
+
+    ``ctx`` is the Vulkan context to use (default: the shared one, core.vk.get_context()). ``with
+    SplatRenderer(scene, ctx) as r:`` frees its GPU memory when the block ends; so does ``close()``.
+    """
 
     def __init__(self, scene: SplatScene, ctx=None, near: float = DEFAULT_NEAR) -> None:
         self.ctx = ctx or get_context()
         self.scene_count = scene.count
         self.sh_k = scene.sh.shape[1]
         self.near = near
+        self.generation = 0
+        self.last_frame: GpuFrame | None = None  # the latest render's frame (valid until the next render)
+        self._owned: list = []  # every GPU object this renderer made, destroyed by close()
+        self._programs: dict[tuple, Program] = {}
         n = max(1, scene.count)
-        c = self.ctx
-        self.pos_op = Buffer(c, n * 16, "pos_op")
-        self.scale = Buffer(c, n * 16, "scale")
-        self.rot = Buffer(c, n * 16, "rot")
-        self.sh = Buffer(c, n * self.sh_k * 12, "sh")
+        buf = self._buffer
+        self.pos_op, self.scale, self.rot = buf(n * 16, "pos_op"), buf(n * 16, "scale"), buf(n * 16, "rot")
+        self.sh = buf(n * self.sh_k * 12, "sh")
         if scene.count:
             self.pos_op.write(np.concatenate([scene.positions, scene.opacities[:, None]], 1).astype(np.float32))
             self.scale.write(np.concatenate([scene.scales, np.zeros((scene.count, 1))], 1).astype(np.float32))
             self.rot.write(scene.rotations.astype(np.float32))
             # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
             self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
-        self.prepared = Buffer(c, n * 80, "prepared")  # PREP = 5 vec4 per splat (shaders/splat_common.glsl)
-        self.tile_count = Buffer(c, n * 4, "tile_count")
-        self.depth_key = Buffer(c, n * 4, "depth_key")
-        self.depth_val = Buffer(c, n * 4, "depth_val")
-        self.rects = Buffer(c, n * 6 * 8, "rects")  # tile rectangle per splat and view (up to six)
-        self.offsets = Buffer(c, n * 4, "offsets")
-        self.count = Buffer(c, 16, "count")
-        self.n_count = Buffer(c, 16, "n_count")
+        self.prepared = buf(n * PREP * 16, "prepared")
+        self.tile_count, self.depth_key, self.depth_val = buf(n * 4, "tile_count"), buf(n * 4, "depth_key"), buf(n * 4, "depth_val")
+        self.rects = buf(n * MAX_VIEWS * 8, "rects")  # tile rectangle per splat and view
+        self.offsets = buf(n * 4, "offsets")
+        self.count = buf(16, "count")
+        self.n_count = buf(16, "n_count")
         self.n_count.write(np.array([scene.count, 0, 0, 0], np.uint32))
-        self.depth_sorter = RadixSorter(c, n)
-        self.scanner = Scanner(c, n)
+        self.origin = buf(16, "origin")
+        self.views = buf(MAX_VIEWS * 80, "views")
+        self.no_depth = buf(16, "no-depth")  # bound where depth is not written
+        self.depth_sorter = self._own(RadixSorter(self.ctx, n))
+        self.scanner = self._own(Scanner(self.ctx, n))
         self.capacity = 0
-        self._frame: dict = {}
+        self.tile_sorter = None
+        self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
         self._ensure_capacity(max(1 << 16, 4 * n))
+
+    def _own(self, obj):
+        self._owned.append(obj)
+        return obj
+
+    def _buffer(self, nbytes: int, name: str) -> Buffer:
+        return self._own(Buffer(self.ctx, nbytes, name))
+
+    def _drop(self, obj) -> None:
+        if obj is not None:
+            obj.destroy()
+            self._owned.remove(obj)
 
     def _ensure_capacity(self, need: int) -> None:
         if need <= self.capacity:
             return
-        for name in ("inst_key", "inst_val"):
-            old = getattr(self, name, None)
-            if old is not None:
-                old.destroy()
-        if getattr(self, "tile_sorter", None) is not None:
-            self.tile_sorter.destroy()
+        for name in ("inst_key", "inst_val", "tile_sorter"):
+            self._drop(getattr(self, name, None))
         self.capacity = int(need)
-        self.inst_key = Buffer(self.ctx, self.capacity * 4, "inst_key")
-        self.inst_val = Buffer(self.ctx, self.capacity * 4, "inst_val")
-        self.tile_sorter = RadixSorter(self.ctx, self.capacity)
+        self.inst_key = self._buffer(self.capacity * 4, "inst_key")
+        self.inst_val = self._buffer(self.capacity * 4, "inst_val")
+        self.tile_sorter = self._own(RadixSorter(self.ctx, self.capacity))
 
-    def _ensure_frame(self, total_tiles: int, total_pixels: int, view_bytes: int) -> None:
-        f = self._frame
-        if f.get("tiles") != total_tiles or f.get("pixels") != total_pixels:
-            for b in f.get("buffers", ()):
-                b.destroy()
-            ranges = Buffer(self.ctx, (total_tiles + 1) * 8, "ranges")  # + the missed-tile key's run
-            image = Buffer(self.ctx, total_pixels * 16, "image")
-            depth = Buffer(self.ctx, total_pixels * 4, "depth")
-            views = Buffer(self.ctx, max(view_bytes, 6 * 80), "views")
-            chunks = raster_chunks(total_tiles)
-            partial = Buffer(self.ctx, total_pixels * 16 * chunks if chunks > 1 else 16, "raster-partials")
-            partial_depth = Buffer(self.ctx, total_pixels * 4 * chunks if chunks > 1 else 16, "raster-partial-depth")
-            self._frame = {"tiles": total_tiles, "pixels": total_pixels, "ranges": ranges, "image": image,
-                           "depth": depth, "views": views, "chunks": chunks, "partial": partial,
-                           "partial_depth": partial_depth,
-                           "buffers": (ranges, image, depth, views, partial, partial_depth)}
+    def _frame_buffer(self, name: str, nbytes: int) -> Buffer:
+        """The named frame buffer, at least ``nbytes`` (grown by 1.5x when too small, never shrunk)."""
+        b = self._frame.get(name)
+        if b is None or b.nbytes < nbytes:
+            self._drop(b)
+            b = self._frame[name] = self._buffer(max(nbytes, int(b.nbytes * 1.5) if b is not None else 0), name)
+        return b
 
-    def render(self, batch: ViewBatch, timestamps: bool = False) -> RenderResult:
+    def render(self, batch: ViewBatch, timestamps: bool = False, depth: bool = False) -> RenderResult:
+        """Render ``batch`` into a GpuFrame (RenderResult.frame); ``depth`` also writes the depth image."""
         t0 = time.perf_counter()
         view_data, total_tiles, total_pixels = _views_buffer_data(batch)
-        self._ensure_frame(total_tiles, total_pixels, view_data.nbytes)
-        fr = self._frame
-        fr["views"].write(view_data)
+        self.views.write(view_data)
+        self.origin.write(np.append(batch.origin, 0.0).astype(np.float32))
+        self.generation += 1
         for _attempt in range(2):
-            timings = self._record_and_submit(batch, total_tiles, timestamps)
+            timings = self._program(batch, total_tiles, total_pixels, timestamps, depth).run()
             needed = int(self.count.read(np.uint32, 2)[1])  # [0] pairs kept, [1] pairs wanted
             if needed <= self.capacity:
                 break
             self._ensure_capacity(int(needed * 1.25) + 1024)
-        image = fr["image"].read(np.float32, total_pixels * 4)
-        depth = fr["depth"].read(np.float32, total_pixels)
-        images, depths, off = [], [], 0
-        for v in batch.views:
-            npx = v.width * v.height
-            images.append(image[off * 4:(off + npx) * 4].reshape(v.height, v.width, 4))
-            depths.append(depth[off:off + npx].reshape(v.height, v.width))
-            off += npx
-        return RenderResult(images, depths, timings, needed, (time.perf_counter() - t0) * 1e3)
+        frame = self.last_frame = GpuFrame(self, batch, self._frame["image"], self._frame["depth"] if depth else None,
+                                           self.generation)
+        return RenderResult(frame, timings, needed, (time.perf_counter() - t0) * 1e3)
 
-    def _record_and_submit(self, batch: ViewBatch, total_tiles: int, timestamps: bool) -> dict[str, float]:
-        c, fr = self.ctx, self._frame
-        n = self.scene_count
-        o = batch.origin.astype(np.float32)
-        nv = len(batch.views)
-        with Recorder(c, timestamps=timestamps) as rec:
-            rec.fill(self.count)
-            rec.fill(fr["ranges"])
-            rec.fill(fr["image"], 0, total_tiles and fr["pixels"] * 16)
-            rec.fill(fr["depth"], 0, total_tiles and fr["pixels"] * 4)
-            rec.timestamp("clear")
-            if n:
-                rec.dispatch(c.pipeline("gs_preprocess", 10, 36),
-                             [self.pos_op, self.scale, self.rot, self.sh, fr["views"], self.prepared, self.tile_count,
-                              self.depth_key, self.depth_val, self.rects], groups(n, 256, c),
-                             pack("fffIffIII", *o, n, batch.pixel_angle, self.near, self.sh_k, nv,
-                                  int(batch.energy_preserving)))
-                rec.timestamp("preprocess")
-                self.depth_sorter.record(rec, self.depth_key, self.depth_val, self.n_count, 0, DEPTH_KEY_BITS)
-                rec.timestamp("sort_depth")
-                rec.dispatch(c.pipeline("gs_gather_counts", 4, 4),
-                             [self.depth_key, self.depth_val, self.tile_count, self.offsets], groups(n, 256, c),
-                             pack("I", n))
-                total_buf = self.scanner.record(rec, self.offsets, n)
-                rec.dispatch(c.pipeline("gs_emit", 10, 16),
-                             [fr["views"], self.depth_key, self.depth_val, self.offsets, total_buf, self.inst_key,
-                              self.inst_val, self.count, self.prepared, self.rects],
-                             groups(self.capacity, 256, c), pack("IIII", n, self.capacity, nv, total_tiles))
-                rec.timestamp("emit")
-                # tile ids run to total_tiles inclusive: that one is the key of instances whose tile was missed
-                bits = max(1, int(total_tiles).bit_length())
-                self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, bits)
-                rec.timestamp("sort_tiles")
-                rec.dispatch(c.pipeline("gs_ranges", 3, 0), [self.inst_key, self.count, fr["ranges"]],
-                             groups(self.capacity, 256, c))
-                rec.timestamp("ranges")
-            chunks, npx = fr["chunks"], fr["pixels"]
-            rec.dispatch(c.pipeline("gs_raster", 6, 16),
-                         [fr["views"], fr["ranges"], self.inst_val, self.prepared,
-                          fr["partial"] if chunks > 1 else fr["image"],
-                          fr["partial_depth"] if chunks > 1 else fr["depth"]],
-                         groups(total_tiles * chunks, 1, c), pack("IIII", nv, total_tiles, chunks, npx))
-            if chunks > 1:
-                rec.dispatch(c.pipeline("gs_merge", 4, 8),
-                             [fr["partial"], fr["image"], fr["partial_depth"], fr["depth"]], groups(npx, 256, c),
-                             pack("II", chunks, npx))
-            rec.timestamp("raster")
-        return rec.timings_ms
+    def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
+                 depth: bool) -> Program:
+        shape = tuple((v.width, v.height) for v in batch.views)
+        key = (shape, float(batch.pixel_angle), bool(batch.energy_preserving), bool(timestamps), bool(depth),
+               self.capacity)
+        prog = self._programs.pop(key, None)
+        if prog is not None and not prog.valid:
+            prog.close()
+            prog = None
+        if prog is None:
+            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth)
+            while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
+                self._programs.pop(next(iter(self._programs))).close()
+        self._programs[key] = prog
+        return prog
+
+    def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
+                depth: bool) -> Program:
+        c, n, nv = self.ctx, self.scene_count, len(batch.views)
+        chunks = raster_chunks(total_tiles)
+        ranges = self._frame_buffer("ranges", (total_tiles + 1) * 8)  # + the missed-tile key's run
+        image = self._frame_buffer("image", total_pixels * 16)
+        depth_buf = self._frame_buffer("depth", total_pixels * 4) if depth else self.no_depth
+        if chunks > 1:
+            partial = self._frame_buffer("partial", total_pixels * 16 * chunks)
+            partial_depth = self._frame_buffer("partial_depth", total_pixels * 4 * chunks) if depth else self.no_depth
+        rec = Recorder(c, timestamps=timestamps, reusable=True)
+        rec.fill(self.count)
+        rec.fill(ranges, 0, (total_tiles + 1) * 8)
+        rec.fill(image, 0, total_pixels * 16)
+        if depth:
+            rec.fill(depth_buf, 0, total_pixels * 4)
+        rec.timestamp("clear")
+        if n:
+            rec.dispatch(KERNELS["gs_preprocess"],
+                         [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
+                          self.depth_key, self.depth_val, self.rects, self.origin], groups(n, 256, c),
+                         n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
+                         energy_preserving=int(batch.energy_preserving))
+            rec.timestamp("preprocess")
+            self.depth_sorter.record(rec, self.depth_key, self.depth_val, self.n_count, 0, DEPTH_KEY_BITS)
+            rec.timestamp("sort_depth")
+            rec.dispatch(KERNELS["gs_gather_counts"], [self.depth_key, self.depth_val, self.tile_count, self.offsets],
+                         groups(n, 256, c), n=n)
+            total_buf = self.scanner.record(rec, self.offsets, n)
+            rec.dispatch(KERNELS["gs_emit"],
+                         [self.views, self.depth_key, self.depth_val, self.offsets, total_buf, self.inst_key,
+                          self.inst_val, self.count, self.prepared, self.rects],
+                         groups(self.capacity, 256, c), n=n, capacity=self.capacity, n_views=nv, n_tiles=total_tiles)
+            rec.timestamp("emit")
+            # tile ids run to total_tiles inclusive: that one is the key of instances whose tile was missed
+            bits = max(1, int(total_tiles).bit_length())
+            self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, bits)
+            rec.timestamp("sort_tiles")
+            rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, ranges], groups(self.capacity, 256, c))
+            rec.timestamp("ranges")
+        rec.dispatch(KERNELS["gs_raster"],
+                     [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else image,
+                      partial_depth if chunks > 1 else depth_buf],
+                     groups(total_tiles * chunks, 1, c), n_views=nv, total_tiles=total_tiles, chunks=chunks,
+                     total_pixels=total_pixels, write_depth=int(depth))
+        if chunks > 1:
+            rec.dispatch(KERNELS["gs_merge"], [partial, image, partial_depth, depth_buf], groups(total_pixels, 256, c),
+                         chunks=chunks, total_pixels=total_pixels, write_depth=int(depth))
+        rec.timestamp("raster")
+        self.chunks = chunks
+        return rec.program()
 
     def close(self) -> None:
-        for name in ("pos_op", "scale", "rot", "sh", "prepared", "tile_count", "depth_key", "depth_val", "rects", "offsets",
-                     "count", "n_count", "inst_key", "inst_val"):
-            getattr(self, name).destroy()
-        for b in self._frame.get("buffers", ()):
-            b.destroy()
-        self.depth_sorter.destroy()
-        self.tile_sorter.destroy()
-        self.scanner.destroy()
+        for prog in self._programs.values():
+            prog.close()
+        self._programs.clear()
+        while self._owned:
+            self._owned.pop().destroy()
+        self._frame.clear()
+        self.generation += 1  # frames of this renderer are stale now
+
+    def __enter__(self) -> "SplatRenderer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def render_cubemap(scene: SplatScene, origin, face_size: int, renderer: SplatRenderer | None = None,
                    timestamps: bool = False) -> tuple[np.ndarray, RenderResult]:
     """(6, N, N, 4) float32 cube faces (+X, -X, +Y, -Y, +Z, -Z) from ``origin``, and the render details."""
-    r = renderer or SplatRenderer(scene)
-    res = r.render(ViewBatch.cubemap(origin, face_size), timestamps)
-    return np.stack(res.images), res
+    if renderer is not None:
+        res = renderer.render(ViewBatch.cubemap(origin, face_size), timestamps)
+        return np.stack(res.images), res
+    with SplatRenderer(scene) as r:
+        res = r.render(ViewBatch.cubemap(origin, face_size), timestamps)
+        return np.stack(res.images), res

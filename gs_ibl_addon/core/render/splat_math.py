@@ -21,6 +21,7 @@ import numpy as np
 
 from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
+from ..vk.constants import DEPTH_KEY_SHIFT  # shared with the GLSL
 
 DILATION_PX2 = 0.3
 ALPHA_MIN = 1.0 / 255.0  # 3DGS: a splat's footprint ends where its alpha falls below this
@@ -81,7 +82,6 @@ def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice,
     return np.sum(cr * cr, -1) / dd, -od / dd, od < 0
 
 
-DEPTH_KEY_SHIFT = 8  # as in shaders/splat_common.glsl
 
 
 def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:

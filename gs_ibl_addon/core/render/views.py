@@ -11,8 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cubemap import FACE_BASES
-
-TILE = 16
+from ..vk.constants import TILE
 
 
 @dataclass(frozen=True)

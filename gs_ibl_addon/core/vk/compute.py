@@ -1,28 +1,39 @@
-"""Storage buffers, compute pipelines and a command recorder.
+"""Storage buffers, compute pipelines, a command recorder and recorded programs.
 
 The `vulkan` package's trap (shared/NOTES-vulkan-and-gpu.md): cffi frees a temporary struct as soon as Python drops
 it, so a nested create-info written inline can hand the driver freed memory. Here every nested struct, array and
 string is bound to a local name that lives until the call returns; nowhere else builds create-infos.
+
+Command buffers, fences and query pools come from the context and go back to it after each submission; host
+transfers go through the context's two staging buffers and are counted in ``ctx.stats``. A ``Program`` is a
+recorded command buffer submitted again and again: what changes between runs lives in buffers, never in the
+recording, so a probe's host cost is one submit and one wait.
 """
 from __future__ import annotations
 
 import itertools
-import struct
 from typing import Sequence
 
 import numpy as np
 
 from .context import VulkanContext
+from .kernels import Kernel
 
 _serial = itertools.count(1)
+_NO_TIMEOUT = 0xFFFFFFFFFFFFFFFF
+STAGING_MAX = 64 << 20  # the kept staging buffers grow to this at most; larger transfers go in pieces
 
 
 class Buffer:
-    """A storage buffer. Device-local where the device has such memory; mapped directly when it is host-visible."""
+    """A storage buffer. Device-local where the device has such memory; mapped directly when it is host-visible.
 
-    def __init__(self, ctx: VulkanContext, nbytes: int, name: str = "") -> None:
+    ``with Buffer(ctx, n) as b:`` destroys it when the block ends; a pooled buffer (``ctx.scratch``) goes back to
+    the context's pool instead.
+    """
+
+    def __init__(self, ctx: VulkanContext, nbytes: int, name: str = "", pooled: bool = False) -> None:
         vk = ctx.vk
-        self.ctx, self.name, self.serial = ctx, name, next(_serial)
+        self.ctx, self.name, self.serial, self.pooled = ctx, name, next(_serial), pooled
         self.nbytes = max(int(nbytes), 16)
         usage = (vk.VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT
                  | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT)
@@ -61,33 +72,47 @@ class Buffer:
             raise ValueError(f"write of {raw.nbytes} bytes at {offset} overflows buffer {self.name!r} ({self.nbytes})")
         if raw.nbytes == 0:
             return
+        stats = self.ctx.stats
+        stats.uploads += 1
+        stats.upload_bytes += raw.nbytes
         if self._map is not None:
             self._map[offset:offset + raw.nbytes] = raw
             return
-        staging = Buffer._staging(self.ctx, raw.nbytes)
-        staging._map[:raw.nbytes] = raw
-        with Recorder(self.ctx) as rec:
-            rec.copy(staging, self, raw.nbytes, dst_offset=offset)
-        staging.destroy()
+        with self.ctx.lock:  # through the kept staging buffer, in pieces of at most STAGING_MAX bytes
+            staging = self.ctx.staging(min(raw.nbytes, STAGING_MAX), "up")
+            for start in range(0, raw.nbytes, STAGING_MAX):
+                piece = raw[start:start + STAGING_MAX]
+                staging._map[:piece.nbytes] = piece
+                with Recorder(self.ctx) as rec:
+                    rec.copy(staging, self, piece.nbytes, dst_offset=offset + start)
 
     def read(self, dtype=np.uint8, count: int | None = None, offset: int = 0) -> np.ndarray:
         dt = np.dtype(dtype)
         n = (self.nbytes - offset) // dt.itemsize if count is None else int(count)
         nbytes = n * dt.itemsize
-        if self._map is not None and self.host_cached:
+        stats = self.ctx.stats
+        stats.readbacks += 1
+        stats.readback_bytes += nbytes
+        # Small reads of mapped memory are direct even when uncached (a few words cost less than a copy).
+        if self._map is not None and (self.host_cached or nbytes <= 4096):
             return np.frombuffer(self._map, dtype=dt, count=n, offset=offset).copy()
-        staging = Buffer._staging(self.ctx, nbytes, cached=True)
-        with Recorder(self.ctx) as rec:
-            rec.copy(self, staging, nbytes, src_offset=offset)
-        out = np.frombuffer(staging._map, dtype=dt, count=n).copy()
-        staging.destroy()
+        out = np.empty(n, dt)
+        dst = memoryview(out).cast("B")
+        with self.ctx.lock:
+            staging = self.ctx.staging(min(nbytes, STAGING_MAX), "down")
+            for start in range(0, nbytes, STAGING_MAX):
+                size = min(STAGING_MAX, nbytes - start)
+                with Recorder(self.ctx) as rec:
+                    rec.copy(self, staging, size, src_offset=offset + start)
+                dst[start:start + size] = staging._map[:size]
         return out
 
     @staticmethod
-    def _staging(ctx: VulkanContext, nbytes: int, cached: bool = False) -> "Buffer":
+    def staging(ctx: VulkanContext, nbytes: int, cached: bool = False) -> "Buffer":
+        """A host-visible transfer buffer (the context keeps two: VulkanContext.staging)."""
         b = Buffer.__new__(Buffer)
         vk = ctx.vk
-        b.ctx, b.name, b.serial, b.nbytes = ctx, "staging", next(_serial), max(int(nbytes), 16)
+        b.ctx, b.name, b.serial, b.nbytes, b.pooled = ctx, "staging", next(_serial), max(int(nbytes), 16), False
         bci = vk.VkBufferCreateInfo(size=b.nbytes, sharingMode=vk.VK_SHARING_MODE_EXCLUSIVE,
                                     usage=vk.VK_BUFFER_USAGE_TRANSFER_SRC_BIT | vk.VK_BUFFER_USAGE_TRANSFER_DST_BIT)
         b.handle = vk.vkCreateBuffer(ctx.device, bci, None)
@@ -105,6 +130,10 @@ class Buffer:
         b._map = vk.vkMapMemory(ctx.device, b.memory, 0, b.nbytes, 0)
         return b
 
+    @property
+    def alive(self) -> bool:
+        return self.handle is not None and self.ctx.device is not None
+
     def destroy(self) -> None:
         vk = self.ctx.vk
         if self.handle is None or self.ctx.device is None:
@@ -116,28 +145,44 @@ class Buffer:
         vk.vkFreeMemory(self.ctx.device, self.memory, None)
         self.handle = None
 
+    def close(self) -> None:
+        """End of this owner's use: a pooled buffer returns to the context's pool, any other is destroyed."""
+        if self.pooled and self.alive:
+            self.ctx.release(self)
+        else:
+            self.destroy()
+
+    def __enter__(self) -> "Buffer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def __del__(self) -> None:
         try:
-            self.destroy()
+            if not getattr(self, "pooled", False):
+                self.destroy()
         except Exception:
             pass
 
 
 class Pipeline:
-    """A compute pipeline whose set 0 is ``n_buffers`` storage buffers, plus a push-constant block."""
+    """The compute pipeline of one kernels.Kernel: set 0 = its storage buffers, plus its push-constant block."""
 
-    POOL_SETS = 512
+    POOL_SETS = 1024
 
-    def __init__(self, ctx: VulkanContext, name: str, spirv: bytes, n_buffers: int, push_size: int) -> None:
+    def __init__(self, ctx: VulkanContext, kernel: Kernel, spirv: bytes) -> None:
         vk = ctx.vk
-        self.ctx, self.name, self.n_buffers, self.push_size = ctx, name, n_buffers, push_size
+        self.ctx, self.kernel, self.name = ctx, kernel, kernel.name
+        self.n_buffers, self.push_size = len(kernel.buffers), kernel.push_size
         bindings = [vk.VkDescriptorSetLayoutBinding(binding=i, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
                                                     descriptorCount=1, stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT)
-                    for i in range(n_buffers)]
+                    for i in range(self.n_buffers)]
         dslci = vk.VkDescriptorSetLayoutCreateInfo(bindingCount=len(bindings), pBindings=bindings)
         self.set_layout = vk.vkCreateDescriptorSetLayout(ctx.device, dslci, None)
         set_layouts = [self.set_layout]
-        ranges = [vk.VkPushConstantRange(stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT, offset=0, size=push_size)] if push_size else []
+        ranges = ([vk.VkPushConstantRange(stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT, offset=0, size=self.push_size)]
+                  if self.push_size else [])
         plci = vk.VkPipelineLayoutCreateInfo(setLayoutCount=1, pSetLayouts=set_layouts,
                                              pushConstantRangeCount=len(ranges), pPushConstantRanges=ranges or None)
         self.layout = vk.vkCreatePipelineLayout(ctx.device, plci, None)
@@ -151,7 +196,7 @@ class Pipeline:
         self.handle = vk.vkCreateComputePipelines(ctx.device, None, 1, cpcis, None)[0]
         del code, stage, cpci, cpcis, entry
         pool_sizes = [vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
-                                              descriptorCount=max(1, n_buffers) * self.POOL_SETS)]
+                                              descriptorCount=max(1, self.n_buffers) * self.POOL_SETS)]
         dpci = vk.VkDescriptorPoolCreateInfo(maxSets=self.POOL_SETS, poolSizeCount=1, pPoolSizes=pool_sizes)
         self.pool = vk.vkCreateDescriptorPool(ctx.device, dpci, None)
         self._sets: dict[tuple, object] = {}
@@ -159,15 +204,17 @@ class Pipeline:
     def descriptor_set(self, buffers: Sequence[Buffer]):
         vk = self.ctx.vk
         if len(buffers) != self.n_buffers:
-            raise ValueError(f"pipeline {self.name} takes {self.n_buffers} buffers, got {len(buffers)}")
+            raise ValueError(f"kernel {self.name} binds {self.kernel.buffers}, got {len(buffers)} buffers")
         key = tuple(b.serial for b in buffers)
         ds = self._sets.get(key)
         if ds is not None:
             return ds
         if len(self._sets) >= self.POOL_SETS:
-            # Safe: every submission waits for completion, so no set is in flight here.
+            # Safe for one-shot recordings (every submission waits for completion); recorded programs see the
+            # new epoch and re-record.
             vk.vkResetDescriptorPool(self.ctx.device, self.pool, 0)
             self._sets.clear()
+            self.ctx.epoch += 1
         layouts = [self.set_layout]
         dsai = vk.VkDescriptorSetAllocateInfo(descriptorPool=self.pool, descriptorSetCount=1, pSetLayouts=layouts)
         ds = vk.vkAllocateDescriptorSets(self.ctx.device, dsai)[0]
@@ -199,30 +246,85 @@ def groups(n_items: int, group_size: int, ctx: VulkanContext) -> tuple[int, int]
     return mx, -(-g // mx)
 
 
+MAX_STAMPS = 64
+
+
+def _take_query_pool(ctx: VulkanContext):
+    if ctx._free_queries:
+        return ctx._free_queries.pop()
+    vk = ctx.vk
+    qpci = vk.VkQueryPoolCreateInfo(queryType=vk.VK_QUERY_TYPE_TIMESTAMP, queryCount=MAX_STAMPS)
+    return vk.vkCreateQueryPool(ctx.device, qpci, None)
+
+
+def _take_command_buffer(ctx: VulkanContext):
+    if ctx._free_cmds:
+        return ctx._free_cmds.pop()
+    vk = ctx.vk
+    cbai = vk.VkCommandBufferAllocateInfo(commandPool=ctx.command_pool, level=vk.VK_COMMAND_BUFFER_LEVEL_PRIMARY,
+                                          commandBufferCount=1)
+    return vk.vkAllocateCommandBuffers(ctx.device, cbai)[0]
+
+
+def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
+    vk = ctx.vk
+    with ctx.lock:
+        fence = ctx._free_fences.pop() if ctx._free_fences else vk.vkCreateFence(ctx.device, vk.VkFenceCreateInfo(), None)
+        cmds = [cmd]
+        si = vk.VkSubmitInfo(commandBufferCount=1, pCommandBuffers=cmds)
+        sis = [si]
+        fences = [fence]
+        try:
+            vk.vkQueueSubmit(ctx.queue, 1, sis, fence)
+            vk.vkWaitForFences(ctx.device, 1, fences, vk.VK_TRUE, _NO_TIMEOUT)
+        finally:
+            vk.vkResetFences(ctx.device, 1, fences)
+            ctx._free_fences.append(fence)
+        ctx.stats.submits += 1
+
+
+def _read_stamps(ctx: VulkanContext, query_pool, labels: list[str]) -> dict[str, float]:
+    vk = ctx.vk
+    n = len(labels)
+    if query_pool is None or n < 2:
+        return {}
+    data = vk.ffi.new("uint64_t[]", n)
+    vk.vkGetQueryPoolResults(ctx.device, query_pool, 0, n, n * 8, data, 8,
+                             vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT)
+    ms = np.frombuffer(vk.ffi.buffer(data, n * 8), np.uint64).astype(np.float64) * ctx.timestamp_period_ns * 1e-6
+    out: dict[str, float] = {}
+    for i in range(1, n):
+        out[labels[i]] = out.get(labels[i], 0.0) + float(ms[i] - ms[i - 1])
+    out["total"] = float(ms[-1] - ms[0])
+    return out
+
+
 class Recorder:
     """Records dispatches into one command buffer; ``with Recorder(ctx) as r:`` submits and waits on exit.
 
-    A full compute barrier follows every dispatch/copy/fill, so consecutive stages see each other's writes.
-    ``timestamp(label)`` marks the end of a stage; ``timings_ms`` holds stage durations after submission.
+    A full compute barrier opens the recording (earlier submissions' writes are visible) and follows every
+    dispatch/copy/fill, so consecutive stages see each other's writes. ``timestamp(label)`` marks the end of a
+    stage; ``timings_ms`` holds stage durations after submission. ``program()`` instead of submitting keeps the
+    recording as a Program to submit any number of times.
     """
 
-    MAX_STAMPS = 64
-
-    def __init__(self, ctx: VulkanContext, timestamps: bool = False) -> None:
+    def __init__(self, ctx: VulkanContext, timestamps: bool = False, reusable: bool = False) -> None:
         vk = self.vk = ctx.vk
         self.ctx = ctx
-        cbai = vk.VkCommandBufferAllocateInfo(commandPool=ctx.command_pool, level=vk.VK_COMMAND_BUFFER_LEVEL_PRIMARY,
-                                              commandBufferCount=1)
-        self.cmd = vk.vkAllocateCommandBuffers(ctx.device, cbai)[0]
-        cbbi = vk.VkCommandBufferBeginInfo(flags=vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT)
+        self.reusable = reusable
+        self.epoch = ctx.epoch
+        self.buffers: dict[int, Buffer] = {}  # every buffer the recording uses (a Program checks they live)
+        self.cmd = _take_command_buffer(ctx)
+        flags = 0 if reusable else vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT
+        cbbi = vk.VkCommandBufferBeginInfo(flags=flags)
         vk.vkBeginCommandBuffer(self.cmd, cbbi)
         self.labels: list[str] = []
         self.timings_ms: dict[str, float] = {}
         self.query_pool = None
+        self._barrier()
         if timestamps and ctx.timestamps_supported:
-            qpci = vk.VkQueryPoolCreateInfo(queryType=vk.VK_QUERY_TYPE_TIMESTAMP, queryCount=self.MAX_STAMPS)
-            self.query_pool = vk.vkCreateQueryPool(ctx.device, qpci, None)
-            vk.vkCmdResetQueryPool(self.cmd, self.query_pool, 0, self.MAX_STAMPS)
+            self.query_pool = _take_query_pool(ctx)
+            vk.vkCmdResetQueryPool(self.cmd, self.query_pool, 0, MAX_STAMPS)
             self.timestamp("start")
 
     def _barrier(self) -> None:
@@ -234,19 +336,25 @@ class Recorder:
         stages = vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_TRANSFER_BIT
         vk.vkCmdPipelineBarrier(self.cmd, stages, stages, 0, 1, mbs, 0, None, 0, None)
 
-    def dispatch(self, pipeline: Pipeline, buffers: Sequence[Buffer], group_count: tuple[int, int] | int,
-                 push: bytes = b"") -> None:
+    def _use(self, *buffers: Buffer) -> None:
+        for b in buffers:
+            self.buffers[b.serial] = b
+
+    def dispatch(self, kernel: Kernel, buffers: Sequence[Buffer], group_count: tuple[int, int] | int,
+                 **push) -> None:
+        """Run ``kernel`` over ``group_count`` workgroups with ``buffers`` bound in its table order; ``push`` names
+        every push-constant field of the kernel (kernels.py)."""
         vk = self.vk
         gx, gy = (group_count, 1) if isinstance(group_count, int) else group_count
         if gx == 0 or gy == 0:
             return
+        pipeline = self.ctx.pipeline(kernel)
+        data = kernel.pack(push)
         vk.vkCmdBindPipeline(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle)
         sets = [pipeline.descriptor_set(buffers)]
+        self._use(*buffers)
         vk.vkCmdBindDescriptorSets(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout, 0, 1, sets, 0, None)
-        if pipeline.push_size:
-            data = bytes(push).ljust(pipeline.push_size, b"\0")
-            if len(data) != pipeline.push_size:
-                raise ValueError(f"{pipeline.name}: push constants are {len(data)} bytes, expected {pipeline.push_size}")
+        if data:
             raw = vk.ffi.new("char[]", data)
             vk.vkCmdPushConstants(self.cmd, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, len(data), raw)
             del raw
@@ -255,17 +363,21 @@ class Recorder:
 
     def fill(self, buffer: Buffer, value: int = 0, nbytes: int | None = None) -> None:
         size = buffer.nbytes if nbytes is None else (int(nbytes) + 3) // 4 * 4
+        if size == 0:
+            return
+        self._use(buffer)
         self.vk.vkCmdFillBuffer(self.cmd, buffer.handle, 0, size, value & 0xFFFFFFFF)
         self._barrier()
 
     def copy(self, src: Buffer, dst: Buffer, nbytes: int, src_offset: int = 0, dst_offset: int = 0) -> None:
         vk = self.vk
+        self._use(src, dst)
         regions = [vk.VkBufferCopy(srcOffset=src_offset, dstOffset=dst_offset, size=nbytes)]
         vk.vkCmdCopyBuffer(self.cmd, src.handle, dst.handle, 1, regions)
         self._barrier()
 
     def timestamp(self, label: str) -> None:
-        if self.query_pool is None or len(self.labels) >= self.MAX_STAMPS:
+        if self.query_pool is None or len(self.labels) >= MAX_STAMPS:
             return
         self.vk.vkCmdWriteTimestamp(self.cmd, self.vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                                     self.query_pool, len(self.labels))
@@ -274,31 +386,29 @@ class Recorder:
     def submit(self) -> dict[str, float]:
         vk, ctx = self.vk, self.ctx
         vk.vkEndCommandBuffer(self.cmd)
-        cmds = [self.cmd]
-        si = vk.VkSubmitInfo(commandBufferCount=1, pCommandBuffers=cmds)
-        sis = [si]
-        fci = vk.VkFenceCreateInfo()
-        fence = vk.vkCreateFence(ctx.device, fci, None)
         try:
-            with ctx.lock:
-                vk.vkQueueSubmit(ctx.queue, 1, sis, fence)
-            vk.vkWaitForFences(ctx.device, 1, [fence], vk.VK_TRUE, 0xFFFFFFFFFFFFFFFF)
+            _submit_and_wait(ctx, self.cmd)
+            self.timings_ms = _read_stamps(ctx, self.query_pool, self.labels)
         finally:
-            vk.vkDestroyFence(ctx.device, fence, None)
-            vk.vkFreeCommandBuffers(ctx.device, ctx.command_pool, 1, cmds)
-        if self.query_pool is not None:
-            n = len(self.labels)
-            data = vk.ffi.new("uint64_t[]", n)
-            vk.vkGetQueryPoolResults(ctx.device, self.query_pool, 0, n, n * 8, data, 8,
-                                     vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT)
-            ticks = np.frombuffer(vk.ffi.buffer(data, n * 8), np.uint64).astype(np.float64)
-            ms = ticks * ctx.timestamp_period_ns * 1e-6
-            for i in range(1, n):
-                self.timings_ms[self.labels[i]] = self.timings_ms.get(self.labels[i], 0.0) + float(ms[i] - ms[i - 1])
-            self.timings_ms["total"] = float(ms[-1] - ms[0]) if n > 1 else 0.0
-            vk.vkDestroyQueryPool(ctx.device, self.query_pool, None)
-            self.query_pool = None
+            self._give_back()
         return self.timings_ms
+
+    def program(self) -> "Program":
+        """End the recording and keep it: Program.run() submits it again and again."""
+        self.vk.vkEndCommandBuffer(self.cmd)
+        prog = Program(self.ctx, self.cmd, self.query_pool, list(self.labels), list(self.buffers.values()), self.epoch)
+        self.cmd = self.query_pool = None
+        return prog
+
+    def _give_back(self) -> None:
+        ctx = self.ctx
+        if self.cmd is not None:
+            self.vk.vkResetCommandBuffer(self.cmd, 0)
+            ctx._free_cmds.append(self.cmd)
+            self.cmd = None
+        if self.query_pool is not None:
+            ctx._free_queries.append(self.query_pool)
+            self.query_pool = None
 
     def __enter__(self) -> "Recorder":
         return self
@@ -306,13 +416,40 @@ class Recorder:
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
             self.submit()
-        else:
+        elif self.cmd is not None:
             self.vk.vkEndCommandBuffer(self.cmd)
-            self.vk.vkFreeCommandBuffers(self.ctx.device, self.ctx.command_pool, 1, [self.cmd])
+            self._give_back()
+
+
+class Program:
+    """A recorded command buffer, submitted again with ``run()`` (waits; returns GPU timings per stage).
+
+    It stays valid while every buffer it uses lives and the context's descriptor sets were not reset
+    (``valid``); its owner re-records when not. ``close()`` returns its command buffer to the context.
+    """
+
+    def __init__(self, ctx: VulkanContext, cmd, query_pool, labels: list[str], buffers: list[Buffer],
+                 epoch: int) -> None:
+        self.ctx, self.cmd, self.query_pool, self.labels = ctx, cmd, query_pool, labels
+        self.buffers, self.epoch = buffers, epoch
+
+    @property
+    def valid(self) -> bool:
+        return (self.cmd is not None and self.ctx.device is not None and self.epoch == self.ctx.epoch
+                and all(b.handle is not None for b in self.buffers))
+
+    def run(self) -> dict[str, float]:
+        if not self.valid:
+            raise RuntimeError("recorded program is stale (a buffer it uses was freed); record it again")
+        _submit_and_wait(self.ctx, self.cmd)
+        return _read_stamps(self.ctx, self.query_pool, self.labels)
+
+    def close(self) -> None:
+        ctx = self.ctx
+        if self.cmd is not None and ctx.device is not None:
+            ctx.vk.vkResetCommandBuffer(self.cmd, 0)
+            ctx._free_cmds.append(self.cmd)
             if self.query_pool is not None:
-                self.vk.vkDestroyQueryPool(self.ctx.device, self.query_pool, None)
-
-
-def pack(fmt: str, *values) -> bytes:
-    """Push-constant bytes (std430 scalars: I = uint, i = int, f = float)."""
-    return struct.pack("<" + fmt, *values)
+                ctx._free_queries.append(self.query_pool)
+        self.cmd = self.query_pool = None
+        self.buffers = []

@@ -86,8 +86,22 @@ class VulkanContext:
         pci = vk.VkCommandPoolCreateInfo(queueFamilyIndex=self.queue_family,
                                          flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT)
         self.command_pool = vk.vkCreateCommandPool(self.device, pci, None)
-        self._pipelines: dict[str, object] = {}
+        self._pipelines: dict[object, object] = {}
         self.lock = threading.RLock()
+        # Frame resources, made once and reused by every submission (compute.Recorder takes and returns them):
+        # command buffers, fences, timestamp query pools, two staging buffers (host -> GPU, GPU -> host) that grow
+        # to the largest transfer and stay, and a pool of scratch buffers by size.
+        self._free_cmds: list = []
+        self._free_fences: list = []
+        self._free_queries: list = []
+        self._staging: dict[str, object] = {}
+        self._scratch: dict[int, list] = {}
+        # Descriptor-set generation: bumped when a pipeline's descriptor pool is reset, which invalidates recorded
+        # command buffers (compute.Program checks it before each submission).
+        self.epoch = 0
+        # Stage objects cached per context (tables uploaded once, recorded programs), closed with it.
+        self.cache: dict[object, object] = {}
+        self.stats = TransferStats()
 
     def _instance_extensions(self) -> set[str]:
         try:
@@ -149,20 +163,63 @@ class VulkanContext:
                 return i
         raise VulkanUnavailable(f"{self.device_name}: no memory type with flags {flags:#x}")
 
-    def pipeline(self, name: str, n_buffers: int, push_size: int = 0):
-        """The compute pipeline of shader ``name`` (gs_ibl_addon/shaders/<name>.spv), created once."""
+    def pipeline(self, kernel):
+        """The compute pipeline of a kernels.Kernel (its SPIR-V, bindings and push layout), created once."""
         from .compute import Pipeline
         with self.lock:
-            p = self._pipelines.get(name)
+            p = self._pipelines.get(kernel)
             if p is None:
-                p = self._pipelines[name] = Pipeline(self, name, _load_spirv(name), n_buffers, push_size)
+                p = self._pipelines[kernel] = Pipeline(self, kernel, _load_spirv(kernel.name))
             return p
+
+    def staging(self, nbytes: int, direction: str):
+        """The context's staging buffer for ``direction`` ('up' or 'down'), grown to at least ``nbytes`` and kept."""
+        from .compute import Buffer
+        b = self._staging.get(direction)
+        if b is None or b.nbytes < nbytes:
+            if b is not None:
+                b.destroy()
+            size = 1 << max(16, (int(nbytes) - 1).bit_length())
+            b = self._staging[direction] = Buffer.staging(self, size, cached=direction == "down")
+        return b
+
+    def scratch(self, nbytes: int, name: str = "scratch"):
+        """A pooled storage buffer of at least ``nbytes`` (sizes rounded up to a power of two): give it back with
+        ``release`` and the next request of that size class reuses its memory."""
+        from .compute import Buffer
+        size = 1 << max(8, (max(1, int(nbytes)) - 1).bit_length())
+        free = self._scratch.get(size)
+        if free:
+            b = free.pop()
+            b.name = name
+            return b
+        return Buffer(self, size, name, pooled=True)
+
+    def release(self, buffer) -> None:
+        """Return a scratch buffer to the pool (its contents are kept until reused)."""
+        self._scratch.setdefault(buffer.nbytes, []).append(buffer)
 
     def close(self) -> None:
         vk = self.vk
         if getattr(self, "device", None) is None:
             return
         vk.vkDeviceWaitIdle(self.device)
+        for obj in list(self.cache.values()):
+            close = getattr(obj, "close", None)
+            if close is not None:
+                close()
+        self.cache.clear()
+        for b in list(self._staging.values()) + [b for free in self._scratch.values() for b in free]:
+            b.destroy()
+        self._staging.clear()
+        self._scratch.clear()
+        for f in self._free_fences:
+            vk.vkDestroyFence(self.device, f, None)
+        for q in self._free_queries:
+            vk.vkDestroyQueryPool(self.device, q, None)
+        self._free_fences.clear()
+        self._free_queries.clear()
+        self._free_cmds.clear()  # freed with the pool
         for p in self._pipelines.values():
             p.destroy()
         self._pipelines.clear()
@@ -170,6 +227,25 @@ class VulkanContext:
         vk.vkDestroyDevice(self.device, None)
         vk.vkDestroyInstance(self.instance, None)
         self.device = None
+
+    def __enter__(self) -> "VulkanContext":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class TransferStats:
+    """Host <-> GPU traffic through a context: tests count it to prove a stage boundary stays on the GPU."""
+
+    def __init__(self) -> None:
+        self.uploads = self.upload_bytes = self.readbacks = self.readback_bytes = self.submits = 0
+
+    def snapshot(self) -> dict[str, int]:
+        return dict(vars(self))
+
+    def since(self, before: dict[str, int]) -> dict[str, int]:
+        return {k: v - before.get(k, 0) for k, v in vars(self).items()}
 
 
 def _load_spirv(name: str) -> bytes:
@@ -181,17 +257,19 @@ def _load_spirv(name: str) -> bytes:
                                 "(needs glslc: `apt-get install glslc`)") from None
 
 
-_CONTEXT: VulkanContext | None = None
+_CONTEXTS: dict[str | None, VulkanContext] = {}
 _CONTEXT_LOCK = threading.Lock()
 
 
 def get_context(device: str | None = None) -> VulkanContext:
-    """The process-wide context (created on first use; a different ``device`` request replaces it)."""
-    global _CONTEXT
+    """The shared context for a device request (``None``: GS_IBL_DEVICE or the default choice), made on first use.
+
+    Another request gets its own context; none is ever closed under live renderers. Code that needs a context
+    for a while takes one explicitly (``SplatRenderer(scene, ctx)``, ``filter_probe(..., vk_context=ctx)``), or
+    owns one: ``with VulkanContext(device) as ctx:``.
+    """
     with _CONTEXT_LOCK:
-        if _CONTEXT is None or (device is not None and device != getattr(_CONTEXT, "_requested", None)):
-            if _CONTEXT is not None:
-                _CONTEXT.close()
-            _CONTEXT = VulkanContext(device)
-            _CONTEXT._requested = device
-        return _CONTEXT
+        ctx = _CONTEXTS.get(device)
+        if ctx is None or ctx.device is None:
+            ctx = _CONTEXTS[device] = VulkanContext(device)
+        return ctx

@@ -1,0 +1,59 @@
+"""The bake's settings vocabulary, in one place: the irradiance methods (their names on the command line and in
+ProbeSettings, the filter each runs, their labels and descriptions in Blender) and the face-size limits. The core
+(bake, probe.filters), the command line and the Blender panel all import it, so a method is added or renamed here
+and nowhere else.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class IrradianceMethod:
+    name: str  # ProbeSettings.method and --method value
+    filter: str  # probe.filters.filter_probe's method
+    label: str  # Blender's enum name
+    description: str  # Blender's tooltip and the command line's help
+
+
+IRRADIANCE_METHODS: tuple[IrradianceMethod, ...] = (
+    IrradianceMethod("auto", "exact", "Auto",
+                     "Exact integral; with Face Size 0 the faces grow until the irradiance meets the tolerance"),
+    IrradianceMethod("sh", "sh", "Spherical Harmonics",
+                     "9 SH coefficients (fast, smooth; rings next to small bright lights)"),
+    IrradianceMethod("conv", "convolve", "Cosine Convolution",
+                     "Sampled cosine-weighted integral per irradiance texel (the thesis's method; noisy)"),
+    IrradianceMethod("box", "box", "Box Filter", "Box-filtered mip chain (fast approximation)"),
+    IrradianceMethod("exact", "exact", "Exact",
+                     "Integral over every radiance texel with its exact solid angle (GPU; the most accurate)"),
+)
+METHOD_NAMES: tuple[str, ...] = tuple(m.name for m in IRRADIANCE_METHODS)
+FILTER_METHODS: tuple[str, ...] = ("sh", "convolve", "box", "exact")  # what filter_probe runs
+# ProbeSettings.method -> filter_probe's method ("convolve" is accepted as the filter's own name too)
+METHOD_ALIASES: dict[str, str] = {**{m.name: m.filter for m in IRRADIANCE_METHODS}, "convolve": "convolve"}
+
+DEFAULT_METHOD = "auto"
+DEFAULT_IRRADIANCE_SIZE = 16  # irradiance cube face size (lat-long output is 4x as wide)
+DEFAULT_TOLERANCE = 0.01  # relative RMS irradiance change that ends the face-size search
+DEFAULT_DOWNSAMPLE_TO = 32  # exact method: integrate a <= 32^2-face copy (rel RMS loss ~2e-4, docs/accuracy.md)
+AUTO_FIRST_FACE = 32  # the face-size search starts here and doubles
+AUTO_MAX_FACE = 1024  # ... up to here
+MAX_FACE_SIZE = 2048  # the largest face size the panel offers
+
+
+def method_help() -> str:
+    """One line per method for the command line's --help."""
+    return "; ".join(f"{m.name}: {m.description}" for m in IRRADIANCE_METHODS)
+
+
+def blender_method_items() -> list[tuple[str, str, str]]:
+    """EnumProperty items: identifier (the name in capitals), label, description."""
+    return [(m.name.upper(), m.label, m.description) for m in IRRADIANCE_METHODS]
+
+
+def method_from_blender(identifier: str) -> str:
+    """The ProbeSettings method of a Blender enum identifier."""
+    name = identifier.lower()
+    if name not in METHOD_NAMES:
+        raise ValueError(f"unknown irradiance method {identifier!r}: use one of {', '.join(METHOD_NAMES)}")
+    return name

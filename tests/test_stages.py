@@ -1,0 +1,97 @@
+"""The GPU stages' boundaries: render -> GpuFrame -> filters without a host round trip, frame resources reused, and
+contexts passed explicitly. Transfers are counted by the context (VulkanContext.stats), not guessed."""
+import numpy as np
+import pytest
+
+from gs_ibl_addon.core.probe import filter_probe
+from gs_ibl_addon.core.probe import gpu_filters as gf
+from gs_ibl_addon.core.render.renderer import SplatRenderer, StaleFrame
+from gs_ibl_addon.core.render.views import ViewBatch
+from gs_ibl_addon.core.synthetic import random_scene
+from gs_ibl_addon.core.vk import VulkanContext, VulkanUnavailable, get_context
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    try:
+        with VulkanContext() as c:
+            yield c
+    except VulkanUnavailable as e:
+        pytest.skip(str(e))
+
+
+@pytest.fixture(scope="module")
+def renderer(ctx):
+    with SplatRenderer(random_scene(3000, seed=3, sh_degree=1, extent=4.0), ctx) as r:
+        yield r
+
+
+def _rel(a, b):
+    return float(np.max(np.abs(a - b)) / np.max(np.abs(b)))
+
+
+@pytest.mark.parametrize("method", ["exact", "sh", "box", "convolve"])
+def test_frame_filters_like_the_read_back_cube(renderer, method):
+    kw = dict(irradiance_size=8, method=method, roughness=None, phi_steps=16, theta_steps=4, box_level_size=2)
+    frame = renderer.render(ViewBatch.cubemap([0.1, -0.2, 0.05], 32)).frame
+    cube = np.stack(frame.read_images())
+    on_gpu = filter_probe(frame, **kw)
+    via_host = filter_probe(cube, use_gpu=True, vk_context=renderer.ctx, **kw)
+    assert _rel(on_gpu.irradiance, via_host.irradiance) < 2e-5
+    assert _rel(on_gpu.sh_coefficients, via_host.sh_coefficients) < 2e-5
+    assert abs(on_gpu.hole_fraction - via_host.hole_fraction) < 1e-5 and via_host.hole_fraction > 0
+    np.testing.assert_array_equal(on_gpu.radiance, cube)
+
+
+def test_probe_reads_back_only_the_small_results(renderer):
+    ctx, batch = renderer.ctx, ViewBatch.cubemap([0.0, 0.0, 0.0], 64)
+    for _ in range(2):  # the first records the programs and uploads the tables
+        filter_probe(renderer.render(batch).frame, 16, "exact", roughness=None, read_radiance=False)
+    before = ctx.stats.snapshot()
+    p = filter_probe(renderer.render(batch).frame, 16, "exact", roughness=None, read_radiance=False)
+    d = ctx.stats.since(before)
+    assert p.radiance is None and p.irradiance.shape == (6, 16, 16, 3)
+    radiance_bytes = 6 * 64 * 64 * 16
+    small = 6 * 16 * 16 * 12 + gf.SH_GROUPS_MAX * (27 + 1) * 4 + 64
+    assert d["readback_bytes"] <= small < radiance_bytes // 10, d
+    assert d["upload_bytes"] <= 6 * 80 + 16, d  # the views and the probe position, nothing else
+    assert d["submits"] == 2, d  # one recorded render, one recorded filter
+
+
+def test_frame_resources_are_reused(renderer):
+    ctx, batch = renderer.ctx, ViewBatch.cubemap([0.0, 0.0, 0.0], 16)
+    renderer.render(batch, timestamps=True)
+    gf.gpu_exact_irradiance(renderer.last_frame, 4)
+    pools = (len(ctx._free_fences), len(ctx._free_cmds), len(ctx._free_queries))
+    for _ in range(3):
+        renderer.render(batch, timestamps=True)
+        gf.gpu_exact_irradiance(renderer.last_frame, 4)
+    assert (len(ctx._free_fences), len(ctx._free_cmds), len(ctx._free_queries)) == pools
+
+
+def test_stale_frame_refuses_to_be_read(renderer):
+    first = renderer.render(ViewBatch.cubemap([0.0, 0.0, 0.0], 8)).frame
+    renderer.render(ViewBatch.cubemap([0.5, 0.0, 0.0], 8))
+    with pytest.raises(StaleFrame):
+        first.read_images()
+    with pytest.raises(StaleFrame):
+        filter_probe(first, 4, "exact", roughness=None)
+
+
+def test_depth_only_when_asked(renderer):
+    batch = ViewBatch.pinhole([0, -6, 0], [0, 0, 0], 50, 24, 16)
+    res = renderer.render(batch)
+    assert res.frame.depth is None
+    with pytest.raises(ValueError, match="depth=True"):
+        res.depths
+    assert renderer.render(batch, depth=True).depths[0].shape == (16, 24)
+
+
+def test_another_device_request_leaves_the_shared_context_open():
+    shared = get_context()
+    try:
+        other = get_context("cpu")
+    except VulkanUnavailable:
+        pytest.skip("no CPU Vulkan device here")
+    assert shared.device is not None and get_context() is shared
+    assert other.device is not None
