@@ -9,6 +9,7 @@
 #                                             recipe remakes its entry; an interrupted one is made again)
 #   scripts/blender_roots.sh ready NAME       exit status 0 when NAME is made (with the current recipe)
 #   scripts/blender_roots.sh path NAME        where it is
+#   scripts/blender_roots.sh remove NAME      unmount and delete it
 #   scripts/blender_roots.sh chroot NAME CMD  run CMD inside a root with /proc, /dev, /sys mounted and this checkout
 #                                             bound read-only at /src; the root's /tmp is `path NAME`/tmp here
 # Cached under $GS_IBL_ROOTS (default /var/cache/gs-ibl); made from scratch: ~3 min per root, ~1 min per bpy venv.
@@ -60,11 +61,17 @@ in_root() {  # a clean environment: only what the root's own programs should see
     PIP_DISABLE_PIP_VERSION_CHECK=1 PIP_DEFAULT_TIMEOUT=180 ${EXTRA_ENV:-} chroot "$r" "$@"
 }
 
+unmount_root() {  # every bind mount first: deleting a root must never reach /dev or the checkout through /src
+  local r=$1 m
+  for m in src sys dev/pts dev proc; do mountpoint -q "$r/$m" 2>/dev/null && $SUDO umount -l "$r/$m"; done
+  if grep -q " $r/" /proc/mounts; then echo "[roots] still mounted under $r" >&2; exit 1; fi
+}
+
 make_root() {  # make_root NAME SUITE PACKAGES: a changed package list tops the root up, a new suite remakes it
   local name=$1 suite=$2 packages=$3 r="$ROOTS/$1"
   if [ "$(cat "$r/.gs-ibl-base" 2>/dev/null)" != "$suite" ]; then
     command -v debootstrap >/dev/null || { $SUDO apt-get update -qq; $SUDO apt-get install -y -qq debootstrap >/dev/null; }
-    for m in src sys dev/pts dev proc; do mountpoint -q "$r/$m" 2>/dev/null && $SUDO umount -l "$r/$m"; done
+    unmount_root "$r"
     $SUDO rm -rf "$r"
     echo "[roots] debootstrap $suite into $r"
     $SUDO debootstrap --variant=minbase --include=ca-certificates "$suite" "$r" "$MIRROR" >/dev/null
@@ -124,6 +131,7 @@ case "$cmd" in
   ensure) for n in "$@"; do ensure_one "$n"; done ;;
   path) recipe "$1" >/dev/null; echo "$ROOTS/$1" ;;
   ready) stamp_ok "$1" ;;
+  remove) recipe "$1" >/dev/null; rm -f "$ROOTS/$1.stamp"; unmount_root "$ROOTS/$1"; $SUDO rm -rf "${ROOTS:?}/$1" ;;
   chroot)
     name=$1; shift
     stamp_ok "$name" || { echo "[roots] $name is not made: scripts/blender_roots.sh ensure $name" >&2; exit 1; }
