@@ -14,6 +14,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,7 @@ HERE = Path(__file__).resolve().parent
 CAPTURE = REPO / "tests" / "data" / "guitar.compressed.ply"
 CAPTURE_COUNT = 90854  # tests/data/README.md
 TIMEOUT_S = 900
+STALE_S = 3 * 3600  # a run's folder in a root older than this was left by a killed run
 RESULT_TAG = "GSIBL-MATRIX-RESULT "  # scenario.py's
 PATH = "/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin:/sbin:/bin"
 
@@ -86,14 +88,23 @@ class Runner:
     def __init__(self, entry: Entry, host_tmp: Path):
         self.entry = entry
         if entry.chroot:
-            root = Path(_roots("path", entry.root, check=True).stdout.strip())
-            self.host = root / "tmp" / "gs-ibl-matrix" / entry.name
-            self.inner = Path("/tmp/gs-ibl-matrix") / entry.name
+            # a folder of its own per run: two runs of one entry (a CI run beside someone's) never share one
+            parent = Path(_roots("path", entry.root, check=True).stdout.strip()) / "tmp" / "gs-ibl-matrix"
+            parent.mkdir(parents=True, exist_ok=True)
+            for old in parent.iterdir():  # what runs that were killed left behind
+                if time.time() - old.stat().st_mtime > STALE_S:
+                    shutil.rmtree(old, ignore_errors=True)
+            self.host = Path(tempfile.mkdtemp(prefix=f"{entry.name}-", dir=parent))
+            self.inner = Path("/tmp/gs-ibl-matrix") / self.host.name
         else:
             self.host = self.inner = host_tmp / entry.name
             self.venv = Path(_roots("path", entry.root, check=True).stdout.strip())
-        shutil.rmtree(self.host, ignore_errors=True)
+            shutil.rmtree(self.host, ignore_errors=True)
         (self.host / "home").mkdir(parents=True)
+
+    def close(self) -> None:
+        """Delete the run's folder (in a root it would outlive pytest's temporary folders)."""
+        shutil.rmtree(self.host, ignore_errors=True)
 
     def env(self) -> dict[str, str]:
         # a fresh user directory: Blender's config, scripts and extensions all live under this HOME
@@ -153,10 +164,15 @@ def _scenario_cmd(runner: Runner, args_inner: str) -> list[str]:
         return [runner.python(), script, args_inner]
     if not runner.entry.gui:
         return ["blender", "-b", "--python", script, "--", args_inner]
-    d = _free_display()
-    # Xvfb for the window, Blender's GUI on it; the scenario quits Blender when done
-    return ["sh", "-c", f"Xvfb :{d} -screen 0 1600x1000x24 -nolisten tcp >xvfb.log 2>&1 & x=$!; sleep 2; "
-            f"DISPLAY=:{d} blender --python {script} -- {args_inner}; rc=$?; kill $x; exit $rc"]
+    return xvfb_shell(f"blender --python {script} -- {args_inner}")
+
+
+def xvfb_shell(command: str, screen: str = "1600x1000x24") -> list[str]:
+    """`sh -c` running COMMAND with DISPLAY set to a new Xvfb, which picks a free display itself (-displayfd) and
+    is stopped afterwards; the exit status is COMMAND's."""
+    return ["sh", "-c", f"Xvfb -displayfd 3 -screen 0 {screen} -nolisten tcp 3>display 2>xvfb.log & x=$!; "
+            "i=0; while [ ! -s display ] && [ $i -lt 100 ]; do sleep 0.1; i=$((i+1)); done; "
+            f"DISPLAY=:$(cat display) {command}; rc=$?; kill $x; exit $rc"]
 
 
 @pytest.mark.parametrize("entry", [pytest.param(e, id=e.name) for e in ENTRIES])
@@ -192,7 +208,8 @@ def test_entry(entry: Entry, tmp_path_factory):
     keep = OUT / entry.name
     shutil.rmtree(keep, ignore_errors=True)
     shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.spz", "*.zip", "*.blend*"))
-    result_file = runner.host / "result.json"
+    result_file = keep / "result.json"
+    runner.close()
     assert result_file.exists(), f"{entry.name}: the scenario wrote no result (rc {r.returncode}); see {keep}"
     result = json.loads(result_file.read_text())
     # the scenario's own result line quotes the tracebacks it caught: only what Blender printed counts here
