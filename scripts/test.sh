@@ -3,6 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+bash scripts/setup_node_tools.sh  # PlayCanvas splat-transform for tests/test_formats_ecosystem.py (needs node/npm)
 if [ -n "${CI:-}" ]; then
   # CI must run the Blender half: a bpy that fails to import would otherwise only skip those tests
   .venv/bin/python -c "import bpy" || { echo "[test] bpy does not import: the Blender tests cannot run" >&2; exit 1; }
