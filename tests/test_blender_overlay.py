@@ -285,3 +285,13 @@ def test_display_settings_never_upload_again_and_helpers_hide(blender):
     bpy.context.view_layer.update()
     overlay.splat_image(obj, rv3d, 40, 30, 1.0)
     assert splat_cache.uploads == n0 + 1
+
+
+@bpy_only
+def test_panel_wraps_long_lines(blender):
+    from gs_ibl_addon.blender.panel import wrapped_lines
+    report = ("Baked 21,939 splats, 512x512 faces\nexact; face size by irradiance change (64: 7.45%, 128: 3.32%, "
+              "256: 1.50%, 512: 0.61%) converged")
+    lines = wrapped_lines(report, 30)
+    assert all(len(x) <= 30 for x in lines) and len(lines) >= 4
+    assert " ".join(lines).split() == report.split()  # nothing lost, words kept whole

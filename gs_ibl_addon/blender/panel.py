@@ -1,6 +1,9 @@
 """Probe operators (add, bake/refresh, restore World) and the 3D Viewport sidebar panel "GS-IBL"."""
 from __future__ import annotations
 
+import os
+import textwrap
+
 import bpy
 from bpy.props import EnumProperty
 from mathutils import Vector
@@ -110,6 +113,36 @@ class GSIBL_OT_restore_world(bpy.types.Operator):
         return {"FINISHED"}
 
 
+def _chars_per_line(context) -> int:
+    """About how many characters of the UI font fit across the sidebar (for wrapping long text ourselves:
+    labels are cut, not wrapped, by Blender)."""
+    region = getattr(context, "region", None)
+    width = region.width if region is not None else 300
+    scale = context.preferences.system.ui_scale if context.preferences else 1.0
+    return max(20, int((width - 30 * scale) / (7.0 * scale)))
+
+
+def wrapped_lines(text: str, chars: int) -> list[str]:
+    """``text`` (lines separated by newlines) wrapped at word boundaries to at most ``chars`` characters."""
+    out = []
+    for line in text.split("\n"):
+        out.extend(textwrap.wrap(line, chars, break_long_words=True, break_on_hyphens=False) or [""])
+    return out
+
+
+def _label_block(layout, context, text: str, icon: str = "NONE") -> None:
+    col = layout.column(align=True)
+    for i, line in enumerate(wrapped_lines(text, _chars_per_line(context))):
+        col.label(text=line, icon=icon if i == 0 else "BLANK1" if icon != "NONE" else "NONE")
+
+
+def scene_world_hidden(context) -> bool:
+    """Material Preview with Scene World off shows an HDRI instead of the scene's World: the baked light is not
+    seen there (Rendered mode and Scene World on show it)."""
+    shading = getattr(getattr(context, "space_data", None), "shading", None)
+    return shading is not None and shading.type == "MATERIAL" and not shading.use_scene_world
+
+
 class GSIBL_PT_panel(bpy.types.Panel):
     bl_label = "GS-IBL"
     bl_idname = "GSIBL_PT_panel"
@@ -124,8 +157,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if is_splat_object(obj):
             info = obj["gs_ibl"]
             box = layout.box()
-            box.label(text=f"{len(obj.data.vertices):,} splats, SH degree {info.get('sh_degree', '?')}")
-            box.label(text=str(info.get("source", "")))
+            box.label(text=f"{len(obj.data.vertices):,} splats, SH {info.get('sh_degree', '?')}")
+            source = str(info.get("source", ""))
+            box.label(text=os.path.basename(source) or source)  # the path would be cut; its file name fits
         ov = context.scene.gs_ibl_overlay
         row = layout.row(align=True)
         row.prop(ov, "show", toggle=True, icon="HIDE_OFF" if ov.show else "HIDE_ON")
@@ -137,8 +171,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if probe is None:
             return
         s = probe.gs_ibl_probe
+        # No property split: at the sidebar's default width a split cuts labels such as "Use as Scene World";
+        # sliders carry their name inside, checkboxes beside.
         col = layout.column()
-        col.use_property_split = True
         col.label(text=probe.name, icon="EMPTY_DATA")
         col.prop(s, "splats")
         col.prop(s, "method")
@@ -156,7 +191,10 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if s.last_report:
             box = layout.box()
             for line in s.last_report.split("\n"):
-                box.label(text=line, icon="ERROR" if "holes" in line or "failed" in line else "NONE")
+                _label_block(box, context, line, icon="ERROR" if "holes" in line or "failed" in line else "NONE")
+        if s.world is not None and scene_world_hidden(context):
+            _label_block(layout.box(), context, "Material Preview shows the baked light only with Scene World on "
+                         "(Viewport Shading popover), or in Rendered mode", icon="INFO")
         if isinstance(context.scene.get(gw.PREVIOUS_WORLD), bpy.types.World):
             layout.operator(GSIBL_OT_restore_world.bl_idname, icon="LOOP_BACK")
 

@@ -1,6 +1,6 @@
 """Run by a real Blender with its GUI (tests/real_blender/test_gui_overlay.py): the viewport overlay as a user sees it.
 
-    blender --python gui_overlay.py -- --out DIR [--src CHECKOUT] [--pictures]
+    blender --python gui_overlay.py -- --out DIR --room ROOM.PLY [--src CHECKOUT] [--pictures]
 
 The extension is the one installed in this Blender (from the built zip), or, with --src, the package in a checkout
 (registered directly: for working on the overlay before a zip exists). The scene: the sample room as a splat
@@ -42,6 +42,7 @@ def _arg(name: str, default=None):
 
 OUT = os.path.abspath(_arg("--out", "/tmp/gui_overlay"))
 SRC = _arg("--src")
+ROOM = _arg("--room")
 PICTURES = "--pictures" in ARGS
 SETTLE = float(_arg("--settle", "6"))  # seconds the window gets to draw before a screenshot (llvmpipe is slow)
 os.makedirs(OUT, exist_ok=True)
@@ -113,10 +114,7 @@ def build(pkg: str) -> None:
     for obj in list(bpy.data.objects):  # the startup file's cube, camera and light
         bpy.data.objects.remove(obj)
     bpy.context.view_layer.update()
-    room_path = os.path.join(os.path.dirname(importlib.import_module(pkg).__file__), "..", "samples", "room.ply")
-    if not os.path.exists(room_path):
-        room_path = os.path.join(SRC or "/src", "samples", "room.ply")
-    room = formats.read_scene(room_path)  # the sample is stored Z up, as Blender's axes
+    room = formats.read_scene(ROOM or os.path.join(SRC, "samples", "room.ply"))  # the sample is stored Z up, as Blender's axes
     try:
         state["room"] = splat_object.create_splat_object(bpy.context, room, "Room")
         state["proxy"] = True
@@ -174,7 +172,7 @@ def record(shot: str, pkg: str) -> None:
     overlay = mod(pkg, "blender.overlay")
     room = state["room"]
     corners = [list(room.matrix_world @ Vector(c)) for c in room.bound_box]
-    info = {"png": path, "window": [window.width, window.height],
+    info = {"png": os.path.basename(path), "window": [window.width, window.height],
             "region": [region.x, region.y, region.width, region.height],
             "view_matrix": [list(r) for r in r3d.view_matrix], "window_matrix": [list(r) for r in r3d.window_matrix],
             "show_splats": bpy.context.scene.gs_ibl_overlay.show, "overlays": space.overlay.show_overlays,
@@ -187,7 +185,7 @@ def record(shot: str, pkg: str) -> None:
                                   slot="gui-check")
         cov = os.path.join(OUT, f"{shot}_coverage.npy")
         np.save(cov, img.rgba[..., 3])
-        info["coverage"], info["coverage_rect"] = cov, list(img.view.ndc_rect)
+        info["coverage"], info["coverage_rect"] = os.path.basename(cov), list(img.view.ndc_rect)
     state["shots"][shot] = info
     log(f"shot {shot}: {info['last_draw']} error={info['error']}")
 
@@ -225,6 +223,7 @@ def finish(error: str | None = None) -> None:
 
 
 def main() -> None:
+    bpy.context.preferences.view.show_splash = False  # a fresh user directory would open on the splash
     try:
         pkg = package()
     except Exception:  # noqa: BLE001
