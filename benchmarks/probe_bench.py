@@ -40,7 +40,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 
 def probe(r: SplatRenderer, batch: ViewBatch, read_radiance: bool) -> float:
     """GPU ms of one probe (render + filter); the wall time is the caller's."""
-    res = r.render(batch, timestamps=True)
+    res = r.render(batch, timestamps=True, wait=False)  # the filter queues behind the render: one host wait
     pr = filter_probe(res.frame, 16, method="exact", roughness=None, read_radiance=read_radiance)
     return res.timings_ms.get("total", 0.0) + pr.timings_ms.get("filter_gpu", 0.0)
 

@@ -23,6 +23,8 @@ import time
 
 import numpy as np
 
+from .core.settings import DEFAULT_METHOD, METHOD_NAMES
+
 DESCRIPTION = __doc__
 SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
 
@@ -331,7 +333,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("scene", help=SCENE_HELP)
     q.add_argument("--probe", nargs=3, type=finite_float, metavar=("X", "Y", "Z"),
                    help="probe position (default: the splats' opacity-weighted centre of mass)")
-    q.add_argument("--method", default="auto", choices=["auto", "sh", "conv", "box", "exact"],
+    q.add_argument("--method", default=DEFAULT_METHOD, choices=METHOD_NAMES,
                    help="irradiance filter: auto (= exact, the most accurate at the same cost), exact (every "
                         "texel integrated with its exact solid angle), sh (9 SH coefficients: rings near small "
                         "bright sources), conv (cosine convolution, the thesis's method), box (box-filtered "

@@ -194,7 +194,7 @@ def test_a_failed_write_leaves_the_earlier_bake_whole(tmp_path, sky_shell, monke
 def test_out_of_memory_becomes_advice(sky_shell, monkeypatch):
     from gs_ibl_addon.core.render import renderer as renderer_module
 
-    def no_memory(self, batch, timestamps=False):
+    def no_memory(self, batch, *args, **kwargs):
         raise MemoryError("cannot allocate 4096.0 MiB for buffer 'image'")
 
     monkeypatch.setattr(renderer_module.SplatRenderer, "render", no_memory)

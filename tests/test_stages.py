@@ -43,12 +43,28 @@ def test_frame_filters_like_the_read_back_cube(renderer, method):
     np.testing.assert_array_equal(on_gpu.radiance, cube)
 
 
+def test_filter_queued_behind_a_render_that_must_be_drawn_again(ctx):
+    # render(wait=False) + filter: the instance list outgrows the first capacity, the render is drawn again and the
+    # filter queued behind the first attempt runs again: the result equals the waited, read-back path.
+    scene = random_scene(3000, seed=4, sh_degree=0, extent=2.0)
+    scene.scales *= 6.0
+    batch = ViewBatch.cubemap([0.0, 0.0, 0.0], 64)
+    with SplatRenderer(scene, ctx) as r:
+        first_capacity = r.capacity
+        res = r.render(batch, wait=False)
+        on_gpu = filter_probe(res.frame, 8, "exact", roughness=None)
+        assert res.instances > first_capacity and r.capacity > first_capacity
+        via_host = filter_probe(np.stack(r.render(batch).images), 8, "exact", roughness=None, use_gpu=True,
+                                vk_context=ctx)
+    assert _rel(on_gpu.irradiance, via_host.irradiance) < 2e-5
+
+
 def test_probe_reads_back_only_the_small_results(renderer):
     ctx, batch = renderer.ctx, ViewBatch.cubemap([0.0, 0.0, 0.0], 64)
     for _ in range(2):  # the first records the programs and uploads the tables
         filter_probe(renderer.render(batch).frame, 16, "exact", roughness=None, read_radiance=False)
     before = ctx.stats.snapshot()
-    p = filter_probe(renderer.render(batch).frame, 16, "exact", roughness=None, read_radiance=False)
+    p = filter_probe(renderer.render(batch, wait=False).frame, 16, "exact", roughness=None, read_radiance=False)
     d = ctx.stats.since(before)
     assert p.radiance is None and p.irradiance.shape == (6, 16, 16, 3)
     radiance_bytes = 6 * 64 * 64 * 16

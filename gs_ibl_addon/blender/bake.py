@@ -15,18 +15,18 @@ from bpy.app.handlers import persistent
 
 from ..core.bake import ProbeSettings, bake_probe
 from ..core.probe.latlong import cube_to_latlong
+from ..core.settings import method_from_blender
 from . import splat_cache
 from . import world as gw
 from .properties import is_probe
 from .splat_object import is_splat_object
 
-METHODS = {"AUTO": "auto", "SH": "sh", "CONV": "conv", "BOX": "box", "EXACT": "exact"}
 HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
 
 
 def probe_settings(props) -> ProbeSettings:
     """The core's settings from a probe's properties (Object.gs_ibl_probe)."""
-    return ProbeSettings(method=METHODS[props.method], face_size=int(props.face_size),
+    return ProbeSettings(method=method_from_blender(props.method), face_size=int(props.face_size),
                          irradiance_size=int(props.irradiance_size), tolerance=float(props.tolerance))
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
+from ..core.settings import DEFAULT_METHOD, blender_method_items
 from .splat_object import is_splat_object
 
 PROBE_NAME = "GS-IBL Probe"
@@ -32,12 +33,8 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                             description="Splat object whose light this probe captures")
     method: EnumProperty(
         name="Method",
-        items=[("AUTO", "Auto", "Exact integral; with Face Size 0 the faces grow until the irradiance meets the tolerance"),
-               ("SH", "Spherical Harmonics", "9 SH coefficients (fast, smooth; rings next to small bright lights)"),
-               ("CONV", "Cosine Convolution", "Sampled cosine-weighted integral per irradiance texel (the thesis's method; noisy)"),
-               ("BOX", "Box Filter", "Box-filtered mip chain (fast approximation)"),
-               ("EXACT", "Exact", "Integral over every radiance texel with its exact solid angle (GPU; the most accurate)")],
-        default="AUTO")
+        items=blender_method_items(),  # core/settings.py: the one list of methods
+        default=DEFAULT_METHOD.upper())
     face_size: IntProperty(name="Face Size", default=0, min=0, max=2048,
                            description="Resolution of each of the six radiance faces rendered from the probe "
                                        "(0: doubled from 32 until the irradiance changes by less than the tolerance)")

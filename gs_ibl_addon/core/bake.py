@@ -21,11 +21,9 @@ from .probe.gpu_filters import gpu_ggx_prefilter
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
+from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE,
+                       METHOD_ALIASES, METHOD_NAMES)
 
-METHOD_ALIASES = {"auto": "exact", "sh": "sh", "conv": "convolve", "convolve": "convolve", "box": "box",
-                  "exact": "exact"}
-AUTO_FIRST_FACE = 32
-AUTO_MAX_FACE = 1024
 # From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
 # face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
 FACE_BY_FACE_FROM = 1024
@@ -42,10 +40,10 @@ class BadSetting(ValueError):
 
 @dataclass
 class ProbeSettings:
-    method: str = "auto"  # auto | sh | conv | box | exact
+    method: str = DEFAULT_METHOD  # one of settings.METHOD_NAMES
     face_size: int = 0  # radiance face size; 0 = the smallest whose irradiance has converged to the tolerance
-    irradiance_size: int = 16  # irradiance cube face size (lat-long output is 4x as wide)
-    tolerance: float = 0.01  # relative RMS irradiance change that ends the face-size search
+    irradiance_size: int = DEFAULT_IRRADIANCE_SIZE  # irradiance cube face size (lat-long output is 4x as wide)
+    tolerance: float = DEFAULT_TOLERANCE  # relative RMS irradiance change that ends the face-size search
     sh_order: int = 2
     glossy: bool = False  # also GGX prefiltered radiance for glossy surfaces (slower)
     max_face_size: int = AUTO_MAX_FACE
@@ -57,8 +55,8 @@ def check_settings(s: ProbeSettings) -> str:
     no file: callers run it before reading anything."""
     method = METHOD_ALIASES.get(str(s.method).lower())
     if method is None:
-        raise BadSetting("method", s.method, f"unknown irradiance method {s.method!r}: use one of auto, sh, conv, "
-                                             "box, exact")
+        raise BadSetting("method", s.method, f"unknown irradiance method {s.method!r}: use one of "
+                                             f"{', '.join(METHOD_NAMES)}")
     for name, value, low in (("face_size", s.face_size, 0), ("irradiance_size", s.irradiance_size, 1),
                              ("max_face_size", s.max_face_size, 1)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
@@ -138,10 +136,13 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
         if face < FACE_BY_FACE_FROM:
             # The frame stays on the GPU: the filter reads back the irradiance only, the radiance is read once,
             # for the face size kept (below).
-            res = r.render(cube, timestamps=True)
-            return filter_probe(res.frame, irradiance_size=s.irradiance_size, method=method, sh_order=s.sh_order,
-                                roughness=None, timings_ms={f"render_{k}": v for k, v in res.timings_ms.items()},
-                                read_radiance=False, splat_count=splat_count, device=r.ctx.device_name, **s.extra)
+            # wait=False: the filter is queued behind the render and the host waits once for both.
+            res = r.render(cube, timestamps=True, wait=False)
+            probe = filter_probe(res.frame, irradiance_size=s.irradiance_size, method=method, sh_order=s.sh_order,
+                                 roughness=None, read_radiance=False, splat_count=splat_count,
+                                 device=r.ctx.device_name, **s.extra)
+            probe.timings_ms.update({f"render_{k}": v for k, v in res.timings_ms.items()})
+            return probe
         else:
             images, timings = [], {}
             for f, view in enumerate(cube.views):
@@ -177,7 +178,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     frame = None
     if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
         frame = r.last_frame
-        result.radiance = np.stack(frame.read_images())
+        result.radiance = frame.read_cube()
     if s.glossy:
         say("prefiltering glossy maps", 0.85)
         result.prefiltered, ggx_ms = gpu_ggx_prefilter(frame if frame is not None else np.asarray(result.radiance),

@@ -96,11 +96,11 @@ def filter_probe(radiance, irradiance_size: int = 16, method: str = "sh", sh_ord
                 roughness=None if roughness is None else tuple(roughness), ggx_samples=ggx_samples)
     frame = radiance if _is_frame(radiance) else None
     if frame is not None and sh_order != 2:  # numpy SH of another order needs the cube on the host
-        radiance, frame = np.stack(frame.read_images()), None
+        radiance, frame = frame.read_cube(), None
     if frame is not None:
         coeffs, irr, pre, hole = _filter_gpu(frame, p, frame.ctx, stages)
         face = frame.face_size
-        radiance = np.stack(frame.read_images()) if read_radiance else None
+        radiance = frame.read_cube() if read_radiance else None
         use_gpu = True
     else:
         rgb, hole = split_alpha(radiance)
@@ -162,7 +162,13 @@ def _filter_gpu(source, p: _Params, ctx, stages: _Stages
         plan = g.plan_for(ctx, src, frame is not None, n, p.method, p.size, phi_steps=p.phi_steps,
                           theta_steps=p.theta_steps, box_level_size=p.box_level_size, downsample_to=p.downsample_to)
         t1 = time.perf_counter()
-        coeffs, irr, hole, tm = plan.run()
+        if frame is not None:  # queued behind the render (if still in flight): the host waits once for both
+            plan.program.start()
+            if frame.wait():  # the render was drawn again after this filter was queued: filter it again
+                plan.program.wait()
+            coeffs, irr, hole, tm = plan.finish()
+        else:
+            coeffs, irr, hole, tm = plan.run()
         wall = (time.perf_counter() - t1) * 1e3
         pre_stages = {"split", "sh_project"}
         stages.timings["sh_project"] = sum(v for k, v in tm.items() if k in pre_stages)

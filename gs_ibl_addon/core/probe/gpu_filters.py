@@ -110,7 +110,7 @@ class _Scratch:
         if isinstance(cube, GpuCube):
             return cube.buffer, cube.size
         if _is_frame(cube):
-            cube.check()
+            cube.wait()
             n = cube.face_size
             rgb = self.empty(6 * n * n * 12, "probe-radiance")
             hole = self.empty(SH_GROUPS_MAX * 4, "probe-hole-partial")
@@ -137,7 +137,7 @@ class GpuCube:
     def __init__(self, cube, ctx=None) -> None:
         self.hole_fraction = 0.0
         if _is_frame(cube):
-            cube.check()
+            cube.wait()
             self.ctx = cube.ctx
             self.size = n = cube.face_size
             self.buffer = Buffer(self.ctx, 6 * n * n * 12, "probe-radiance")
@@ -410,7 +410,23 @@ class FilterPlan:
             _record_box(rec, s, rgb, n, self.out, size, box_level_size(n, size, params["box_level_size"]))
         elif method == "exact":
             _record_exact(rec, s, rgb, n, self.out, size, integration_size(n, params["downsample_to"]))
+        # The results end in one host-readable buffer, copied there by the program itself: reading them back is a
+        # memcpy from mapped memory, not one more submission per result (on a discrete GPU a read of device
+        # memory goes through a staging copy).
+        parts = [(self.sh_partial, self.sh_groups * 27 * 4), (self.hole_partial, SH_GROUPS_MAX * 4),
+                 (self.out, 6 * size * size * 12)]
+        self.offsets, total = [], 0
+        for buf, nbytes in parts:
+            self.offsets.append(total)
+            if buf is not None:
+                rec.copy(buf, self._results(ctx, parts), nbytes, 0, total)
+            total += nbytes
         self.program: Program = rec.program()
+
+    def _results(self, ctx, parts) -> Buffer:
+        if getattr(self, "results", None) is None:
+            self.results = Buffer.staging(ctx, sum(nbytes for _, nbytes in parts), cached=True)
+        return self.results
 
     @property
     def valid(self) -> bool:
@@ -418,15 +434,30 @@ class FilterPlan:
 
     def run(self) -> tuple[np.ndarray, np.ndarray | None, float, dict[str, float]]:
         """(SH coefficients (9, 3), irradiance cube or None for the sh method, hole fraction, GPU timings)."""
-        timings = self.program.run()
-        coeffs = _sh_partials(self.sh_partial, self.sh_groups)
-        irr = None if self.out is None else _read_cube(self.out, self.size)
-        hole = hole_fraction(self.hole_partial, self.n) if self.hole_partial is not None else 0.0
+        self.program.start()
+        return self.finish()
+
+    def finish(self) -> tuple[np.ndarray, np.ndarray | None, float, dict[str, float]]:
+        """Wait for the program (started by run() or program.start()) and read its results; one that is not
+        running is run now."""
+        if not self.program.running:
+            self.program.start()
+        timings = self.program.wait()
+        res, (o_sh, o_hole, o_irr) = self.results, self.offsets
+        coeffs = res.read(np.float32, self.sh_groups * 27, o_sh).reshape(-1, 9, 3).astype(np.float64).sum(axis=0)
+        hole = 0.0
+        if self.hole_partial is not None:
+            hole = float(res.read(np.float32, _reduction_groups(self.n), o_hole).astype(np.float64).sum() / (4 * np.pi))
+        irr = None
+        if self.out is not None:
+            m = self.size
+            irr = res.read(np.float32, 6 * m * m * 3, o_irr).reshape(6, m, m, 3).astype(np.float64)
         return coeffs, irr, hole, timings
 
     def close(self) -> None:
         self.program.close()
         self._scratch.__exit__(None, None, None)
+        self.results.destroy()
 
 
 def plan_for(ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, **params) -> FilterPlan:

@@ -90,6 +90,13 @@ class GpuFrame:
             raise StaleFrame("this frame was overwritten by a later render of the same renderer; "
                              "read it (or filter it) before rendering again")
 
+    def wait(self) -> bool:
+        """Finish the render (``render(..., wait=False)`` returns before the GPU is done). True when it had to be
+        drawn again (its instance list outgrew the renderer's capacity): work queued on the frame meanwhile saw an
+        incomplete image and must run again."""
+        self.check()
+        return self.renderer.resolve()
+
     def _split(self, flat: np.ndarray, channels: int) -> list[np.ndarray]:
         out, off = [], 0
         for v in self.batch.views:
@@ -100,23 +107,50 @@ class GpuFrame:
 
     def read_images(self) -> list[np.ndarray]:
         """Per view (H, W, 4) float32, read back from the GPU."""
-        self.check()
+        self.wait()
         return self._split(self.image.read(np.float32, self.pixels * 4), 4)
+
+    def read_cube(self) -> np.ndarray:
+        """A cubemap frame as one (6, N, N, 4) float32 array, read back from the GPU (no per-face copies)."""
+        n = self.face_size
+        self.wait()
+        return self.image.read(np.float32, 6 * n * n * 4).reshape(6, n, n, 4)
 
     def read_depths(self) -> list[np.ndarray]:
         """Per view (H, W) float32, read back from the GPU; the render must have been asked for depth."""
-        self.check()
+        self.wait()
         if self.depth is None:
             raise ValueError("this frame has no depth: render(batch, depth=True) writes it")
         return self._split(self.depth.read(np.float32, self.pixels), 1)
 
 
-@dataclass(eq=False)
 class RenderResult:
-    frame: GpuFrame
-    timings_ms: dict[str, float] = field(default_factory=dict)  # GPU time per stage (timestamp queries)
-    instances: int = 0  # (tile, splat) pairs rasterised
-    wall_ms: float = 0.0
+    """What render() returns: the frame, and (once the GPU is done: reading these waits) the GPU time per stage
+    (timestamp queries), the (tile, splat) pairs rasterised and the host wall time of the render."""
+
+    def __init__(self, frame: GpuFrame, t0: float) -> None:
+        self.frame, self._t0 = frame, t0
+        self._timings: dict[str, float] = {}
+        self._instances, self._wall_ms = 0, 0.0
+
+    def _finished(self, timings: dict[str, float], instances: int) -> None:
+        self._timings, self._instances = timings, instances
+        self._wall_ms = (time.perf_counter() - self._t0) * 1e3
+
+    @property
+    def timings_ms(self) -> dict[str, float]:
+        self.frame.renderer.resolve(self)
+        return self._timings
+
+    @property
+    def instances(self) -> int:
+        self.frame.renderer.resolve(self)
+        return self._instances
+
+    @property
+    def wall_ms(self) -> float:
+        self.frame.renderer.resolve(self)
+        return self._wall_ms
 
     @cached_property
     def images(self) -> list[np.ndarray]:
@@ -163,6 +197,7 @@ class SplatRenderer:
         self.near = near
         self.generation = 0
         self.last_frame: GpuFrame | None = None  # the latest render's frame (valid until the next render)
+        self._pending: tuple | None = None  # the render submitted and not yet waited for (render(wait=False))
         self._owned: list = []  # every GPU object this renderer made, destroyed by close()
         self._programs: dict[tuple, Program] = {}
         n = max(1, scene.count)
@@ -222,22 +257,48 @@ class SplatRenderer:
             b = self._frame[name] = self._buffer(max(nbytes, int(b.nbytes * 1.5) if b is not None else 0), name)
         return b
 
-    def render(self, batch: ViewBatch, timestamps: bool = False, depth: bool = False) -> RenderResult:
-        """Render ``batch`` into a GpuFrame (RenderResult.frame); ``depth`` also writes the depth image."""
+    def render(self, batch: ViewBatch, timestamps: bool = False, depth: bool = False,
+               wait: bool = True) -> RenderResult:
+        """Render ``batch`` into a GpuFrame (RenderResult.frame); ``depth`` also writes the depth image.
+
+        ``wait=False`` returns once the render is submitted: a filter given the frame is then queued behind it
+        and the host waits once for both (GpuFrame.wait() settles the render, and re-draws it in the rare case
+        its instance list outgrew the capacity).
+        """
         t0 = time.perf_counter()
+        self.resolve()  # the previous render reads the views and origin written below
         view_data, total_tiles, total_pixels = _views_buffer_data(batch)
         self.views.write(view_data)
         self.origin.write(np.append(batch.origin, 0.0).astype(np.float32))
         self.generation += 1
-        for _attempt in range(2):
-            timings = self._program(batch, total_tiles, total_pixels, timestamps, depth).run()
-            needed = int(self.count.read(np.uint32, 2)[1])  # [0] pairs kept, [1] pairs wanted
-            if needed <= self.capacity:
-                break
-            self._ensure_capacity(int(needed * 1.25) + 1024)
+        prog = self._program(batch, total_tiles, total_pixels, timestamps, depth)
         frame = self.last_frame = GpuFrame(self, batch, self._frame["image"], self._frame["depth"] if depth else None,
                                            self.generation)
-        return RenderResult(frame, timings, needed, (time.perf_counter() - t0) * 1e3)
+        result = RenderResult(frame, t0)
+        prog.start()
+        self._pending = (prog, result, (batch, total_tiles, total_pixels, timestamps, depth))
+        if wait:
+            self.resolve()
+        return result
+
+    def resolve(self, result: RenderResult | None = None) -> bool:
+        """Finish the submitted render, if one is in flight; True when it was drawn again with room for more
+        instances (see render's ``wait``)."""
+        pending = getattr(self, "_pending", None)
+        if pending is None or (result is not None and pending[1] is not result):
+            return False
+        self._pending = None
+        prog, result, args = pending
+        timings = prog.wait()
+        needed = int(self.count.read(np.uint32, 2)[1])  # [0] pairs kept, [1] pairs wanted
+        redrawn = False
+        if needed > self.capacity:
+            self._ensure_capacity(int(needed * 1.25) + 1024)
+            timings = self._program(*args).run()
+            needed = int(self.count.read(np.uint32, 2)[1])
+            redrawn = True
+        result._finished(timings, needed)
+        return redrawn
 
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
                  depth: bool) -> Program:
@@ -308,6 +369,7 @@ class SplatRenderer:
         return rec.program()
 
     def close(self) -> None:
+        self._pending = None
         for prog in self._programs.values():
             prog.close()
         self._programs.clear()

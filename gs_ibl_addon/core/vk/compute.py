@@ -76,13 +76,13 @@ class Buffer:
         stats.uploads += 1
         stats.upload_bytes += raw.nbytes
         if self._map is not None:
-            self._map[offset:offset + raw.nbytes] = raw
+            np.frombuffer(self._map, np.uint8, raw.nbytes, offset)[:] = np.frombuffer(raw, np.uint8)
             return
         with self.ctx.lock:  # through the kept staging buffer, in pieces of at most STAGING_MAX bytes
             staging = self.ctx.staging(min(raw.nbytes, STAGING_MAX), "up")
             for start in range(0, raw.nbytes, STAGING_MAX):
                 piece = raw[start:start + STAGING_MAX]
-                staging._map[:piece.nbytes] = piece
+                np.frombuffer(staging._map, np.uint8, piece.nbytes)[:] = np.frombuffer(piece, np.uint8)
                 with Recorder(self.ctx) as rec:
                     rec.copy(staging, self, piece.nbytes, dst_offset=offset + start)
 
@@ -97,14 +97,14 @@ class Buffer:
         if self._map is not None and (self.host_cached or nbytes <= 4096):
             return np.frombuffer(self._map, dtype=dt, count=n, offset=offset).copy()
         out = np.empty(n, dt)
-        dst = memoryview(out).cast("B")
+        dst = out.view(np.uint8)
         with self.ctx.lock:
             staging = self.ctx.staging(min(nbytes, STAGING_MAX), "down")
             for start in range(0, nbytes, STAGING_MAX):
                 size = min(STAGING_MAX, nbytes - start)
                 with Recorder(self.ctx) as rec:
                     rec.copy(self, staging, size, src_offset=offset + start)
-                dst[start:start + size] = staging._map[:size]
+                dst[start:start + size] = np.frombuffer(staging._map, np.uint8, size)  # one memcpy
         return out
 
     @staticmethod
@@ -266,21 +266,37 @@ def _take_command_buffer(ctx: VulkanContext):
     return vk.vkAllocateCommandBuffers(ctx.device, cbai)[0]
 
 
-def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
+def _submit(ctx: VulkanContext, cmd):
+    """Submit ``cmd`` and return its fence (from the context's pool) without waiting."""
     vk = ctx.vk
     with ctx.lock:
         fence = ctx._free_fences.pop() if ctx._free_fences else vk.vkCreateFence(ctx.device, vk.VkFenceCreateInfo(), None)
         cmds = [cmd]
         si = vk.VkSubmitInfo(commandBufferCount=1, pCommandBuffers=cmds)
         sis = [si]
-        fences = [fence]
         try:
             vk.vkQueueSubmit(ctx.queue, 1, sis, fence)
-            vk.vkWaitForFences(ctx.device, 1, fences, vk.VK_TRUE, _NO_TIMEOUT)
-        finally:
-            vk.vkResetFences(ctx.device, 1, fences)
+        except BaseException:
             ctx._free_fences.append(fence)
+            raise
         ctx.stats.submits += 1
+        return fence
+
+
+def _wait(ctx: VulkanContext, fence) -> None:
+    """Wait for a fence from _submit and give it back to the context."""
+    vk = ctx.vk
+    fences = [fence]
+    try:
+        vk.vkWaitForFences(ctx.device, 1, fences, vk.VK_TRUE, _NO_TIMEOUT)
+    finally:
+        vk.vkResetFences(ctx.device, 1, fences)
+        with ctx.lock:
+            ctx._free_fences.append(fence)
+
+
+def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
+    _wait(ctx, _submit(ctx, cmd))
 
 
 def _read_stamps(ctx: VulkanContext, query_pool, labels: list[str]) -> dict[str, float]:
@@ -439,13 +455,34 @@ class Program:
                 and all(b.handle is not None for b in self.buffers))
 
     def run(self) -> dict[str, float]:
+        self.start()
+        return self.wait()
+
+    def start(self) -> None:
+        """Submit without waiting (the queue runs submissions in order, each opening with a full barrier, so a
+        program started next sees this one's writes); ``wait()`` before reading what it wrote."""
         if not self.valid:
             raise RuntimeError("recorded program is stale (a buffer it uses was freed); record it again")
-        _submit_and_wait(self.ctx, self.cmd)
+        if getattr(self, "_fence", None) is not None:
+            raise RuntimeError("program started twice without a wait")
+        self._fence = _submit(self.ctx, self.cmd)
+
+    def wait(self) -> dict[str, float]:
+        """Wait for the submission from start(); returns its GPU timings per stage."""
+        fence, self._fence = getattr(self, "_fence", None), None
+        if fence is None:
+            raise RuntimeError("program waited on without a start")
+        _wait(self.ctx, fence)
         return _read_stamps(self.ctx, self.query_pool, self.labels)
+
+    @property
+    def running(self) -> bool:
+        return getattr(self, "_fence", None) is not None
 
     def close(self) -> None:
         ctx = self.ctx
+        if self.running and ctx.device is not None:
+            self.wait()
         if self.cmd is not None and ctx.device is not None:
             ctx.vk.vkResetCommandBuffer(self.cmd, 0)
             ctx._free_cmds.append(self.cmd)
