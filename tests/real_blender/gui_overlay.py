@@ -50,7 +50,7 @@ os.makedirs(OUT, exist_ok=True)
 # The two views: eye, target. A looks into the room past the Occluder and at the Blob in front of the Backdrop;
 # B looks at both from the side, across the floor (where the grid would show).
 VIEWS = {"a": ((0.2, -2.1, 1.45), (0.35, 1.2, 0.75)), "b": ((-2.3, 1.6, 1.9), (0.7, -0.4, 0.6))}
-OCCLUDER = (-0.55, 0.7, 0.35)
+OCCLUDER = (0.15, 0.75, 0.3)
 BLOB, BACKDROP = (0.95, 0.1, 0.8), (1.15, 1.3, 0.8)
 BLOB_RGB = (0.9, 0.08, 0.06)
 
