@@ -1,7 +1,7 @@
 """Decode time and peak memory of each compressed splat format for 1M splats (SH degree 3 where the format has SH).
 
 Makes one random scene (core.synthetic.random_scene), writes it with our writers to /tmp (SuperSplat compressed PLY,
-SPZ v2, v3, v4, .splat), then decodes each file in fresh subprocesses so the numbers are clean: one run for wall
+SPZ v2, v3, v4, .splat, SOG, GLB with KHR_gaussian_splatting, .ksplat modes 0 and 1), then decodes each file in fresh subprocesses so the numbers are clean: one run for wall
 time (best of ``--repeat``) and peak RSS delta (VmHWM after the read minus VmRSS before it, imports done), one under
 tracemalloc for the peak of Python/numpy allocations. Files are in the page cache (just written), so times are
 warm-cache times. The "scene" column is the size of the SplatScene arrays the reader returns, the floor for any
@@ -29,8 +29,8 @@ def kib(key):
             return next(int(l.split()[1]) for l in f if l.startswith(key + ":"))
     except OSError:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-import numpy, plyfile, zstandard, gzip  # imports outside the measured span
-from gs_ibl_addon.core.formats import compressed_ply, spz, splat
+import numpy, plyfile, zstandard, gzip, zipfile, OpenImageIO  # imports outside the measured span
+from gs_ibl_addon.core.formats import compressed_ply, spz, splat, sog, gltf, ksplat, webp
 before = kib("VmRSS")
 if traced:
     tracemalloc.start()
@@ -58,9 +58,13 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=1_000_000)
     ap.add_argument("--degree", type=int, default=3)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--only", help="comma-separated parts of format names to run (e.g. sog,glb,ksplat)")
     args = ap.parse_args()
     sys.path.insert(0, ROOT)
     from gs_ibl_addon.core.formats.compressed_ply import write_compressed_ply
+    from gs_ibl_addon.core.formats.gltf import write_glb
+    from gs_ibl_addon.core.formats.ksplat import write_ksplat
+    from gs_ibl_addon.core.formats.sog import write_sog
     from gs_ibl_addon.core.formats.splat import write_splat
     from gs_ibl_addon.core.formats.spz import write_spz
     from gs_ibl_addon.core.synthetic import random_scene
@@ -73,9 +77,17 @@ def main() -> None:
         "spz v3": lambda p: write_spz(p, scene, version=3),
         "spz v4": lambda p: write_spz(p, scene, version=4),
         ".splat (SH 0)": lambda p: write_splat(p, scene),
+        "sog (SH 0)": lambda p: write_sog(p, scene),
+        "glb": lambda p: write_glb(p, scene),
+        "ksplat mode 0": lambda p: write_ksplat(p, scene, 0),
+        "ksplat mode 1": lambda p: write_ksplat(p, scene, 1),
     }
-    suffix = {"compressed.ply": ".compressed.ply", ".splat (SH 0)": ".splat"}
+    suffix = {"compressed.ply": ".compressed.ply", ".splat (SH 0)": ".splat", "sog (SH 0)": ".sog", "glb": ".glb",
+              "ksplat mode 0": ".m0.ksplat", "ksplat mode 1": ".m1.ksplat"}
+    only = set(args.only.split(",")) if args.only else None
     for name, write in writers.items():
+        if only and not any(o in name for o in only):
+            continue
         path = stem + suffix.get(name, f".{name.replace(' ', '')}.spz")
         write(path)
         size = os.path.getsize(path)

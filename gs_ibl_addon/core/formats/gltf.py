@@ -50,6 +50,8 @@ def _turn(positions: np.ndarray, wxyz: np.ndarray, sh_rest: np.ndarray) -> tuple
     _flip(np.zeros((0, 3), np.float32), np.zeros((0, 4), np.float32), sh_rest, _FLIP)
     q = quat_multiply(_HALF_TURN_Z, wxyz.astype(np.float64))
     return (positions.astype(np.float64) * _FLIP).astype(np.float32), q.astype(np.float32)
+
+
 _SH_PER_DEGREE = (1, 3, 5, 7)
 _GLB_JSON, _GLB_BIN = 0x4E4F534A, 0x004E4942
 
@@ -70,6 +72,7 @@ def _load(path: str) -> tuple[dict, bytes | None]:
     if length != len(data):
         raise _fail(path, f"the header says {length:,} bytes but the file has {len(data):,}: truncated or damaged")
     at, doc, binary = 12, None, None
+    data = memoryview(data)  # chunks are views: the binary chunk is not copied
     while at + 8 <= len(data):
         size, kind = struct.unpack_from("<II", data, at)
         if at + 8 + size > len(data):
@@ -77,7 +80,7 @@ def _load(path: str) -> tuple[dict, bytes | None]:
         body = data[at + 8:at + 8 + size]
         if kind == _GLB_JSON and doc is None:
             try:
-                doc = json.loads(body.decode("utf-8"))
+                doc = json.loads(bytes(body).decode("utf-8"))
             except (UnicodeDecodeError, ValueError) as e:
                 raise _fail(path, f"the JSON chunk is not valid JSON ({e})") from None
         elif kind == _GLB_BIN and binary is None:
@@ -144,7 +147,7 @@ class _Doc:
 
     def accessor(self, index, name: str, n: int | None, types: tuple[str, ...], components: tuple[int, ...]
                  ) -> np.ndarray:
-        """The accessor's values as float64 (n, width), normalized integers mapped to [0, 1] or [-1, 1]."""
+        """The accessor's values as float32 (n, width), normalized integers mapped to [0, 1] or [-1, 1]."""
         a = self.item("accessors", index)
         kind, comp, count = a.get("type"), a.get("componentType"), a.get("count")
         if kind not in types or comp not in components:
@@ -163,9 +166,9 @@ class _Doc:
             raise _fail(self.path, f"attribute {name}: {count:,} values (stride {stride}) do not fit in their "
                                    f"{length:,}-byte buffer view: truncated or damaged")
         raw = np.ndarray((count, width), dtype, data, start + offset, (stride, dtype.itemsize))
-        values = raw.astype(np.float64)
+        values = raw.astype(np.float32)
         if a.get("normalized") and comp in _NORM:
-            values = np.maximum(values / _NORM[comp], -1.0)
+            values = np.maximum(values / np.float32(_NORM[comp]), np.float32(-1.0))
         return values
 
 
@@ -264,7 +267,7 @@ def _primitive(g: _Doc, prim: dict, linear_scale: bool) -> SplatScene:
     while degree < 3 and all(f"{_P}SH_DEGREE_{degree + 1}_COEF_{c}" in attrs
                              for c in range(_SH_PER_DEGREE[degree + 1])):
         degree += 1
-    sh = np.zeros((n, (degree + 1) ** 2, 3))
+    sh = np.zeros((n, (degree + 1) ** 2, 3), np.float32)
     if _P + "SH_DEGREE_0_COEF_0" in attrs:
         k = 0
         for d in range(degree + 1):
@@ -274,7 +277,7 @@ def _primitive(g: _Doc, prim: dict, linear_scale: bool) -> SplatScene:
                 k += 1
     elif "COLOR_0" in attrs:
         colour = g.accessor(attrs["COLOR_0"], "COLOR_0", n, ("VEC3", "VEC4"), (5126, 5121, 5123))
-        sh[:, 0] = (colour[:, :3] - 0.5) / SH_C0
+        sh[:, 0] = (colour[:, :3] - np.float32(0.5)) / np.float32(SH_C0)
     else:
         raise _fail(g.path, f"a splat primitive has neither {_P}SH_DEGREE_0_COEF_0 nor COLOR_0: no colour")
 
@@ -292,12 +295,12 @@ def _primitive(g: _Doc, prim: dict, linear_scale: bool) -> SplatScene:
     if ((opacity < 0) | (opacity > 1)).any():
         raise _fail(g.path, f"{int(((opacity < 0) | (opacity > 1)).sum())} opacities lie outside 0-1, which the "
                             "extension forbids (logit values written by mistake?)")
-    scales32 = scales.astype(np.float32)
+    scales32 = np.ascontiguousarray(scales, np.float32)
     clamp_scales(scales32, counts)
     wxyz = normalise_quaternions(rot[:, [3, 0, 1, 2]].astype(np.float32), counts)
-    rest = sh[:, 1:].astype(np.float32)
+    rest = sh[:, 1:]  # turned in place
     positions, wxyz = _turn(pos, wxyz, rest)
-    sh32 = np.concatenate([sh[:, :1].astype(np.float32), rest], 1)
+    sh32 = sh
     opacities = np.clip(opacity, 1e-6, 1 - 1e-6).astype(np.float32)
     return SplatScene(positions, scales32, wxyz, opacities, sh32, source=g.path, repairs=reported(counts))
 

@@ -125,10 +125,10 @@ def read_ksplat(path: str | os.PathLike) -> SplatScene:
             rotations[m:m + count] = rows["rotation"]
             rgba[m:m + count] = rows["rgba"]
             if _SH_REST[sdeg]:
-                vals = rows["sh"].astype(np.float64)
+                vals = rows["sh"].astype(np.float32)
                 if mode == 2:
-                    vals = sh_lo + vals / 255.0 * (sh_hi - sh_lo)
-                rest = np.zeros((count, 3 * (k - 1)))
+                    vals = np.float32(sh_lo) + vals * np.float32((sh_hi - sh_lo) / 255.0)
+                rest = np.zeros((count, 3 * (k - 1)), np.float32)
                 cols = _sh_columns(sdeg)
                 per_in, per_out = _SH_REST[sdeg] // 3, k - 1
                 # re-index the section's own channel-major columns into the file-wide degree

@@ -1,7 +1,7 @@
 """Lossless WebP images as exact RGBA bytes (SOG's containers), through OpenImageIO, else Pillow.
 
 OpenImageIO reads and writes WebP (checked: PyPI openimageio 3.0.21 in our venv, Debian's 3.1.18 beside Blender
-5.2); Blender's own builds bundle the OpenImageIO module (4.0 and later) but the bpy *module* on PyPI does not, so
+5.2); Blender release builds are documented to bundle it (4.0 and later), but the bpy *module* on PyPI does not, so
 Pillow is tried next, and without either the message says what to do. Two traps, both handled here:
   * OpenImageIO premultiplies colour by alpha on reading unless asked not to (``oiio:UnassociatedAlpha``); SOG
     keeps data, not colour, in alpha (opacity, a quaternion tag), so that would change the RGB bytes;
