@@ -174,16 +174,18 @@ def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
         del rows
 
 
-def parse_header(path: str) -> tuple[PlyData, int]:
+def parse_header(path: str, check_sizes: bool = True) -> tuple[PlyData, int]:
     """plyfile's header parser on its own (so a bad layout is refused before any data is read), with the element
-    counts checked against the file size; returns the header and the byte offset of the data."""
+    counts checked against the file size unless ``check_sizes`` is False (the caller then calls ``check_counts``
+    itself, after the checks whose messages say more); returns the header and the byte offset of the data."""
     try:
         with open(path, "rb") as f:
             ply = PlyData._parse_header(f)
             offset = f.tell()
     except (PlyParseError, UnicodeDecodeError, ValueError) as e:
         raise fail(path, f"not a readable PLY file (header: {e})", "choose a 3DGS .ply file") from None
-    check_counts(path, ply, offset)
+    if check_sizes:
+        check_counts(path, ply, offset)
     return ply, offset
 
 
@@ -202,8 +204,11 @@ def _read_all(path: str, mmap: bool) -> PlyData:
 def read_ply(path: str | os.PathLike) -> SplatScene:
     """Read a standard 3DGS PLY into an activated SplatScene (see the module docstring for errors and repairs)."""
     path = check_input(path)
-    ply, offset = parse_header(path)
-    vertex, layout = _check_header(path, ply)
+    ply, offset = parse_header(path, check_sizes=False)
+    if any(e.count < 0 for e in ply.elements):
+        check_counts(path, ply, offset)  # a negative count: say so before the layout checks trip over it
+    vertex, layout = _check_header(path, ply)  # a wrong layout says more than a wrong size: checked first
+    check_counts(path, ply, offset)  # before any allocation
     if ply.text:
         data = _read_all(path, mmap=False)["vertex"].data
         chunks = (data[i:i + CHUNK_ROWS] for i in range(0, len(data), CHUNK_ROWS))
