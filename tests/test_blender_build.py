@@ -280,8 +280,8 @@ CLI_ONLY = {("core.preview", "matplotlib"): "draws the command line's preview PN
 # their absence (a fallback, or a message saying what to install).
 OPTIONAL = {"zstandard": "SPZ v4: official builds and the bpy module ship it; else compression.zstd",
             "compression": "SPZ v4: Python 3.14's compression.zstd (Linux distributions' builds)",
-            "OpenImageIO": "SOG's WebP images: official builds bundle it from 4.0; else Pillow",
-            "PIL": "SOG's WebP images where OpenImageIO is missing; without either the import says what to install"}
+            "OpenImageIO": "SOG's WebP outside Blender (in Blender, blender/webp_decoder.py registers Blender's own)",
+            "PIL": "SOG's WebP outside Blender where OpenImageIO is missing"}
 
 
 def _module_name(rel: str) -> str:

@@ -223,3 +223,35 @@ def test_spz_axes_is_ignored_for_other_formats(blender, tmp_path):
     write_ply(path, scene)
     assert bpy.ops.gs_ibl.import_splats(filepath=str(path), spz_axes="RDF") == {"FINISHED"}
     np.testing.assert_array_equal(_local_positions(bpy.context.active_object), scene.positions)
+
+
+def test_sog_imports_with_blenders_own_webp_decoder(blender, tmp_path, monkeypatch):
+    """SOG's WebP images decode through Blender's image loader where neither OpenImageIO nor Pillow is importable
+    (the bpy module from PyPI, distributions' builds): same bytes, same splats as the libraries give."""
+    from gs_ibl_addon.blender.webp_decoder import decode_webp
+    from gs_ibl_addon.core.formats import webp
+    from gs_ibl_addon.core.formats.sog import read_sog, write_sog
+    rng = np.random.default_rng(3)
+    rgba = rng.integers(0, 256, (21, 34, 4), dtype=np.uint8)
+    rgba[rgba[..., 3] == 0, :3] = 0  # libwebp drops RGB under alpha 0 (webp.py's note)
+    data = webp.encode_lossless(rgba)
+    np.testing.assert_array_equal(decode_webp(data), rgba)
+    with pytest.raises(ValueError, match="cannot be decoded"):
+        decode_webp(b"RIFF\x10\x00\x00\x00WEBPVP8L" + b"\x00" * 8)
+    scene = make_scene()
+    path = tmp_path / "scene.sog"
+    write_sog(path, scene)
+    webp.drop_decoder(decode_webp)
+    by_library = read_sog(path)
+    webp.use_decoder(decode_webp)
+    monkeypatch.setattr(webp, "_oiio", lambda: None)
+    monkeypatch.setattr(webp, "_pillow", lambda: None)
+    by_blender = read_sog(path)
+    for field in ("positions", "scales", "rotations", "opacities", "sh"):
+        np.testing.assert_array_equal(getattr(by_blender, field), getattr(by_library, field), err_msg=field)
+    assert bpy.ops.gs_ibl.import_splats(filepath=str(path)) == {"FINISHED"}
+    assert len(bpy.context.active_object.data.vertices) == scene.count
+    import gs_ibl_addon
+    gs_ibl_addon.unregister()
+    assert decode_webp not in webp._decoders
+    gs_ibl_addon.register()

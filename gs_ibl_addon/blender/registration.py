@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake, importer, overlay, panel, properties, splat_cache
+from . import bake, importer, overlay, panel, properties, splat_cache, webp_decoder
 
 _CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES)
 _MENUS = (*importer.MENUS, *panel.MENUS)
@@ -19,9 +19,11 @@ def register() -> None:
     splat_cache.register_handlers()
     bake.register_handlers()
     overlay.register_overlay()
+    webp_decoder.register()
 
 
 def unregister() -> None:
+    webp_decoder.unregister()
     overlay.unregister_overlay()
     bake.unregister_handlers()
     splat_cache.unregister_handlers()  # after the overlay: frees the renderers it drew with

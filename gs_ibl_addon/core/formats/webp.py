@@ -1,4 +1,5 @@
-"""Lossless WebP images as exact RGBA bytes (SOG's containers), through OpenImageIO, else Pillow.
+"""Lossless WebP images as exact RGBA bytes (SOG's containers): through a decoder the host application supplies
+(Blender's own image loader, registered by the extension: every Blender has it), else OpenImageIO, else Pillow.
 
 OpenImageIO reads and writes WebP (checked: PyPI openimageio 3.0.21 in our venv, Debian's 3.1.18 beside Blender
 5.2); Blender release builds are documented to bundle it (4.0 and later), but the bpy *module* on PyPI does not, so
@@ -12,8 +13,24 @@ from __future__ import annotations
 
 import os
 import tempfile
+from typing import Callable
 
 import numpy as np
+
+Decoder = Callable[[bytes], np.ndarray]  # WebP bytes -> (H, W, 4) uint8 RGBA, ValueError for an undecodable image
+_decoders: list[Decoder] = []  # supplied by the host application, tried first
+
+
+def use_decoder(decoder: Decoder) -> None:
+    """Decode WebP with ``decoder`` before OpenImageIO and Pillow (Blender registers its image loader: the bpy
+    module and distributions' builds may have neither library)."""
+    if decoder not in _decoders:
+        _decoders.insert(0, decoder)
+
+
+def drop_decoder(decoder: Decoder) -> None:
+    while decoder in _decoders:
+        _decoders.remove(decoder)
 
 
 class WebPUnavailable(RuntimeError):
@@ -44,6 +61,8 @@ def decode(data: bytes) -> np.ndarray:
     """(H, W, 4) uint8 RGBA of a WebP image given as bytes; ValueError for bytes that are not a WebP image."""
     if data[:4] != b"RIFF" or data[8:12] != b"WEBP":
         raise ValueError(f"not a WebP image (starts with {data[:12]!r})")
+    if _decoders:
+        return _decoders[0](data)
     oiio = _oiio()
     if oiio is not None:
         fd, tmp = tempfile.mkstemp(suffix=".webp")  # OpenImageIO's Python API reads files, not bytes
