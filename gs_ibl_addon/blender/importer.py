@@ -120,6 +120,10 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
             except (SplatFormatError, ValueError, OSError) as e:
                 self.report({"ERROR"}, str(e))
                 return {"CANCELLED"}
+            except MemoryError:
+                self.report({"ERROR"}, f"{path}: not enough memory to read this file: close other programs or "
+                                       "import a smaller or compressed version (.sog, .spz, compressed .ply)")
+                return {"CANCELLED"}
         for path, scene in scenes:
             name = os.path.splitext(os.path.basename(path))[0] or "Splats"
             matrix = import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale, path)
@@ -140,7 +144,8 @@ class GSIBL_FH_splats(bpy.types.FileHandler):
     bl_idname = "GSIBL_FH_splats"
     bl_label = "Gaussian Splatting"
     bl_import_operator = GSIBL_OT_import_splats.bl_idname
-    bl_file_extensions = ";".join(EXTENSIONS)
+    # not .json (a SOG folder's meta.json, choosable in File > Import): a handler for every dropped .json is too broad
+    bl_file_extensions = ";".join(e for e in EXTENSIONS if e != ".json")
 
     @classmethod
     def poll_drop(cls, context):
