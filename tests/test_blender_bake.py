@@ -278,3 +278,19 @@ def test_demo_script_runs(tmp_path):
     splats = np.asarray(OpenImageIO.ImageBuf(str(tmp_path / "splats.png")).get_pixels(OpenImageIO.FLOAT))
     assert splats.shape[:2] == (60, 80) and splats.mean() > 0.1
     assert (tmp_path / "demo.blend").is_file()
+
+
+def test_bake_refuses_a_size_that_does_not_fit_before_uploading(blender, tmp_path, write_3dgs_ply, monkeypatch):
+    """The panel's bake checks the face size against free memory before the splats are read or uploaded, and says
+    which size fits (the command line's check: core/limits.py)."""
+    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.core import limits
+    _import_shell(tmp_path, write_3dgs_ply)
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.face_size = 1024
+    monkeypatch.setattr(limits, "host_available", lambda: 64 << 20)  # 64 MiB free
+    uploads = splat_cache.uploads
+    with pytest.raises(RuntimeError, match=r"1024\^2 faces needs about .* use \d+ or less"):
+        bpy.ops.gs_ibl.bake_probe()  # the operator's ERROR report surfaces as RuntimeError in the bpy module
+    assert splat_cache.uploads == uploads and probe.gs_ibl_probe.world is None

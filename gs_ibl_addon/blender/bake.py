@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from ..core.bake import ProbeSettings, bake_probe
+from ..core.bake import ProbeSettings, bake_probe, check_fits_device
 from ..core.probe.latlong import cube_to_latlong
 from ..core.settings import method_from_blender
 from . import splat_cache
@@ -119,8 +119,8 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
                     progress: Callable[[str, float], None] | None = None):
     """Bake ``probe`` from ``splats`` (default: the probe's) and write the result into Blender.
 
-    Returns (ProbeResult, one-line report, hole warning or None). Raises ValueError/RuntimeError/OSError with a
-    message meant for the user.
+    Returns (ProbeResult, one-line report, hole warning or None). Raises ValueError/RuntimeError/OSError/MemoryError
+    with a message meant for the user.
     """
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
@@ -128,9 +128,12 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     if splats is None:
         raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
     t0 = time.perf_counter()
+    settings = probe_settings(probe.gs_ibl_probe)
+    check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
     cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
-    result = bake_probe(None, np.array(probe.matrix_world.translation, np.float64),
-                        probe_settings(probe.gs_ibl_probe), renderer=cached.renderer, progress=progress)
+    check_fits_device(settings, cached.renderer.ctx, cached.renderer.scene_count)
+    result = bake_probe(None, np.array(probe.matrix_world.translation, np.float64), settings,
+                        renderer=cached.renderer, progress=progress)
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]
     # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
@@ -210,7 +213,7 @@ def run_pending() -> None:
             _, text, warning = bake_into_world(scene, probe)
             last_auto_error = None
             print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
-        except (ValueError, RuntimeError, OSError) as e:
+        except (ValueError, RuntimeError, OSError, MemoryError) as e:
             last_auto_error = f"{probe_name}: {e}"
             probe.gs_ibl_probe.last_report = f"Automatic re-bake failed:\n{e}"
             print(f"GS-IBL (update when moved): {last_auto_error}")

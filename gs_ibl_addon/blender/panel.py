@@ -88,7 +88,7 @@ class GSIBL_OT_bake_probe(bpy.types.Operator):
 
         try:
             _result, text, warning = gb.bake_into_world(context.scene, probe, splats, progress)
-        except (ValueError, RuntimeError, OSError) as e:
+        except (ValueError, RuntimeError, OSError, MemoryError) as e:
             # Core errors carry a complete message (what, where, what to do); no traceback for the user.
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
