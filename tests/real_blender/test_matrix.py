@@ -66,12 +66,19 @@ def _build_inputs() -> dict[str, Path]:
     subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
                    capture_output=True, text=True)
     files = {"room": REPO / "samples" / "room.ply", "capture": CAPTURE,
-             "spz": OUT / "inputs" / "guitar.spz", "ply": OUT / "inputs" / "guitar.ply"}
+             "spz": OUT / "inputs" / "guitar.spz", "ply": OUT / "inputs" / "guitar.ply",
+             "spz4": OUT / "inputs" / "guitar.v4.spz"}
     files["spz"].parent.mkdir(exist_ok=True)
-    for key in ("spz", "ply"):
+    for key in ("spz", "ply", "spz4"):
         files[key].unlink(missing_ok=True)  # the CLI never overwrites
+    for key in ("spz", "ply"):
         subprocess.run([sys.executable, "-m", "gs_ibl_addon", "convert", str(CAPTURE), str(files[key])], cwd=REPO,
                        check=True, capture_output=True, text=True)
+    # SPZ version 4 (ZSTD streams: the reader needs zstandard, which not every Blender ships); the CLI writes 3
+    subprocess.run([sys.executable, "-c", "import sys; from gs_ibl_addon.core.formats import read_scene; "
+                    "from gs_ibl_addon.core.formats.spz import write_spz; "
+                    "write_spz(sys.argv[2], read_scene(sys.argv[1]), version=4)", str(CAPTURE), str(files["spz4"])],
+                   cwd=REPO, check=True, capture_output=True, text=True)
     return {"zip": zip_path, **files}
 
 
@@ -193,7 +200,7 @@ def test_entry(entry: Entry, tmp_path_factory):
     shutil.copy(HERE / "scenario.py", runner.host / "scenario.py")
     args = {"entry": entry.name, "work": str(runner.inner), "user_dir": str(runner.inner / "home"),
             "result": str(runner.inner / "result.json"),
-            "files": {k: inner[k] for k in ("room", "capture", "spz", "ply")}, "capture_count": CAPTURE_COUNT,
+            "files": {k: inner[k] for k in ("room", "capture", "spz", "ply", "spz4")}, "capture_count": CAPTURE_COUNT,
             "probe_in_room": [0.0, 0.45, 1.0], "face_size": 64, "albedo": 0.8, "size": 48,
             "eevee_samples": 4, "cycles_samples": 16, "gui_wait_s": 10.0}
     (runner.host / "args.json").write_text(json.dumps(args, indent=1))
