@@ -17,7 +17,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), ".."))
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from bench_common import append_csv, bench_scene, warm_up  # noqa: E402
+from bench_common import append_csv, bench_scene, gpu_clock, hold_gpu_clock, warm_up  # noqa: E402
 
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
@@ -35,9 +35,11 @@ def main() -> None:
     ap.add_argument("--extent", type=float, default=5.0, help="half size of the box of splats around the probe")
     ap.add_argument("--max-chunks", type=int, help="override the raster's chunk limit (experiments)")
     ap.add_argument("--target-groups", type=int, help="override the raster's workgroup target (experiments)")
+    ap.add_argument("--hold-clock", action="store_true", help="keep a CUDA context open (torch) to hold the SM clock")
     ap.add_argument("--csv", default=os.path.join(os.path.dirname(__file__), "..", "out", "bench", "renderer.csv"),
                     help="CSV to append to (copy it into docs/bench/ to publish a run)")
     args = ap.parse_args()
+    holder = hold_gpu_clock() if args.hold_clock else None
     ctx = get_context()
     import gs_ibl_addon.core.render.renderer as renderer_module
     if args.max_chunks:
@@ -45,14 +47,15 @@ def main() -> None:
     if args.target_groups:
         renderer_module.RASTER_TARGET_GROUPS = args.target_groups
     date = datetime.date.today().isoformat()
-    print(f"device: {ctx.device_name}, date {date}, SH degree {args.sh_degree}, median of {args.repeats}")
+    print(f"device: {ctx.device_name}, date {date}, SH degree {args.sh_degree}, median of {args.repeats}, "
+          f"clock held by CUDA: {holder is not None}")
     print("| splats | face | instances | " + " | ".join(STAGES) + " | wall ms |")
     print("|---" * (len(STAGES) + 4) + "|")
     rows = []
     for n in [int(x) for x in args.counts.split(",")]:
         t = time.perf_counter()
         scene = bench_scene(n, args.sh_degree, args.extent)
-        renderer = SplatRenderer(scene)
+        renderer = SplatRenderer(scene, ctx)
         upload_s = time.perf_counter() - t
         for face in [int(x) for x in args.faces.split(",")]:
             batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
@@ -63,7 +66,7 @@ def main() -> None:
             inst = runs[-1].instances
             print(f"| {n:,} | {face} | {inst:,} | " + " | ".join(f"{med[s]:.3f}" for s in STAGES) + f" | {wall:.1f} |",
                   flush=True)
-            rows.append({"device": ctx.device_name, "date": date, "splats": n, "face": face, "sh_degree": args.sh_degree,
+            rows.append({"device": ctx.device_name, "date": date, "sm_mhz": gpu_clock(), "splats": n, "face": face, "sh_degree": args.sh_degree,
                          "instances": inst, **{f"{s}_ms": round(med[s], 4) for s in STAGES}, "wall_ms": round(wall, 2),
                          "setup_s": round(upload_s, 2)})
         renderer.close()

@@ -155,7 +155,7 @@ def _filter_gpu(source, p: _Params, ctx, stages: _Stages
         frame.check()
     else:
         n = int(source.shape[1])
-        src = ctx.scratch(6 * n * n * 12, "probe-radiance")
+        src = g.scratch(ctx, 6 * n * n * 12, "probe-radiance")
         src.write(np.ascontiguousarray(source, np.float32))
         stages.timings["upload"] = (time.perf_counter() - t0) * 1e3
     try:

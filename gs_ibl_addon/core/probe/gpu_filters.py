@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import cubemap
 from ..vk import Buffer, Recorder, get_context
-from ..vk.compute import Program, groups
+from ..vk.compute import Program, groups, scratch
 from ..vk.kernels import KERNELS
 from .box import box_level_size, halving_sizes
 from .convolve import check_steps
@@ -94,7 +94,7 @@ class _Scratch:
             self.buffers.pop().close()
 
     def empty(self, nbytes: int, name: str) -> Buffer:
-        b = self.ctx.scratch(nbytes, name)
+        b = scratch(self.ctx, nbytes, name)
         self.buffers.append(b)
         return b
 
@@ -141,7 +141,7 @@ class GpuCube:
             self.ctx = cube.ctx
             self.size = n = cube.face_size
             self.buffer = Buffer(self.ctx, 6 * n * n * 12, "probe-radiance")
-            with self.ctx.scratch(SH_GROUPS_MAX * 4, "probe-hole-partial") as hole:
+            with scratch(self.ctx, SH_GROUPS_MAX * 4, "probe-hole-partial") as hole:
                 with Recorder(self.ctx) as rec:
                     record_split(rec, cube.image, self.buffer, hole, n)
                 self.hole_fraction = hole_fraction(hole, n)

@@ -17,7 +17,7 @@ The instance list is sized from the previous frame; if a frame needs more, it is
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np

@@ -16,7 +16,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .context import VulkanContext
+from importlib import resources
+
+from .context import VulkanContext, VulkanUnavailable
 from .kernels import Kernel
 
 _serial = itertools.count(1)
@@ -27,7 +29,7 @@ STAGING_MAX = 64 << 20  # the kept staging buffers grow to this at most; larger 
 class Buffer:
     """A storage buffer. Device-local where the device has such memory; mapped directly when it is host-visible.
 
-    ``with Buffer(ctx, n) as b:`` destroys it when the block ends; a pooled buffer (``ctx.scratch``) goes back to
+    ``with Buffer(ctx, n) as b:`` destroys it when the block ends; a pooled buffer (``scratch``) goes back to
     the context's pool instead.
     """
 
@@ -79,7 +81,7 @@ class Buffer:
             np.frombuffer(self._map, np.uint8, raw.nbytes, offset)[:] = np.frombuffer(raw, np.uint8)
             return
         with self.ctx.lock:  # through the kept staging buffer, in pieces of at most STAGING_MAX bytes
-            staging = self.ctx.staging(min(raw.nbytes, STAGING_MAX), "up")
+            staging = staging(self.ctx, min(raw.nbytes, STAGING_MAX), "up")
             for start in range(0, raw.nbytes, STAGING_MAX):
                 piece = raw[start:start + STAGING_MAX]
                 np.frombuffer(staging._map, np.uint8, piece.nbytes)[:] = np.frombuffer(piece, np.uint8)
@@ -99,7 +101,7 @@ class Buffer:
         out = np.empty(n, dt)
         dst = out.view(np.uint8)
         with self.ctx.lock:
-            staging = self.ctx.staging(min(nbytes, STAGING_MAX), "down")
+            staging = staging(self.ctx, min(nbytes, STAGING_MAX), "down")
             for start in range(0, nbytes, STAGING_MAX):
                 size = min(STAGING_MAX, nbytes - start)
                 with Recorder(self.ctx) as rec:
@@ -237,6 +239,47 @@ class Pipeline:
         vk.vkDestroyDescriptorSetLayout(dev, self.set_layout, None)
 
 
+def _load_spirv(name: str) -> bytes:
+    path = resources.files(__package__.rsplit(".", 2)[0]).joinpath("shaders", f"{name}.spv")
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise VulkanUnavailable(f"compiled shader {path} is missing; run scripts/build_shaders.py "
+                                "(needs glslc: `apt-get install glslc`)") from None
+
+
+def get_pipeline(ctx: VulkanContext, kernel: Kernel) -> Pipeline:
+    """The compute pipeline of a kernels.Kernel (its SPIR-V, bindings and push layout), created once per context."""
+    with ctx.lock:
+        p = ctx._pipelines.get(kernel)
+        if p is None:
+            p = ctx._pipelines[kernel] = Pipeline(ctx, kernel, _load_spirv(kernel.name))
+        return p
+
+
+def staging(ctx: VulkanContext, nbytes: int, direction: str) -> Buffer:
+    """The context's staging buffer for ``direction`` ('up' or 'down'), grown to at least ``nbytes`` and kept."""
+    b = ctx._staging.get(direction)
+    if b is None or b.nbytes < nbytes:
+        if b is not None:
+            b.destroy()
+        size = 1 << max(16, (int(nbytes) - 1).bit_length())
+        b = ctx._staging[direction] = Buffer.staging(ctx, size, cached=direction == "down")
+    return b
+
+
+def scratch(ctx: VulkanContext, nbytes: int, name: str = "scratch") -> Buffer:
+    """A pooled storage buffer of at least ``nbytes`` (sizes rounded up to a power of two); ``close()`` gives it
+    back to the context's pool and the next request of that size class reuses its memory."""
+    size = 1 << max(8, (max(1, int(nbytes)) - 1).bit_length())
+    free = ctx._scratch.get(size)
+    if free:
+        b = free.pop()
+        b.name = name
+        return b
+    return Buffer(ctx, size, name, pooled=True)
+
+
 def groups(n_items: int, group_size: int, ctx: VulkanContext) -> tuple[int, int]:
     """Workgroup counts (x, y) covering ``n_items``; shaders linearise with gl_WorkGroupID.y * gl_NumWorkGroups.x."""
     g = max(1, -(-int(n_items) // group_size))
@@ -364,7 +407,7 @@ class Recorder:
         gx, gy = (group_count, 1) if isinstance(group_count, int) else group_count
         if gx == 0 or gy == 0:
             return
-        pipeline = self.ctx.pipeline(kernel)
+        pipeline = get_pipeline(self.ctx, kernel)
         data = kernel.pack(push)
         vk.vkCmdBindPipeline(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle)
         sets = [pipeline.descriptor_set(buffers)]

@@ -9,7 +9,6 @@ from __future__ import annotations
 import os
 import sys
 import threading
-from importlib import resources
 
 
 def _install_hint(platform: str = sys.platform) -> str:
@@ -88,9 +87,10 @@ class VulkanContext:
         self.command_pool = vk.vkCreateCommandPool(self.device, pci, None)
         self._pipelines: dict[object, object] = {}
         self.lock = threading.RLock()
-        # Frame resources, made once and reused by every submission (compute.Recorder takes and returns them):
-        # command buffers, fences, timestamp query pools, two staging buffers (host -> GPU, GPU -> host) that grow
-        # to the largest transfer and stay, and a pool of scratch buffers by size.
+        # Frame resources, made once and reused by every submission: command buffers, fences, timestamp query
+        # pools, two staging buffers (host -> GPU, GPU -> host) that grow to the largest transfer and stay, and a
+        # pool of scratch buffers by size. compute.py makes and takes them (compute.staging, compute.scratch,
+        # compute.pipeline); this module only holds them and destroys them with the device.
         self._free_cmds: list = []
         self._free_fences: list = []
         self._free_queries: list = []
@@ -163,38 +163,6 @@ class VulkanContext:
                 return i
         raise VulkanUnavailable(f"{self.device_name}: no memory type with flags {flags:#x}")
 
-    def pipeline(self, kernel):
-        """The compute pipeline of a kernels.Kernel (its SPIR-V, bindings and push layout), created once."""
-        from .compute import Pipeline
-        with self.lock:
-            p = self._pipelines.get(kernel)
-            if p is None:
-                p = self._pipelines[kernel] = Pipeline(self, kernel, _load_spirv(kernel.name))
-            return p
-
-    def staging(self, nbytes: int, direction: str):
-        """The context's staging buffer for ``direction`` ('up' or 'down'), grown to at least ``nbytes`` and kept."""
-        from .compute import Buffer
-        b = self._staging.get(direction)
-        if b is None or b.nbytes < nbytes:
-            if b is not None:
-                b.destroy()
-            size = 1 << max(16, (int(nbytes) - 1).bit_length())
-            b = self._staging[direction] = Buffer.staging(self, size, cached=direction == "down")
-        return b
-
-    def scratch(self, nbytes: int, name: str = "scratch"):
-        """A pooled storage buffer of at least ``nbytes`` (sizes rounded up to a power of two): give it back with
-        ``release`` and the next request of that size class reuses its memory."""
-        from .compute import Buffer
-        size = 1 << max(8, (max(1, int(nbytes)) - 1).bit_length())
-        free = self._scratch.get(size)
-        if free:
-            b = free.pop()
-            b.name = name
-            return b
-        return Buffer(self, size, name, pooled=True)
-
     def release(self, buffer) -> None:
         """Return a scratch buffer to the pool (its contents are kept until reused)."""
         self._scratch.setdefault(buffer.nbytes, []).append(buffer)
@@ -246,15 +214,6 @@ class TransferStats:
 
     def since(self, before: dict[str, int]) -> dict[str, int]:
         return {k: v - before.get(k, 0) for k, v in vars(self).items()}
-
-
-def _load_spirv(name: str) -> bytes:
-    path = resources.files(__package__.rsplit(".", 2)[0]).joinpath("shaders", f"{name}.spv")
-    try:
-        return path.read_bytes()
-    except FileNotFoundError:
-        raise VulkanUnavailable(f"compiled shader {path} is missing; run scripts/build_shaders.py "
-                                "(needs glslc: `apt-get install glslc`)") from None
 
 
 _CONTEXTS: dict[str | None, VulkanContext] = {}
