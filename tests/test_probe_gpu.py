@@ -248,3 +248,14 @@ def test_filter_probe_runs_ggx_on_gpu(ctx):
     assert a.roughness == b.roughness == [0.0, 0.4, 1.0]
     assert a.settings["stage_devices"]["ggx"] == "gpu" and b.settings["stage_devices"]["ggx"] == "cpu"
     assert a.timings_ms["ggx"] > 0
+
+
+@pytest.mark.parametrize("name,width,height", [("random", 64, None), ("patch", 128, 64), ("smooth", 50, 17)])
+def test_cube_to_latlong(ctx, gpu, name, width, height):
+    from gs_ibl_addon.core.probe import cube_to_latlong
+    cube = CUBES[name]()
+    out, timings = gpu.gpu_cube_to_latlong(cube, width, height, ctx=ctx)
+    ref = cube_to_latlong(cube, width, height)
+    assert out.shape == ref.shape
+    close(out, ref)
+    check_timings(ctx, timings, ("latlong",))

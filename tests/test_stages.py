@@ -111,3 +111,11 @@ def test_another_device_request_leaves_the_shared_context_open():
         pytest.skip("no CPU Vulkan device here")
     assert shared.device is not None and get_context() is shared
     assert other.device is not None
+
+
+def test_latlong_of_a_frame_matches_the_read_back_cube(renderer):
+    from gs_ibl_addon.core.probe import cube_to_latlong
+    frame = renderer.render(ViewBatch.cubemap([0.2, 0.1, 0.0], 16)).frame
+    img, _ = gf.gpu_cube_to_latlong(frame, 64)
+    ref = cube_to_latlong(np.stack(frame.read_images())[..., :3], 64)
+    assert _rel(img, ref) < 2e-5

@@ -7,6 +7,7 @@
   gpu_exact_irradiance  -> reference.exact_irradiance of          shaders/probe_downsample.comp + probe_integrate.comp
                            box.downsample_cube^k (downsample_to)
   gpu_ggx_prefilter     -> ggx.ggx_prefilter                      shaders/probe_downsample.comp + probe_ggx.comp
+  gpu_cube_to_latlong   -> latlong.cube_to_latlong                shaders/probe_latlong.comp
 
 Cubes travel as packed float32 RGB (alpha is split off first: holes are black, as in numpy). Every filter takes
 a numpy cube, a GpuCube (``upload_cube``: several filters of one cube then share one upload) or a GpuFrame straight
@@ -315,6 +316,25 @@ def gpu_exact_irradiance(cube, size: int, downsample_to: int | None = 32,
             _record_exact(rec, scratch, src, n, out, size, k)
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
+
+
+def gpu_cube_to_latlong(cube, width: int, height: int | None = None,
+                        ctx=None) -> tuple[np.ndarray, dict[str, float]]:
+    """(height, width, 3) lat-long image of a radiance cube (numpy, GpuCube or GpuFrame) on the GPU; numpy
+    reference: latlong.cube_to_latlong (same seamless bilinear lookup, same mapping)."""
+    if width < 2:
+        raise ValueError(f"lat-long width must be >= 2, got {width}")
+    height = max(1, width // 2) if height is None else int(height)
+    ctx = _context(cube, ctx)
+    with _Scratch(ctx) as scratch:
+        out = scratch.empty(width * height * 12, "probe-latlong")
+        with Recorder(ctx, timestamps=True) as rec:
+            src, n = scratch.source(rec, cube)
+            rec.dispatch(KERNELS["probe_latlong"], [src, out], groups(width * height, 64, ctx),
+                         n=n, width=width, height=height)
+            rec.timestamp("latlong")
+        img = out.read(np.float32, width * height * 3).reshape(height, width, 3).astype(np.float64)
+    return img, rec.timings_ms
 
 
 def _mip_chain(rec: Recorder, scratch: _Scratch, src: Buffer, n: int) -> tuple[Buffer, int]:

@@ -72,6 +72,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("probe_cube_read", "Cube Out", "n m", (64,)),
     _k("probe_integrate", "Cube Texels Out", "n m", (128,)),
     _k("probe_ggx", "Mips Samples Lods Levels Out", "n n_mips n_levels total", (64,)),
+    _k("probe_latlong", "Cube Out", "n width height", (64,)),
 )}
 
 
