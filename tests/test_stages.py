@@ -119,3 +119,17 @@ def test_latlong_of_a_frame_matches_the_read_back_cube(renderer):
     img, _ = gf.gpu_cube_to_latlong(frame, 64)
     ref = cube_to_latlong(np.stack(frame.read_images())[..., :3], 64)
     assert _rel(img, ref) < 2e-5
+
+
+def test_device_local_buffers_go_through_the_kept_staging_buffers(ctx, monkeypatch):
+    # A discrete GPU's large buffers are not mapped: writes and reads go through the context's two staging buffers,
+    # in pieces of at most STAGING_MAX. lavapipe maps everything, so the path is forced here by unmapping.
+    from gs_ibl_addon.core.vk import Buffer, compute
+    monkeypatch.setattr(compute, "STAGING_MAX", 4096)
+    data = np.random.default_rng(1).random(5000).astype(np.float32)  # 20000 bytes: five pieces
+    with Buffer(ctx, data.nbytes + 64, "device-local") as b:
+        ctx.vk.vkUnmapMemory(ctx.device, b.memory)
+        b._map = None
+        b.write(data, 64)
+        np.testing.assert_array_equal(b.read(np.float32, 5000, 64), data)
+    assert ctx._staging["up"].nbytes >= 4096 and ctx._staging["down"].nbytes >= 4096

@@ -81,12 +81,12 @@ class Buffer:
             np.frombuffer(self._map, np.uint8, raw.nbytes, offset)[:] = np.frombuffer(raw, np.uint8)
             return
         with self.ctx.lock:  # through the kept staging buffer, in pieces of at most STAGING_MAX bytes
-            staging = staging(self.ctx, min(raw.nbytes, STAGING_MAX), "up")
+            stage = staging(self.ctx, min(raw.nbytes, STAGING_MAX), "up")
             for start in range(0, raw.nbytes, STAGING_MAX):
                 piece = raw[start:start + STAGING_MAX]
-                np.frombuffer(staging._map, np.uint8, piece.nbytes)[:] = np.frombuffer(piece, np.uint8)
+                np.frombuffer(stage._map, np.uint8, piece.nbytes)[:] = np.frombuffer(piece, np.uint8)
                 with Recorder(self.ctx) as rec:
-                    rec.copy(staging, self, piece.nbytes, dst_offset=offset + start)
+                    rec.copy(stage, self, piece.nbytes, dst_offset=offset + start)
 
     def read(self, dtype=np.uint8, count: int | None = None, offset: int = 0) -> np.ndarray:
         dt = np.dtype(dtype)
@@ -101,12 +101,12 @@ class Buffer:
         out = np.empty(n, dt)
         dst = out.view(np.uint8)
         with self.ctx.lock:
-            staging = staging(self.ctx, min(nbytes, STAGING_MAX), "down")
+            stage = staging(self.ctx, min(nbytes, STAGING_MAX), "down")
             for start in range(0, nbytes, STAGING_MAX):
                 size = min(STAGING_MAX, nbytes - start)
                 with Recorder(self.ctx) as rec:
-                    rec.copy(self, staging, size, src_offset=offset + start)
-                dst[start:start + size] = np.frombuffer(staging._map, np.uint8, size)  # one memcpy
+                    rec.copy(self, stage, size, src_offset=offset + start)
+                dst[start:start + size] = np.frombuffer(stage._map, np.uint8, size)  # one memcpy
         return out
 
     @staticmethod
