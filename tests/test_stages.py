@@ -124,8 +124,8 @@ def test_latlong_of_a_frame_matches_the_read_back_cube(renderer):
 def test_device_local_buffers_go_through_the_kept_staging_buffers(ctx, monkeypatch):
     # A discrete GPU's large buffers are not mapped: writes and reads go through the context's two staging buffers,
     # in pieces of at most STAGING_MAX. lavapipe maps everything, so the path is forced here by unmapping.
-    from gs_ibl_addon.core.vk import Buffer, compute
-    monkeypatch.setattr(compute, "STAGING_MAX", 4096)
+    from gs_ibl_addon.core.vk import Buffer, buffers
+    monkeypatch.setattr(buffers, "STAGING_MAX", 4096)
     data = np.random.default_rng(1).random(5000).astype(np.float32)  # 20000 bytes: five pieces
     with Buffer(ctx, data.nbytes + 64, "device-local") as b:
         ctx.vk.vkUnmapMemory(ctx.device, b.memory)

@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import cubemap
 from ..vk import Buffer, Recorder, get_context
-from ..vk.compute import Program, groups, scratch
+from ..vk import Program, groups, scratch
 from ..vk.kernels import KERNELS
 from .box import box_level_size, halving_sizes
 from .convolve import check_steps

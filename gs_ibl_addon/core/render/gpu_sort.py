@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..vk import Buffer, Recorder
-from ..vk.compute import groups
+from ..vk import groups
 from ..vk.constants import SCAN_BLOCK, SORT_BLOCK
 from ..vk.kernels import KERNELS
 

@@ -23,8 +23,7 @@ from functools import cached_property
 import numpy as np
 
 from ..scene import SplatScene
-from ..vk import Buffer, Recorder, get_context
-from ..vk.compute import Program, groups
+from ..vk import Buffer, Program, Recorder, get_context, groups
 from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
 from ..vk.kernels import KERNELS
 from .gpu_sort import RadixSorter, Scanner

@@ -89,15 +89,15 @@ class VulkanContext:
         self.lock = threading.RLock()
         # Frame resources, made once and reused by every submission: command buffers, fences, timestamp query
         # pools, two staging buffers (host -> GPU, GPU -> host) that grow to the largest transfer and stay, and a
-        # pool of scratch buffers by size. compute.py makes and takes them (compute.staging, compute.scratch,
-        # compute.pipeline); this module only holds them and destroys them with the device.
+        # pool of scratch buffers by size. buffers.py, pipelines.py and commands.py make and take them; this module
+        # only holds them and destroys them with the device.
         self._free_cmds: list = []
         self._free_fences: list = []
         self._free_queries: list = []
         self._staging: dict[str, object] = {}
         self._scratch: dict[int, list] = {}
         # Descriptor-set generation: bumped when a pipeline's descriptor pool is reset, which invalidates recorded
-        # command buffers (compute.Program checks it before each submission).
+        # command buffers (commands.Program checks it before each submission).
         self.epoch = 0
         # Stage objects cached per context (tables uploaded once, recorded programs), closed with it.
         self.cache: dict[object, object] = {}

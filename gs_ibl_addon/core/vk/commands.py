@@ -1,0 +1,270 @@
+"""Recording and submitting: the Recorder (one-shot: ``with Recorder(ctx) as r:`` submits and waits) and the
+Program (a recording submitted again and again). Command buffers, fences and query pools come from the context's
+pools and go back to them; GPU timings come from timestamp queries.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from .context import VulkanContext
+from .kernels import Kernel
+from .pipelines import Buffer, get_pipeline
+
+_NO_TIMEOUT = 0xFFFFFFFFFFFFFFFF
+
+
+def groups(n_items: int, group_size: int, ctx: VulkanContext) -> tuple[int, int]:
+    """Workgroup counts (x, y) covering ``n_items``; shaders linearise with gl_WorkGroupID.y * gl_NumWorkGroups.x."""
+    g = max(1, -(-int(n_items) // group_size))
+    mx = min(ctx.max_workgroups[0], 65535)
+    if g <= mx:
+        return g, 1
+    return mx, -(-g // mx)
+
+
+MAX_STAMPS = 64
+
+
+def _take_query_pool(ctx: VulkanContext):
+    if ctx._free_queries:
+        return ctx._free_queries.pop()
+    vk = ctx.vk
+    qpci = vk.VkQueryPoolCreateInfo(queryType=vk.VK_QUERY_TYPE_TIMESTAMP, queryCount=MAX_STAMPS)
+    return vk.vkCreateQueryPool(ctx.device, qpci, None)
+
+
+def _take_command_buffer(ctx: VulkanContext):
+    if ctx._free_cmds:
+        return ctx._free_cmds.pop()
+    vk = ctx.vk
+    cbai = vk.VkCommandBufferAllocateInfo(commandPool=ctx.command_pool, level=vk.VK_COMMAND_BUFFER_LEVEL_PRIMARY,
+                                          commandBufferCount=1)
+    return vk.vkAllocateCommandBuffers(ctx.device, cbai)[0]
+
+
+def _submit(ctx: VulkanContext, cmd):
+    """Submit ``cmd`` and return its fence (from the context's pool) without waiting."""
+    vk = ctx.vk
+    with ctx.lock:
+        fence = ctx._free_fences.pop() if ctx._free_fences else vk.vkCreateFence(ctx.device, vk.VkFenceCreateInfo(), None)
+        cmds = [cmd]
+        si = vk.VkSubmitInfo(commandBufferCount=1, pCommandBuffers=cmds)
+        sis = [si]
+        try:
+            vk.vkQueueSubmit(ctx.queue, 1, sis, fence)
+        except BaseException:
+            ctx._free_fences.append(fence)
+            raise
+        ctx.stats.submits += 1
+        return fence
+
+
+def _wait(ctx: VulkanContext, fence) -> None:
+    """Wait for a fence from _submit and give it back to the context."""
+    vk = ctx.vk
+    fences = [fence]
+    try:
+        vk.vkWaitForFences(ctx.device, 1, fences, vk.VK_TRUE, _NO_TIMEOUT)
+    finally:
+        vk.vkResetFences(ctx.device, 1, fences)
+        with ctx.lock:
+            ctx._free_fences.append(fence)
+
+
+def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
+    _wait(ctx, _submit(ctx, cmd))
+
+
+def _read_stamps(ctx: VulkanContext, query_pool, labels: list[str]) -> dict[str, float]:
+    vk = ctx.vk
+    n = len(labels)
+    if query_pool is None or n < 2:
+        return {}
+    data = vk.ffi.new("uint64_t[]", n)
+    vk.vkGetQueryPoolResults(ctx.device, query_pool, 0, n, n * 8, data, 8,
+                             vk.VK_QUERY_RESULT_64_BIT | vk.VK_QUERY_RESULT_WAIT_BIT)
+    ms = np.frombuffer(vk.ffi.buffer(data, n * 8), np.uint64).astype(np.float64) * ctx.timestamp_period_ns * 1e-6
+    out: dict[str, float] = {}
+    for i in range(1, n):
+        out[labels[i]] = out.get(labels[i], 0.0) + float(ms[i] - ms[i - 1])
+    out["total"] = float(ms[-1] - ms[0])
+    return out
+
+
+class Recorder:
+    """Records dispatches into one command buffer; ``with Recorder(ctx) as r:`` submits and waits on exit.
+
+    A full compute barrier opens the recording (earlier submissions' writes are visible) and follows every
+    dispatch/copy/fill, so consecutive stages see each other's writes. ``timestamp(label)`` marks the end of a
+    stage; ``timings_ms`` holds stage durations after submission. ``program()`` instead of submitting keeps the
+    recording as a Program to submit any number of times.
+    """
+
+    def __init__(self, ctx: VulkanContext, timestamps: bool = False, reusable: bool = False) -> None:
+        vk = self.vk = ctx.vk
+        self.ctx = ctx
+        self.reusable = reusable
+        self.epoch = ctx.epoch
+        self.buffers: dict[int, Buffer] = {}  # every buffer the recording uses (a Program checks they live)
+        self.cmd = _take_command_buffer(ctx)
+        flags = 0 if reusable else vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT
+        cbbi = vk.VkCommandBufferBeginInfo(flags=flags)
+        vk.vkBeginCommandBuffer(self.cmd, cbbi)
+        self.labels: list[str] = []
+        self.timings_ms: dict[str, float] = {}
+        self.query_pool = None
+        self._barrier()
+        if timestamps and ctx.timestamps_supported:
+            self.query_pool = _take_query_pool(ctx)
+            vk.vkCmdResetQueryPool(self.cmd, self.query_pool, 0, MAX_STAMPS)
+            self.timestamp("start")
+
+    def _barrier(self) -> None:
+        vk = self.vk
+        access = (vk.VK_ACCESS_SHADER_READ_BIT | vk.VK_ACCESS_SHADER_WRITE_BIT | vk.VK_ACCESS_TRANSFER_READ_BIT
+                  | vk.VK_ACCESS_TRANSFER_WRITE_BIT)
+        mb = vk.VkMemoryBarrier(srcAccessMask=access, dstAccessMask=access)
+        mbs = [mb]
+        stages = vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_TRANSFER_BIT
+        vk.vkCmdPipelineBarrier(self.cmd, stages, stages, 0, 1, mbs, 0, None, 0, None)
+
+    def _use(self, *buffers: Buffer) -> None:
+        for b in buffers:
+            self.buffers[b.serial] = b
+
+    def dispatch(self, kernel: Kernel, buffers: Sequence[Buffer], group_count: tuple[int, int] | int,
+                 **push) -> None:
+        """Run ``kernel`` over ``group_count`` workgroups with ``buffers`` bound in its table order; ``push`` names
+        every push-constant field of the kernel (kernels.py)."""
+        vk = self.vk
+        gx, gy = (group_count, 1) if isinstance(group_count, int) else group_count
+        if gx == 0 or gy == 0:
+            return
+        pipeline = get_pipeline(self.ctx, kernel)
+        data = kernel.pack(push)
+        vk.vkCmdBindPipeline(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle)
+        sets = [pipeline.descriptor_set(buffers)]
+        self._use(*buffers)
+        vk.vkCmdBindDescriptorSets(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout, 0, 1, sets, 0, None)
+        if data:
+            raw = vk.ffi.new("char[]", data)
+            vk.vkCmdPushConstants(self.cmd, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, len(data), raw)
+            del raw
+        vk.vkCmdDispatch(self.cmd, gx, gy, 1)
+        self._barrier()
+
+    def fill(self, buffer: Buffer, value: int = 0, nbytes: int | None = None) -> None:
+        size = buffer.nbytes if nbytes is None else (int(nbytes) + 3) // 4 * 4
+        if size == 0:
+            return
+        self._use(buffer)
+        self.vk.vkCmdFillBuffer(self.cmd, buffer.handle, 0, size, value & 0xFFFFFFFF)
+        self._barrier()
+
+    def copy(self, src: Buffer, dst: Buffer, nbytes: int, src_offset: int = 0, dst_offset: int = 0) -> None:
+        vk = self.vk
+        self._use(src, dst)
+        regions = [vk.VkBufferCopy(srcOffset=src_offset, dstOffset=dst_offset, size=nbytes)]
+        vk.vkCmdCopyBuffer(self.cmd, src.handle, dst.handle, 1, regions)
+        self._barrier()
+
+    def timestamp(self, label: str) -> None:
+        if self.query_pool is None or len(self.labels) >= MAX_STAMPS:
+            return
+        self.vk.vkCmdWriteTimestamp(self.cmd, self.vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                                    self.query_pool, len(self.labels))
+        self.labels.append(label)
+
+    def submit(self) -> dict[str, float]:
+        vk, ctx = self.vk, self.ctx
+        vk.vkEndCommandBuffer(self.cmd)
+        try:
+            _submit_and_wait(ctx, self.cmd)
+            self.timings_ms = _read_stamps(ctx, self.query_pool, self.labels)
+        finally:
+            self._give_back()
+        return self.timings_ms
+
+    def program(self) -> "Program":
+        """End the recording and keep it: Program.run() submits it again and again."""
+        self.vk.vkEndCommandBuffer(self.cmd)
+        prog = Program(self.ctx, self.cmd, self.query_pool, list(self.labels), list(self.buffers.values()), self.epoch)
+        self.cmd = self.query_pool = None
+        return prog
+
+    def _give_back(self) -> None:
+        ctx = self.ctx
+        if self.cmd is not None:
+            self.vk.vkResetCommandBuffer(self.cmd, 0)
+            ctx._free_cmds.append(self.cmd)
+            self.cmd = None
+        if self.query_pool is not None:
+            ctx._free_queries.append(self.query_pool)
+            self.query_pool = None
+
+    def __enter__(self) -> "Recorder":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.submit()
+        elif self.cmd is not None:
+            self.vk.vkEndCommandBuffer(self.cmd)
+            self._give_back()
+
+
+class Program:
+    """A recorded command buffer, submitted again with ``run()`` (waits; returns GPU timings per stage).
+
+    It stays valid while every buffer it uses lives and the context's descriptor sets were not reset
+    (``valid``); its owner re-records when not. ``close()`` returns its command buffer to the context.
+    """
+
+    def __init__(self, ctx: VulkanContext, cmd, query_pool, labels: list[str], buffers: list[Buffer],
+                 epoch: int) -> None:
+        self.ctx, self.cmd, self.query_pool, self.labels = ctx, cmd, query_pool, labels
+        self.buffers, self.epoch = buffers, epoch
+
+    @property
+    def valid(self) -> bool:
+        return (self.cmd is not None and self.ctx.device is not None and self.epoch == self.ctx.epoch
+                and all(b.handle is not None for b in self.buffers))
+
+    def run(self) -> dict[str, float]:
+        self.start()
+        return self.wait()
+
+    def start(self) -> None:
+        """Submit without waiting (the queue runs submissions in order, each opening with a full barrier, so a
+        program started next sees this one's writes); ``wait()`` before reading what it wrote."""
+        if not self.valid:
+            raise RuntimeError("recorded program is stale (a buffer it uses was freed); record it again")
+        if getattr(self, "_fence", None) is not None:
+            raise RuntimeError("program started twice without a wait")
+        self._fence = _submit(self.ctx, self.cmd)
+
+    def wait(self) -> dict[str, float]:
+        """Wait for the submission from start(); returns its GPU timings per stage."""
+        fence, self._fence = getattr(self, "_fence", None), None
+        if fence is None:
+            raise RuntimeError("program waited on without a start")
+        _wait(self.ctx, fence)
+        return _read_stamps(self.ctx, self.query_pool, self.labels)
+
+    @property
+    def running(self) -> bool:
+        return getattr(self, "_fence", None) is not None
+
+    def close(self) -> None:
+        ctx = self.ctx
+        if self.running and ctx.device is not None:
+            self.wait()
+        if self.cmd is not None and ctx.device is not None:
+            ctx.vk.vkResetCommandBuffer(self.cmd, 0)
+            ctx._free_cmds.append(self.cmd)
+            if self.query_pool is not None:
+                ctx._free_queries.append(self.query_pool)
+        self.cmd = self.query_pool = None
+        self.buffers = []

@@ -1,0 +1,104 @@
+"""Compute pipelines, one per kernels.Kernel and context, with their descriptor sets cached by buffer."""
+from __future__ import annotations
+
+from importlib import resources
+from typing import Protocol, Sequence
+
+from .context import VulkanContext, VulkanUnavailable
+from .kernels import Kernel
+
+
+class Buffer(Protocol):
+    """What binding and recording need of a buffers.Buffer (named here so this layer does not import that one)."""
+    handle: object
+    serial: int
+    nbytes: int
+
+
+class Pipeline:
+    """The compute pipeline of one kernels.Kernel: set 0 = its storage buffers, plus its push-constant block."""
+
+    POOL_SETS = 1024
+
+    def __init__(self, ctx: VulkanContext, kernel: Kernel, spirv: bytes) -> None:
+        vk = ctx.vk
+        self.ctx, self.kernel, self.name = ctx, kernel, kernel.name
+        self.n_buffers, self.push_size = len(kernel.buffers), kernel.push_size
+        bindings = [vk.VkDescriptorSetLayoutBinding(binding=i, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                                    descriptorCount=1, stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT)
+                    for i in range(self.n_buffers)]
+        dslci = vk.VkDescriptorSetLayoutCreateInfo(bindingCount=len(bindings), pBindings=bindings)
+        self.set_layout = vk.vkCreateDescriptorSetLayout(ctx.device, dslci, None)
+        set_layouts = [self.set_layout]
+        ranges = ([vk.VkPushConstantRange(stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT, offset=0, size=self.push_size)]
+                  if self.push_size else [])
+        plci = vk.VkPipelineLayoutCreateInfo(setLayoutCount=1, pSetLayouts=set_layouts,
+                                             pushConstantRangeCount=len(ranges), pPushConstantRanges=ranges or None)
+        self.layout = vk.vkCreatePipelineLayout(ctx.device, plci, None)
+        code = bytes(spirv)  # the binding casts pCode from a bytes object itself
+        smci = vk.VkShaderModuleCreateInfo(codeSize=len(code), pCode=code)
+        self.module = vk.vkCreateShaderModule(ctx.device, smci, None)
+        entry = "main"
+        stage = vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_COMPUTE_BIT, module=self.module, pName=entry)
+        cpci = vk.VkComputePipelineCreateInfo(stage=stage, layout=self.layout)
+        cpcis = [cpci]
+        self.handle = vk.vkCreateComputePipelines(ctx.device, None, 1, cpcis, None)[0]
+        del code, stage, cpci, cpcis, entry
+        pool_sizes = [vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                              descriptorCount=max(1, self.n_buffers) * self.POOL_SETS)]
+        dpci = vk.VkDescriptorPoolCreateInfo(maxSets=self.POOL_SETS, poolSizeCount=1, pPoolSizes=pool_sizes)
+        self.pool = vk.vkCreateDescriptorPool(ctx.device, dpci, None)
+        self._sets: dict[tuple, object] = {}
+
+    def descriptor_set(self, buffers: Sequence[Buffer]):
+        vk = self.ctx.vk
+        if len(buffers) != self.n_buffers:
+            raise ValueError(f"kernel {self.name} binds {self.kernel.buffers}, got {len(buffers)} buffers")
+        key = tuple(b.serial for b in buffers)
+        ds = self._sets.get(key)
+        if ds is not None:
+            return ds
+        if len(self._sets) >= self.POOL_SETS:
+            # Safe for one-shot recordings (every submission waits for completion); recorded programs see the
+            # new epoch and re-record.
+            vk.vkResetDescriptorPool(self.ctx.device, self.pool, 0)
+            self._sets.clear()
+            self.ctx.epoch += 1
+        layouts = [self.set_layout]
+        dsai = vk.VkDescriptorSetAllocateInfo(descriptorPool=self.pool, descriptorSetCount=1, pSetLayouts=layouts)
+        ds = vk.vkAllocateDescriptorSets(self.ctx.device, dsai)[0]
+        infos = [vk.VkDescriptorBufferInfo(buffer=b.handle, offset=0, range=b.nbytes) for b in buffers]
+        writes = [vk.VkWriteDescriptorSet(dstSet=ds, dstBinding=i, descriptorCount=1,
+                                          descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, pBufferInfo=[infos[i]])
+                  for i in range(len(buffers))]
+        if writes:
+            vk.vkUpdateDescriptorSets(self.ctx.device, len(writes), writes, 0, None)
+        del infos, writes
+        self._sets[key] = ds
+        return ds
+
+    def destroy(self) -> None:
+        vk, dev = self.ctx.vk, self.ctx.device
+        vk.vkDestroyDescriptorPool(dev, self.pool, None)
+        vk.vkDestroyPipeline(dev, self.handle, None)
+        vk.vkDestroyShaderModule(dev, self.module, None)
+        vk.vkDestroyPipelineLayout(dev, self.layout, None)
+        vk.vkDestroyDescriptorSetLayout(dev, self.set_layout, None)
+
+
+def _load_spirv(name: str) -> bytes:
+    path = resources.files(__package__.rsplit(".", 2)[0]).joinpath("shaders", f"{name}.spv")
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise VulkanUnavailable(f"compiled shader {path} is missing; run scripts/build_shaders.py "
+                                "(needs glslc: `apt-get install glslc`)") from None
+
+
+def get_pipeline(ctx: VulkanContext, kernel: Kernel) -> Pipeline:
+    """The compute pipeline of a kernels.Kernel (its SPIR-V, bindings and push layout), created once per context."""
+    with ctx.lock:
+        p = ctx._pipelines.get(kernel)
+        if p is None:
+            p = ctx._pipelines[kernel] = Pipeline(ctx, kernel, _load_spirv(kernel.name))
+        return p
