@@ -4,7 +4,8 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from ..core.settings import DEFAULT_METHOD, blender_method_items
+from ..core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
+                             MAX_IRRADIANCE_SIZE, blender_method_items)
 from .splat_object import is_splat_object
 
 PROBE_NAME = "GS-IBL Probe"
@@ -35,13 +36,14 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
         name="Method",
         items=blender_method_items(),  # core/settings.py: the one list of methods
         default=DEFAULT_METHOD.upper())
-    face_size: IntProperty(name="Face Size", default=0, min=0, max=2048,
+    face_size: IntProperty(name="Face Size", default=0, min=0, max=MAX_FACE_SIZE,
                            description="Resolution of each of the six radiance faces rendered from the probe "
                                        "(0: doubled from 32 until the irradiance changes by less than the tolerance)")
-    irradiance_size: IntProperty(name="Irradiance Size", default=16, min=4, max=512,
+    irradiance_size: IntProperty(name="Irradiance Size", default=DEFAULT_IRRADIANCE_SIZE, min=4,
+                                 max=MAX_IRRADIANCE_SIZE,
                                  description="Face size of the irradiance cube; its lat-long image is 4x as wide "
                                              "and 2x as high")
-    tolerance: FloatProperty(name="Tolerance", default=0.01, min=1e-4, max=0.5, precision=3,
+    tolerance: FloatProperty(name="Tolerance", default=DEFAULT_TOLERANCE, min=1e-4, max=0.5, precision=3,
                              description="Relative irradiance change that ends the face-size search (Face Size 0)")
     strength: FloatProperty(name="Strength", default=1.0, min=0.0, soft_max=10.0, update=_strength_changed,
                             description="Multiplier of the probe's light in the World")

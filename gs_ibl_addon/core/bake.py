@@ -22,12 +22,11 @@ from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
 from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE,
-                       METHOD_ALIASES, METHOD_NAMES)
+                       MAX_IRRADIANCE_SIZE, METHOD_ALIASES, METHOD_NAMES)
 
 # From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
 # face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
 FACE_BY_FACE_FROM = 1024
-MAX_IRRADIANCE_SIZE = 512  # irradiance is smooth: 16-64 is plenty; beyond this only the filter's cost grows
 
 
 class BadSetting(ValueError):

@@ -39,6 +39,7 @@ DEFAULT_DOWNSAMPLE_TO = 32  # exact method: integrate a <= 32^2-face copy (rel R
 AUTO_FIRST_FACE = 32  # the face-size search starts here and doubles
 AUTO_MAX_FACE = 1024  # ... up to here
 MAX_FACE_SIZE = 2048  # the largest face size the panel offers
+MAX_IRRADIANCE_SIZE = 512  # irradiance is smooth: 16-64 is plenty; beyond this only the filter's cost grows
 
 
 def method_help() -> str:

@@ -181,7 +181,7 @@ def _filter_gpu(source, p: _Params, ctx, stages: _Stages
             stages.timings.update({f"irradiance.{k}": v for k, v in rest.items()})
             stages.devices["irradiance"] = "gpu"
         stages.timings["filter_gpu"] = tm.get("total", wall)
-        stages.timings["filter_wall"] = wall
+        stages.timings["filter_wall"] = wall  # host time to the results: includes a queued render still running
         pre = ([] if p.roughness is None
                else stages.gpu("ggx", g.gpu_ggx_prefilter, frame if frame is not None else _cube_of(g, src, n, ctx),
                                p.roughness, None, p.ggx_samples))
