@@ -133,3 +133,14 @@ def test_device_local_buffers_go_through_the_kept_staging_buffers(ctx, monkeypat
         b.write(data, 64)
         np.testing.assert_array_equal(b.read(np.float32, 5000, 64), data)
     assert ctx._staging["up"].nbytes >= 4096 and ctx._staging["down"].nbytes >= 4096
+
+
+def test_filter_plans_of_a_closed_renderer_give_their_buffers_back(ctx):
+    scene = random_scene(500, seed=6, sh_degree=0, extent=3.0)
+    with SplatRenderer(scene, ctx) as r:
+        filter_probe(r.render(ViewBatch.cubemap([0, 0, 0], 16)).frame, 4, "exact", roughness=None)
+        stale = [v for k, v in ctx.cache.items() if k[0] == "filter-plan" and k[1] == r.last_frame.image.serial]
+    assert stale and not stale[0].valid
+    with SplatRenderer(scene, ctx) as r2:  # the next plan made drops the stale one
+        filter_probe(r2.render(ViewBatch.cubemap([0, 0, 0], 16)).frame, 4, "exact", roughness=None)
+    assert all(v is not stale[0] for v in ctx.cache.values())

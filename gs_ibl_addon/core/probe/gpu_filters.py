@@ -488,9 +488,13 @@ def plan_for(ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, *
         plan.close()
         plan = None
     if plan is None:
+        # Plans whose source is gone (a closed renderer's frame) give their pooled buffers back now; then the least
+        # recently used go beyond PLANS_KEPT.
+        for old in [k for k, v in ctx.cache.items() if k[0] == "filter-plan" and not v.valid]:
+            ctx.cache.pop(old).close()
         plan = FilterPlan(ctx, src, is_frame, n, method, size, params)
         plans = [k for k in ctx.cache if k[0] == "filter-plan"]
-        for old in plans[:max(0, len(plans) - PLANS_KEPT + 1)]:  # the least recently used go
+        for old in plans[:max(0, len(plans) - PLANS_KEPT + 1)]:
             ctx.cache.pop(old).close()
     ctx.cache[key] = plan
     return plan
