@@ -205,10 +205,149 @@ def steps(pkg: str):
         yield from pictures(pkg)
 
 
+PROBE = (0.0, 0.45, 0.9)
+PICTURE_EYE, PICTURE_TARGET = (0.55, -1.6, 1.25), (0.0, 0.55, 0.55)
+
+
+def _screen() -> np.ndarray:
+    """The X screen as float RGB, row 0 at the top."""
+    path = os.path.join(OUT, "screen.png")
+    subprocess.run(["import", "-window", "root", path], check=True)
+    img = bpy.data.images.load(path)
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    bpy.data.images.remove(img)
+    return px.reshape(h, w, 4)[::-1, :, :3]
+
+
+def _save_png(rgb: np.ndarray, name: str) -> None:
+    """Write screen pixels (sRGB values as read, row 0 at the top) as DIR/pictures/<name>.png, unchanged."""
+    h, w = rgb.shape[:2]
+    img = bpy.data.images.new(name, w, h, alpha=False)
+    px = np.ones((h, w, 4), np.float32)
+    px[..., :3] = rgb[::-1]
+    img.pixels.foreach_set(px.ravel())
+    img.filepath_raw = os.path.join(OUT, "pictures", f"{name}.png")
+    img.file_format = "PNG"
+    img.save()
+    bpy.data.images.remove(img)
+    log(f"picture {name}: {w}x{h}")
+
+
+def _crop(screen: np.ndarray, region) -> np.ndarray:
+    top = screen.shape[0] - region.y - region.height
+    return screen[top:top + region.height, region.x:region.x + region.width]
+
+
+def _picture_scene(pkg: str) -> None:
+    """The test objects make way for a white sphere and a grey monkey lit by a probe baked in the room."""
+    for name in ("Blob", "Occluder", "Backdrop"):
+        bpy.data.objects.remove(bpy.data.objects[name])
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(-0.25, 0.55, 0.3), segments=48, ring_count=24)
+    sphere = bpy.context.active_object
+    bpy.ops.object.shade_smooth()
+    bpy.ops.mesh.primitive_monkey_add(size=0.5, location=(0.4, 0.45, 0.32), rotation=(0.0, 0.0, math.radians(200)))
+    monkey = bpy.context.active_object
+    bpy.ops.object.shade_smooth()
+    for obj, grey in ((sphere, 0.8), (monkey, 0.5)):
+        mat = bpy.data.materials.new(obj.name)
+        bsdf = mod(pkg, "blender.compat").node_tree(mat).nodes.get("Principled BSDF")
+        bsdf.inputs["Base Color"].default_value = (grey, grey, grey, 1.0)
+        bsdf.inputs["Roughness"].default_value = 0.6
+        obj.data.materials.append(mat)
+    state["meshes"] = (sphere, monkey)
+    bpy.context.scene.cursor.location = PROBE
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.face_size = 128
+    probe.gs_ibl_probe.keep_background = False  # the renders show the baked room behind the meshes
+    state["probe"] = probe
+    bpy.context.scene.cursor.location = (0.0, -30.0, 0.0)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    bpy.context.scene.collection.objects.link(cam)
+    d = Vector(PICTURE_TARGET) - Vector(PICTURE_EYE)
+    cam.location = PICTURE_EYE
+    cam.rotation_euler = d.to_track_quat("-Z", "Y").to_euler()
+    cam.data.lens = 30.0
+    bpy.context.scene.camera = cam
+
+
+def _render(engine: str, name: str) -> None:
+    scene = bpy.context.scene
+    names = ["BLENDER_EEVEE_NEXT", "BLENDER_EEVEE"] if engine == "EEVEE" else ["CYCLES"]
+    if engine == "CYCLES":
+        import addon_utils
+        addon_utils.enable("cycles", default_set=True)  # a user directory made with --factory-startup lacks it
+    allowed = scene.render.bl_rna.properties["engine"].enum_items.keys()
+    scene.render.engine = next((n for n in names if n in allowed), names[-1])
+    scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = 360, 270, 100
+    scene.render.image_settings.file_format = "PNG"
+    scene.view_settings.view_transform = "Standard"
+    if engine == "EEVEE":
+        scene.eevee.taa_render_samples = 16
+    else:
+        scene.cycles.samples = 32
+        scene.cycles.use_denoising = True
+    scene.render.filepath = os.path.join(OUT, "pictures", f"{name}.png")
+    t = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    log(f"render {name}: {time.perf_counter() - t:.1f} s")
+
+
+def _unlit_world() -> None:
+    world = bpy.data.worlds.get("Unlit") or bpy.data.worlds.new("Unlit")
+    world.color = (0.05, 0.05, 0.05)
+    if world.node_tree is not None:
+        bg = world.node_tree.nodes.get("Background")
+        if bg is not None:
+            bg.inputs["Color"].default_value = (0.05, 0.05, 0.05, 1.0)
+    bpy.context.scene.world = world
+
+
+def _shoot_viewport_and_panel() -> None:
+    _w, area, space, region = view3d()
+    screen = _screen()
+    _save_png(_crop(screen, region), "blender_viewport_lit")
+    ui = next(r for r in area.regions if r.type == "UI")
+    panel = _crop(screen, ui)
+    _save_png(panel[: min(panel.shape[0], 760)], "blender_panel")
+
+
 def pictures(pkg: str):
-    """Pictures for docs/img: added when the rest works (see docs/blender.md)."""
-    return
-    yield
+    """docs/img pictures: the viewport (Material Preview, Scene World on) with the splats around meshes lit by the
+    baked probe, the sidebar panel after the bake, and EEVEE and Cycles renders with the default grey World
+    (unlit) and with the baked one (lit). Written to DIR/pictures."""
+    os.makedirs(os.path.join(OUT, "pictures"), exist_ok=True)
+    yield 0.5, lambda: _picture_scene(pkg)
+    yield 0.5, lambda: _unlit_world()
+    yield 0.5, lambda: _render("EEVEE", "eevee_unlit")
+    yield 0.5, lambda: _render("CYCLES", "cycles_unlit")
+    yield 0.5, lambda: bpy.ops.gs_ibl.bake_probe()
+    yield 0.5, lambda: _render("EEVEE", "eevee_lit")
+    yield 0.5, lambda: _render("CYCLES", "cycles_lit")
+
+    def viewport():
+        _w, area, space, region = view3d()
+        eye, target = Vector(PICTURE_EYE), Vector(PICTURE_TARGET)
+        r3d = space.region_3d
+        r3d.view_rotation = (target - eye).to_track_quat("-Z", "Y")
+        r3d.view_location, r3d.view_distance = target, (target - eye).length
+        space.shading.type = "MATERIAL"
+        space.shading.use_scene_world = True
+        space.show_region_ui = True
+        set_overlay(True, True)
+        for obj in bpy.context.view_layer.objects:
+            obj.select_set(False)
+        bpy.context.view_layer.objects.active = state["probe"]
+        state["probe"].select_set(True)
+        ui = next(r for r in area.regions if r.type == "UI")
+        try:
+            ui.active_panel_category = "GS-IBL"
+        except (AttributeError, TypeError) as e:
+            log(f"cannot open the GS-IBL tab: {e}")
+    yield 0.5, viewport
+    yield SETTLE * 3, _shoot_viewport_and_panel
 
 
 def finish(error: str | None = None) -> None:
@@ -232,11 +371,22 @@ def main() -> None:
     it = steps(pkg)
     pending = []
 
+    busy = []
+
     def tick():
         # run the action that was waiting, then wait as long as the next one asks before running it
-        try:
-            if pending:
+        if busy:  # a blocking render lets Blender run timers meanwhile: not this one again
+            return 1.0
+        if pending:
+            busy.append(True)
+            try:
                 pending.pop()()
+            except BaseException:  # noqa: BLE001  (a StopIteration inside an action is a failure too)
+                finish(traceback.format_exc())
+                return None
+            finally:
+                busy.clear()
+        try:
             delay, action = next(it)
         except StopIteration:
             finish()
