@@ -290,3 +290,7 @@ def unregister_overlay() -> None:
     _refine_scheduled = False
     _shader = None
     clear_cache()
+    try:
+        hide_helpers(False)  # a disabled extension leaves the point proxies showing
+    except (AttributeError, RuntimeError):  # data not accessible while Blender quits
+        pass
