@@ -206,13 +206,20 @@ def steps(pkg: str):
 
 
 PROBE = (0.0, 0.45, 0.9)
-PICTURE_EYE, PICTURE_TARGET = (0.55, -1.6, 1.25), (0.0, 0.55, 0.55)
+HEADER_ROWS = 60  # the 3D region's top rows under the header
+TAB_FROM_TOP = 240  # where the GS-IBL tab (the fifth: Item, Tool, View, Animation, GS-IBL) sits in the sidebar
+PICTURE_EYE, PICTURE_TARGET = (0.35, -0.95, 0.95), (0.05, 0.5, 0.35)
+VIEW_EYE = (0.9, -1.9, 1.5)  # the viewport picture: further back, the probe and the room around the meshes
 
 
 def _screen() -> np.ndarray:
     """The X screen as float RGB, row 0 at the top."""
     path = os.path.join(OUT, "screen.png")
     subprocess.run(["import", "-window", "root", path], check=True)
+    return _load_rgb(path)
+
+
+def _load_rgb(path: str) -> np.ndarray:
     img = bpy.data.images.load(path)
     w, h = img.size
     px = np.empty(w * h * 4, np.float32)
@@ -221,13 +228,16 @@ def _screen() -> np.ndarray:
     return px.reshape(h, w, 4)[::-1, :, :3]
 
 
-def _save_png(rgb: np.ndarray, name: str) -> None:
-    """Write screen pixels (sRGB values as read, row 0 at the top) as DIR/pictures/<name>.png, unchanged."""
+def _save_png(rgb: np.ndarray, name: str, scale: float = 1.0) -> None:
+    """Write pixels as read from a PNG (sRGB values, row 0 at the top) as DIR/pictures/<name>.png, optionally
+    scaled (docs pictures stay under ~300 KB)."""
     h, w = rgb.shape[:2]
     img = bpy.data.images.new(name, w, h, alpha=False)
     px = np.ones((h, w, 4), np.float32)
     px[..., :3] = rgb[::-1]
     img.pixels.foreach_set(px.ravel())
+    if scale != 1.0:
+        img.scale(int(w * scale), int(h * scale))
     img.filepath_raw = os.path.join(OUT, "pictures", f"{name}.png")
     img.file_format = "PNG"
     img.save()
@@ -287,7 +297,7 @@ def _render(engine: str, name: str) -> None:
     if engine == "EEVEE":
         scene.eevee.taa_render_samples = 16
     else:
-        scene.cycles.samples = 32
+        scene.cycles.samples = 128
         scene.cycles.use_denoising = True
     scene.render.filepath = os.path.join(OUT, "pictures", f"{name}.png")
     t = time.perf_counter()
@@ -308,10 +318,38 @@ def _unlit_world() -> None:
 def _shoot_viewport_and_panel() -> None:
     _w, area, space, region = view3d()
     screen = _screen()
-    _save_png(_crop(screen, region), "blender_viewport_lit")
     ui = next(r for r in area.regions if r.type == "UI")
-    panel = _crop(screen, ui)
-    _save_png(panel[: min(panel.shape[0], 760)], "blender_panel")
+    view = _crop(screen, region)[HEADER_ROWS:, : region.width - ui.width]  # the view beside the sidebar
+    _save_png(view, "blender_viewport_lit", scale=0.7)
+    panel = _crop(screen, ui)[HEADER_ROWS - 20:]
+    _save_png(panel[: min(panel.shape[0], 820)], "blender_panel")
+
+
+def _renders_grid() -> None:
+    """EEVEE (top) and Cycles (bottom), default World (left) and baked probe (right), in one picture."""
+    pics = os.path.join(OUT, "pictures")
+    rows = [np.concatenate([_load_rgb(os.path.join(pics, f"{e}_{w}.png")) for w in ("unlit", "lit")], 1)
+            for e in ("eevee", "cycles")]
+    _save_png(np.concatenate(rows, 0), "blender_renders_lit_unlit")
+
+
+def _open_tab(area, category: str = "GS-IBL") -> None:
+    """Click the sidebar's GS-IBL tab (Region.active_panel_category is read-only in 5.2): simulated events, which
+    Blender accepts only when started with --enable-event-simulate. The tabs run down the region's right edge."""
+    ui = next(r for r in area.regions if r.type == "UI")
+    try:
+        ui.active_panel_category = category
+        return
+    except (AttributeError, TypeError):
+        pass
+    window = bpy.context.window_manager.windows[0]
+    x, y = ui.x + ui.width - 12, ui.y + ui.height - TAB_FROM_TOP
+    try:
+        window.event_simulate(type="MOUSEMOVE", value="NOTHING", x=x, y=y)
+        window.event_simulate(type="LEFTMOUSE", value="PRESS", x=x, y=y)
+        window.event_simulate(type="LEFTMOUSE", value="RELEASE", x=x, y=y)
+    except Exception as e:  # noqa: BLE001  without --enable-event-simulate: the picture shows another tab
+        log(f"cannot open the {category} tab: {e}")
 
 
 def pictures(pkg: str):
@@ -329,7 +367,7 @@ def pictures(pkg: str):
 
     def viewport():
         _w, area, space, region = view3d()
-        eye, target = Vector(PICTURE_EYE), Vector(PICTURE_TARGET)
+        eye, target = Vector(VIEW_EYE), Vector(PICTURE_TARGET)
         r3d = space.region_3d
         r3d.view_rotation = (target - eye).to_track_quat("-Z", "Y")
         r3d.view_location, r3d.view_distance = target, (target - eye).length
@@ -337,17 +375,14 @@ def pictures(pkg: str):
         space.shading.use_scene_world = True
         space.show_region_ui = True
         set_overlay(True, True)
+        bpy.context.scene.camera.hide_set(True)
         for obj in bpy.context.view_layer.objects:
             obj.select_set(False)
         bpy.context.view_layer.objects.active = state["probe"]
-        state["probe"].select_set(True)
-        ui = next(r for r in area.regions if r.type == "UI")
-        try:
-            ui.active_panel_category = "GS-IBL"
-        except (AttributeError, TypeError) as e:
-            log(f"cannot open the GS-IBL tab: {e}")
+        _open_tab(area)
     yield 0.5, viewport
     yield SETTLE * 3, _shoot_viewport_and_panel
+    yield 0.5, _renders_grid
 
 
 def finish(error: str | None = None) -> None:
