@@ -132,6 +132,7 @@ def wrapped_lines(text: str, chars: int) -> list[str]:
 
 def _label_block(layout, context, text: str, icon: str = "NONE") -> None:
     col = layout.column(align=True)
+    col.scale_y = 0.8  # wrapped lines of one text read as one paragraph
     for i, line in enumerate(wrapped_lines(text, _chars_per_line(context))):
         col.label(text=line, icon=icon if i == 0 else "BLANK1" if icon != "NONE" else "NONE")
 
@@ -189,9 +190,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
             col.prop(s, "update_interval")
         layout.operator(GSIBL_OT_bake_probe.bl_idname, text="Bake / Refresh", icon="RENDER_STILL")
         if s.last_report:
-            box = layout.box()
+            col = layout.box().column(align=True)
             for line in s.last_report.split("\n"):
-                _label_block(box, context, line, icon="ERROR" if "holes" in line or "failed" in line else "NONE")
+                _label_block(col, context, line, icon="ERROR" if "holes" in line or "failed" in line else "NONE")
         if s.world is not None and scene_world_hidden(context):
             _label_block(layout.box(), context, "Material Preview shows the baked light only with Scene World on "
                          "(Viewport Shading popover), or in Rendered mode", icon="INFO")
