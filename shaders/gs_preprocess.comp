@@ -1,6 +1,8 @@
 #version 450
 // Per splat, once for all views of the batch: cull, whitening transform for the per-ray evaluation, SH colour
 // toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin).
+// With a level of detail (p.lod = 1; render/lod.py) the splats are the nodes of its tree and each first decides
+// whether it is in the probe's cut; the drawn ones are flagged in `live` for gs_lod_compact.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 layout(local_size_x = 256) in;
@@ -16,10 +18,35 @@ layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
 layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // per splat and view, for gs_emit
 // The origin travels in a buffer, not a push constant, so a recorded command buffer serves any probe position.
 layout(std430, binding = 10) readonly buffer Origin { vec4 origin; };
+// Per node: x = cell x | cell y << 16, y = cell z | level << 16 | parent level << 24 (LodTree.words()).
+layout(std430, binding = 11) readonly buffer Lod { uvec2 lod[]; };
+layout(std430, binding = 12) writeonly buffer Live { uint live[]; };
 layout(push_constant) uniform P {
     uint n; float pixel_angle; float near; uint sh_k; uint n_views;
     uint energy_preserving;  // 1: the dilation keeps each splat's integral (probes); 0: 3DGS's look (views)
+    uint lod;  // 1: nodes of a level of detail, drawn where in the cut of threshold lod_tau
+    float lod_tau; float lod_cell; float lod_ox; float lod_oy; float lod_oz;  // threshold, level-1 cell, grid corner
 } p;
+
+const uint LOD_NO_PARENT = 255u;  // render/lod.py NO_PARENT: no stored ancestor, its error is infinite
+
+// size <= tau * distance(origin, cell box): the cell (level >= 1) is fine enough for this probe.
+bool fine_enough(uint level, uvec3 c) {
+    float size = p.lod_cell * exp2(float(level) - 1.0);
+    vec3 lo = vec3(p.lod_ox, p.lod_oy, p.lod_oz) + vec3(c) * size;
+    vec3 d = max(max(lo - origin.xyz, origin.xyz - (lo + size)), vec3(0.0));
+    return size <= p.lod_tau * length(d);
+}
+
+// The cut (lod.cut): a node is drawn iff it is fine enough and its nearest stored ancestor is not. Errors grow
+// up the tree, so every splat is drawn through exactly one node.
+bool in_cut(uvec2 w) {
+    uint level = (w.y >> 16) & 0xFFu, parent = w.y >> 24;
+    uvec3 c = uvec3(w.x & 0xFFFFu, w.x >> 16, w.y & 0xFFFFu);  // at level max(level, 1)
+    if (level > 0u && !fine_enough(level, c)) return false;
+    if (parent == LOD_NO_PARENT) return true;
+    return !fine_enough(parent, c >> (parent - max(level, 1u)));
+}
 
 const float C0 = 0.28209479177387814, C1 = 0.4886025119029199;
 
@@ -56,9 +83,15 @@ vec3 sh_color(uint i, vec3 d) {
 void main() {
     uint i = linear_group() * 256u + gl_LocalInvocationID.x;
     if (i >= p.n) return;
-    depth_val[i] = i;
     depth_key[i] = 0xFFFFFFFFu;
-    tile_count[i] = 0u;
+    if (p.lod != 0u) {
+        // nodes out of the cut read nothing more: most of a big scene's nodes end here
+        live[i] = 0u;
+        if (!in_cut(lod[i])) return;
+    } else {
+        depth_val[i] = i;
+        tile_count[i] = 0u;
+    }
     vec4 po = pos_op[i];
     vec3 mu = po.xyz - origin.xyz;
     float dist = length(mu);
@@ -90,6 +123,7 @@ void main() {
         rects[i * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
     }
     if (count == 0u) return;
+    if (p.lod != 0u) live[i] = 1u;
     vec3 inv = inversesqrt(s2);
     vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
     vec3 ol = -vec3(dot(w0, mu), dot(w1, mu), dot(w2, mu));

@@ -13,6 +13,10 @@ Stages (each a compute dispatch, timed with timestamp queries when asked):
   ranges       each tile's run of instances
   raster       one workgroup per tile of every view, front-to-back compositing with early termination
 The instance list is sized from the previous frame; if a frame needs more, it is re-rendered once with room.
+
+With a level of detail (``SplatRenderer(scene, lod=True)``, render/lod.py) the GPU holds every node of the tree
+and ``render(batch, lod_k=k)`` draws the cut of threshold k x pixel angle: preprocess decides per node and flags
+the drawn ones, a prefix sum and gs_lod_compact pack them in storage order, and the later stages see only those.
 """
 from __future__ import annotations
 
@@ -27,6 +31,7 @@ from ..vk import Buffer, Program, Recorder, get_context, groups
 from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
 from ..vk.kernels import KERNELS
 from .gpu_sort import RadixSorter, Scanner
+from .lod import LodTree, build_lod
 from .splat_math import DEFAULT_NEAR
 from .views import ViewBatch
 
@@ -187,11 +192,18 @@ class SplatRenderer:
 
     ``ctx`` is the Vulkan context to use (default: the shared one, core.vk.get_context()). ``with
     SplatRenderer(scene, ctx) as r:`` frees its GPU memory when the block ends; so does ``close()``.
+    ``lod``: True builds the scene's level of detail (or pass a LodTree built before) and uploads all its nodes;
+    renders then take ``lod_k`` (0: every splat, as without one).
     """
 
-    def __init__(self, scene: SplatScene, ctx=None, near: float = DEFAULT_NEAR) -> None:
+    def __init__(self, scene: SplatScene, ctx=None, near: float = DEFAULT_NEAR, lod: bool | LodTree = False) -> None:
         self.ctx = ctx or get_context()
         self.scene_count = scene.count
+        self.lod: LodTree | None = (lod if isinstance(lod, LodTree) else build_lod(scene)) if lod else None
+        if self.lod is not None:
+            if self.lod.leaves != scene.count:
+                raise ValueError(f"the level of detail was built for {self.lod.leaves:,} splats, not {scene.count:,}")
+            scene = self.lod.scene  # every node is uploaded; scene_count stays the splats'
         self.sh_k = scene.sh.shape[1]
         self.near = near
         self.generation = 0
@@ -219,6 +231,11 @@ class SplatRenderer:
         self.origin = buf(16, "origin")
         self.views = buf(MAX_VIEWS * 80, "views")
         self.no_depth = buf(16, "no-depth")  # bound where depth is not written
+        if self.lod is not None:
+            self.lod_words = buf(n * 8, "lod")
+            self.lod_words.write(self.lod.words())
+            self.sort_key, self.sort_val = buf(n * 4, "lod-sort-key"), buf(n * 4, "lod-sort-val")
+            self.lod_scanner = self._own(Scanner(self.ctx, n))
         self.depth_sorter = self._own(RadixSorter(self.ctx, n))
         self.scanner = self._own(Scanner(self.ctx, n))
         self.capacity = 0
@@ -257,25 +274,32 @@ class SplatRenderer:
         return b
 
     def render(self, batch: ViewBatch, timestamps: bool = False, depth: bool = False,
-               wait: bool = True) -> RenderResult:
+               wait: bool = True, lod_k: float = 0.0) -> RenderResult:
         """Render ``batch`` into a GpuFrame (RenderResult.frame); ``depth`` also writes the depth image.
+
+        ``lod_k`` (a renderer built with a level of detail): draw the cut of threshold lod_k x the batch's pixel
+        angle, each node once its cell spans at most lod_k pixels; 0 draws every splat.
 
         ``wait=False`` returns once the render is submitted: a filter given the frame is then queued behind it
         and the host waits once for both (GpuFrame.wait() settles the render, and re-draws it in the rare case
         its instance list outgrew the capacity).
         """
         t0 = time.perf_counter()
+        if lod_k and self.lod is None:
+            raise ValueError("render(lod_k=...) needs a renderer built with a level of detail (SplatRenderer(..., lod=True))")
+        if not (lod_k >= 0 and np.isfinite(lod_k)):
+            raise ValueError(f"lod_k {lod_k!r} must be 0 (every splat) or a positive number of pixels")
         self.resolve()  # the previous render reads the views and origin written below
         view_data, total_tiles, total_pixels = _views_buffer_data(batch)
         self.views.write(view_data)
         self.origin.write(np.append(batch.origin, 0.0).astype(np.float32))
         self.generation += 1
-        prog = self._program(batch, total_tiles, total_pixels, timestamps, depth)
+        prog = self._program(batch, total_tiles, total_pixels, timestamps, depth, float(lod_k))
         frame = self.last_frame = GpuFrame(self, batch, self._frame["image"], self._frame["depth"] if depth else None,
                                            self.generation)
         result = RenderResult(frame, t0)
         prog.start()
-        self._pending = (prog, result, (batch, total_tiles, total_pixels, timestamps, depth))
+        self._pending = (prog, result, (batch, total_tiles, total_pixels, timestamps, depth, float(lod_k)))
         if wait:
             self.resolve()
         return result
@@ -300,24 +324,26 @@ class SplatRenderer:
         return redrawn
 
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                 depth: bool) -> Program:
+                 depth: bool, lod_k: float = 0.0) -> Program:
         shape = tuple((v.width, v.height) for v in batch.views)
         key = (shape, float(batch.pixel_angle), bool(batch.energy_preserving), bool(timestamps), bool(depth),
-               self.capacity)
+               self.capacity, lod_k)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
             prog = None
         if prog is None:
-            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth)
+            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
         return prog
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                depth: bool) -> Program:
-        c, n, nv = self.ctx, self.scene_count, len(batch.views)
+                depth: bool, lod_k: float = 0.0) -> Program:
+        c, nv = self.ctx, len(batch.views)
+        tree = self.lod
+        n = tree.count if tree is not None else self.scene_count
         chunks = raster_chunks(total_tiles)
         ranges = self._frame_buffer("ranges", (total_tiles + 1) * 8)  # + the missed-tile key's run
         image = self._frame_buffer("image", total_pixels * 16)
@@ -333,19 +359,34 @@ class SplatRenderer:
             rec.fill(depth_buf, 0, total_pixels * 4)
         rec.timestamp("clear")
         if n:
+            grid = (dict(lod=1, lod_tau=lod_k * batch.pixel_angle, lod_cell=tree.cell1, lod_ox=tree.origin[0],
+                         lod_oy=tree.origin[1], lod_oz=tree.origin[2]) if tree is not None else
+                    dict(lod=0, lod_tau=0.0, lod_cell=0.0, lod_ox=0.0, lod_oy=0.0, lod_oz=0.0))
             rec.dispatch(KERNELS["gs_preprocess"],
                          [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
-                          self.depth_key, self.depth_val, self.rects, self.origin], groups(n, 256, c),
+                          self.depth_key, self.depth_val, self.rects, self.origin,
+                          self.lod_words if tree is not None else self.no_depth,
+                          self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
+                         groups(n, 256, c),
                          n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
-                         energy_preserving=int(batch.energy_preserving))
+                         energy_preserving=int(batch.energy_preserving), **grid)
             rec.timestamp("preprocess")
-            self.depth_sorter.record(rec, self.depth_key, self.depth_val, self.n_count, 0, DEPTH_KEY_BITS)
+            if tree is not None:
+                # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)
+                live_total = self.lod_scanner.record(rec, self.offsets, n)
+                rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
+                             groups(n, 256, c), n=n)
+                rec.timestamp("lod_compact")
+                keys, vals, sort_count = self.sort_key, self.sort_val, live_total
+            else:
+                keys, vals, sort_count = self.depth_key, self.depth_val, self.n_count
+            self.depth_sorter.record(rec, keys, vals, sort_count, 0, DEPTH_KEY_BITS)
             rec.timestamp("sort_depth")
-            rec.dispatch(KERNELS["gs_gather_counts"], [self.depth_key, self.depth_val, self.tile_count, self.offsets],
-                         groups(n, 256, c), n=n)
+            rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
+                         groups(n, 256, c), n=n, count_index=0)
             total_buf = self.scanner.record(rec, self.offsets, n)
             rec.dispatch(KERNELS["gs_emit"],
-                         [self.views, self.depth_key, self.depth_val, self.offsets, total_buf, self.inst_key,
+                         [self.views, keys, vals, self.offsets, total_buf, self.inst_key,
                           self.inst_val, self.count, self.prepared, self.rects],
                          groups(self.capacity, 256, c), n=n, capacity=self.capacity, n_views=nv, n_tiles=total_tiles)
             rec.timestamp("emit")

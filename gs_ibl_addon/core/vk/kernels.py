@@ -47,9 +47,11 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
 _SORT_PUSH = "n_blocks shift count_index"
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
-    _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin",
-       "n pixel_angle:float near:float sh_k n_views energy_preserving"),
-    _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets", "n"),
+    _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
+       "n pixel_angle:float near:float sh_k n_views energy_preserving lod lod_tau:float lod_cell:float "
+       "lod_ox:float lod_oy:float lod_oz:float"),
+    _k("gs_lod_compact", "DepthKey Live SortKey SortVal", "n"),
+    _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets Count", "n count_index"),
     _k("gs_emit", "Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects",
        "n capacity n_views n_tiles"),
     _k("gs_ranges", "InstKey Count Ranges"),
