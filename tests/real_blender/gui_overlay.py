@@ -209,7 +209,7 @@ PROBE = (0.0, 0.45, 0.9)
 HEADER_ROWS = 60  # the 3D region's top rows under the header
 TAB_FROM_TOP = 240  # where the GS-IBL tab (the fifth: Item, Tool, View, Animation, GS-IBL) sits in the sidebar
 PICTURE_EYE, PICTURE_TARGET = (0.35, -0.95, 0.95), (0.05, 0.5, 0.35)
-VIEW_EYE = (0.55, -1.25, 1.2)  # the viewport picture: further back, the probe and the room around the meshes
+VIEW_EYE = (0.9, -1.9, 1.5)  # the viewport picture: further back, the probe and the room around the meshes
 
 
 def _screen() -> np.ndarray:
