@@ -167,6 +167,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if ov.show:
             row.prop(ov, "resolution_scale", text="")
             layout.prop(ov, "exposure")
+            from . import overlay
+            if overlay.last_error:
+                _label_block(layout.box(), context, f"Splats not drawn: {overlay.last_error}", icon="ERROR")
         probe = find_probe(context)
         layout.operator(GSIBL_OT_add_probe.bl_idname, icon="LIGHTPROBE_SPHERE")
         if probe is None:
