@@ -31,7 +31,7 @@ OPAQUE_CUT = 0.5  # the depth pass writes the depth of pixels at least this cove
 
 _handle = None
 _overlays: dict[int, SplatOverlay] = {}  # splat_cache.uid(object) -> its images over the shared renderer
-_textures: dict[tuple[int, int], tuple] = {}  # (object uid, region) -> (image id, exposure, colour tex, depth tex)
+_textures: dict[tuple[int, int], tuple] = {}  # (object uid, region) -> (image, exposure, colour tex, depth tex)
 _motion = ViewMotion()
 _refine_scheduled = False
 _shader = None
@@ -115,11 +115,11 @@ def _float_texture(px: np.ndarray, fmt: str):
 
 def _textures_for(key: tuple[int, int], img, exposure: float) -> tuple:
     cached = _textures.get(key)
-    if cached is not None and cached[0] == id(img) and cached[1] == exposure:
+    if cached is not None and cached[0] is img and cached[1] == exposure:  # identity: ids of freed images recur
         return cached[2], cached[3]
     colour = _float_texture(to_display(img.rgba, exposure), "RGBA32F")
     depth = _float_texture(img.window_depth(DEPTH_PULL), "R32F")
-    _textures[key] = (id(img), exposure, colour, depth)
+    _textures[key] = (img, exposure, colour, depth)
     return colour, depth
 
 
@@ -251,7 +251,9 @@ def hide_helpers(show: bool) -> int:
 
 def show_changed(settings, context) -> None:
     """Show Splats toggled: helpers hidden or restored, images freed when off (the uploaded splats stay)."""
+    global _motion
     hide_helpers(settings.show)
+    _motion = ViewMotion()  # views that changed while hidden are drawn at full resolution at once
     if not settings.show:
         clear_cache()
     tag_redraw()
