@@ -15,6 +15,7 @@ While the overlay shows, splat objects draw nothing of their own (hide_helpers):
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import bpy
 import numpy as np
@@ -37,6 +38,7 @@ _refine_scheduled = False
 _shader = None
 last_error: str | None = None
 last_draw: dict = {}  # what the last draw did, per region (scale, render ms): read by tests and the GUI check
+draw_log: deque = deque(maxlen=64)  # (time, region, scale, render ms) of recent draws, for the GUI check
 
 _VERTEX = """
 void main() {
@@ -181,6 +183,7 @@ def draw_callback() -> None:
         if quads:
             _draw_quads(quads)
         last_draw[slot] = {"scale": scale, "render_ms": ms, "objects": len(objs), "time": now}
+        draw_log.append((now, slot, scale, ms))
         _schedule_refine(now)
         last_error = None
     except Exception as e:  # noqa: BLE001  a draw handler that raises would print on every redraw

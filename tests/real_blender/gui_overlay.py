@@ -164,6 +164,23 @@ def project(r3d, region, p) -> list[float]:
     return [float((ndc[0] + 1) / 2 * region.width), float((ndc[1] + 1) / 2 * region.height), float(ndc[2])]
 
 
+def nudge(k: int) -> None:
+    _w, _a, space, _r = view3d()
+    r3d = space.region_3d
+    from mathutils import Quaternion
+    r3d.view_rotation = Quaternion((0.0, 0.0, 1.0), math.radians(2.0)) @ r3d.view_rotation
+    state["last_nudge"] = time.monotonic()
+
+
+def record_motion(pkg: str) -> None:
+    _w, _a, _s, region = view3d()
+    slot = region.as_pointer()
+    log_ = [(t, s, ms) for t, sl, s, ms in mod(pkg, "blender.overlay").draw_log if sl == slot]
+    state["motion"] = {"draws": log_, "last_nudge": state["last_nudge"],
+                       "resolution": bpy.context.scene.gs_ibl_overlay.resolution_scale}
+    log(f"motion: last nudge {state['last_nudge']:.2f}, draws {[(round(t, 2), s) for t, s, _ in log_[-8:]]}")
+
+
 def record(shot: str, pkg: str) -> None:
     window, area, space, region = view3d()
     r3d = space.region_3d
@@ -201,6 +218,11 @@ def steps(pkg: str):
         yield 0.5, lambda: set_overlay(True, False)
         yield SETTLE, lambda name=name: record(f"{name}_clean", pkg)
     yield 0.5, lambda: set_overlay(True, True)
+    # orbit a little (a view change every 0.3 s), then keep still: coarse frames while moving, then one timed
+    # redraw at the full Resolution with no event at all
+    for k in range(5):
+        yield 0.3, lambda k=k: nudge(k)
+    yield 2.5 + SETTLE, lambda: record_motion(pkg)
     if PICTURES:
         yield from pictures(pkg)
 
@@ -389,6 +411,7 @@ def finish(error: str | None = None) -> None:
     state["error"] = error
     with open(os.path.join(OUT, "shots.json"), "w") as f:
         json.dump({"shots": state["shots"], "log": state["log"], "proxy": state.get("proxy"),
+                   "motion": state.get("motion"),
                    "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error}, f, indent=1)
     if error:
         with open(os.path.join(OUT, "error.txt"), "w") as f:

@@ -6,7 +6,9 @@ gui_overlay.py runs in that Blender and takes screenshots from two views (see it
   with Blender's overlays on equals the one with them off wherever the splats cover the view (overlays off, Blender
   can draw neither);
 - a mesh in front of splats hides them (the Occluder cube looks as without splats);
-- splats in front of a mesh hide it (the red Blob is seen where the Backdrop cube is behind it).
+- splats in front of a mesh hide it (the red Blob is seen where the Backdrop cube is behind it);
+- while the view moves the splats are drawn at the moving resolution, and once it is still one timed redraw (no
+  event) draws them at the Resolution setting.
 Skipped unless the sid root has been made (scripts/blender_roots.sh ensure sid). Screenshots land in
 build/matrix/gui-overlay/.
 """
@@ -19,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from gs_ibl_addon.blender.overlay_math import MOVING_SCALE
 from test_matrix import OUT, REPO, Entry, Runner, _free_display, _inputs_once, _install, _ready
 
 HERE = Path(__file__).resolve().parent
@@ -111,4 +114,15 @@ def test_gui_overlay(tmp_path_factory):
         blob = _patch(img_on, on, "blob")
         if not blob[0] > blob[1] + 0.25:
             problems.append(f"view {view}: the red splat ball in front of the Backdrop cube is hidden ({blob.round(3)})")
+    # while the view moved the splats were drawn coarse; once still, a timed redraw drew them at the Resolution
+    motion = result["motion"]
+    draws = [(t, s) for t, s, _ms in motion["draws"]]
+    moving = [s for t, s in draws if t <= motion["last_nudge"] + 0.2]
+    after = [(t, s) for t, s in draws if t > motion["last_nudge"]]
+    print(f"[gui-overlay] draws around the orbit (time after the last view change, scale): "
+          f"{[(round(t - motion['last_nudge'], 2), s) for t, s in draws[-8:]]}")
+    if MOVING_SCALE not in moving:
+        problems.append(f"no coarse ({MOVING_SCALE}) draw while the view moved: {draws[-8:]}")
+    if not after or after[-1][1] != motion["resolution"] or after[-1][0] < motion["last_nudge"] + 0.2:
+        problems.append(f"no full-resolution redraw ({motion['resolution']}) once the view was still: {after}")
     assert not problems, f"Blender {result['blender']} (screenshots in {keep}):\n" + "\n".join(problems)
