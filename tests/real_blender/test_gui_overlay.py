@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from gs_ibl_addon.blender.overlay_math import MOVING_SCALE
-from test_matrix import OUT, REPO, Entry, Runner, _free_display, _inputs_once, _install, _ready
+from test_matrix import OUT, REPO, Entry, Runner, _inputs_once, _install, _ready, xvfb_shell
 
 HERE = Path(__file__).resolve().parent
 ENTRY = Entry("gui-overlay", "sid", True, gui=True)
@@ -75,17 +75,18 @@ def test_gui_overlay(tmp_path_factory):
     runner = Runner(ENTRY, tmp_path_factory.mktemp("gui"))
     for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_overlay.py"):
         shutil.copy(src, runner.host / src.name)
-    r = _install(runner, str(runner.inner / zip_path.name))
-    assert r.returncode == 0, f"installing the zip failed: {r.stdout[-2000:]}\n{r.stderr[-2000:]}"
-    d = _free_display()
-    out_inner = runner.inner / "out"
-    r = runner.run(["sh", "-c", f"Xvfb :{d} -screen 0 1600x1000x24 -nolisten tcp >xvfb.log 2>&1 & x=$!; sleep 2; "
-                    f"DISPLAY=:{d} blender --python {runner.inner / 'gui_overlay.py'} -- --out {out_inner} "
-                    f"--room {runner.inner / 'room.ply'}; rc=$?; kill $x; exit $rc"], "gui_overlay")
-    out = runner.host / "out"
     keep = OUT / ENTRY.name
-    shutil.rmtree(keep, ignore_errors=True)
-    shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
+    try:
+        r = _install(runner, str(runner.inner / zip_path.name))
+        assert r.returncode == 0, f"installing the zip failed: {r.stdout[-2000:]}\n{r.stderr[-2000:]}"
+        inner = runner.inner
+        r = runner.run(xvfb_shell(f"blender --python {inner / 'gui_overlay.py'} -- --out {inner / 'out'} "
+                                  f"--room {inner / 'room.ply'}"), "gui_overlay")
+    finally:
+        shutil.rmtree(keep, ignore_errors=True)
+        shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
+        runner.close()
+    out = keep / "out"
     assert (out / "shots.json").exists(), f"gui_overlay.py wrote no shots.json (rc {r.returncode}); see {keep}"
     result = json.loads((out / "shots.json").read_text())
     assert not result["error"], f"gui_overlay.py failed in Blender {result['blender']}:\n{result['error']}"
