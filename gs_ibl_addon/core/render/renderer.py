@@ -236,12 +236,17 @@ class SplatRenderer:
             self.lod_words.write(self.lod.words())
             self.sort_key, self.sort_val = buf(n * 4, "lod-sort-key"), buf(n * 4, "lod-sort-val")
             self.lod_scanner = self._own(Scanner(self.ctx, n))
-        self.depth_sorter = self._own(RadixSorter(self.ctx, n))
+            # A probe's cut is a small part of the tree: the stages after the compaction (depth sort, counts, emit)
+            # are sized for the cut, from the previous frame, and a frame whose cut outgrew them is drawn again.
+            self.cut_sorter = None
+            self._grow_cut(max(1 << 16, self.scene_count // 8))
+        self.drawn = self.scene_count  # splats (or nodes of the cut) the last render drew
+        self.depth_sorter = self._own(RadixSorter(self.ctx, n)) if self.lod is None else None
         self.scanner = self._own(Scanner(self.ctx, n))
         self.capacity = 0
         self.tile_sorter = None
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
-        self._ensure_capacity(max(1 << 16, 4 * n))
+        self._ensure_capacity(max(1 << 16, 4 * (self.cut_capacity if self.lod is not None else n)))
 
     def _own(self, obj):
         self._owned.append(obj)
@@ -264,6 +269,11 @@ class SplatRenderer:
         self.inst_key = self._buffer(self.capacity * 4, "inst_key")
         self.inst_val = self._buffer(self.capacity * 4, "inst_val")
         self.tile_sorter = self._own(RadixSorter(self.ctx, self.capacity))
+
+    def _grow_cut(self, need: int) -> None:
+        self._drop(self.cut_sorter)
+        self.cut_capacity = int(min(self.lod.count, need))
+        self.cut_sorter = self._own(RadixSorter(self.ctx, self.cut_capacity))
 
     def _frame_buffer(self, name: str, nbytes: int) -> Buffer:
         """The named frame buffer, at least ``nbytes`` (grown by 1.5x when too small, never shrunk)."""
@@ -313,12 +323,23 @@ class SplatRenderer:
         self._pending = None
         prog, result, args = pending
         timings = prog.wait()
-        needed = int(self.count.read(np.uint32, 2)[1])  # [0] pairs kept, [1] pairs wanted
         redrawn = False
-        if needed > self.capacity:
-            self._ensure_capacity(int(needed * 1.25) + 1024)
+        while True:
+            counts = self.count.read(np.uint32, 3)  # [0] pairs kept, [1] pairs wanted, [2] nodes in the cut
+            needed = int(counts[1])
+            if self.lod is not None:
+                self.drawn = int(counts[2])
+                if self.drawn > self.cut_capacity:  # the cut outgrew its sort: nothing after it counts
+                    self._grow_cut(int(self.drawn * 1.25) + 1024)
+                elif needed > self.capacity:
+                    self._ensure_capacity(int(needed * 1.25) + 1024)
+                else:
+                    break
+            elif needed > self.capacity:
+                self._ensure_capacity(int(needed * 1.25) + 1024)
+            else:
+                break
             timings = self._program(*args).run()
-            needed = int(self.count.read(np.uint32, 2)[1])
             redrawn = True
         result._finished(timings, needed)
         return redrawn
@@ -327,7 +348,7 @@ class SplatRenderer:
                  depth: bool, lod_k: float = 0.0) -> Program:
         shape = tuple((v.width, v.height) for v in batch.views)
         key = (shape, float(batch.pixel_angle), bool(batch.energy_preserving), bool(timestamps), bool(depth),
-               self.capacity, lod_k)
+               self.capacity, lod_k, getattr(self, "cut_capacity", 0))
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -376,11 +397,13 @@ class SplatRenderer:
                 live_total = self.lod_scanner.record(rec, self.offsets, n)
                 rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
                              groups(n, 256, c), n=n)
+                rec.copy(live_total, self.count, 4, dst_offset=8)  # read back with the pair counts
                 rec.timestamp("lod_compact")
-                keys, vals, sort_count = self.sort_key, self.sort_val, live_total
+                keys, vals, sort_count, sorter = self.sort_key, self.sort_val, live_total, self.cut_sorter
+                n = self.cut_capacity  # from here on only the cut's entries
             else:
-                keys, vals, sort_count = self.depth_key, self.depth_val, self.n_count
-            self.depth_sorter.record(rec, keys, vals, sort_count, 0, DEPTH_KEY_BITS)
+                keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
+            sorter.record(rec, keys, vals, sort_count, 0, DEPTH_KEY_BITS)
             rec.timestamp("sort_depth")
             rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                          groups(n, 256, c), n=n, count_index=0)
