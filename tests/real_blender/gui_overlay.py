@@ -114,7 +114,8 @@ def build(pkg: str) -> None:
     for obj in list(bpy.data.objects):  # the startup file's cube, camera and light
         bpy.data.objects.remove(obj)
     bpy.context.view_layer.update()
-    room = formats.read_scene(ROOM or os.path.join(SRC, "samples", "room.ply"))  # the sample is stored Z up, as Blender's axes
+    # the sample is stored Z up, as Blender's axes: the room goes in with no axis conversion
+    room = formats.read_scene(ROOM or os.path.join(SRC, "samples", "room.ply"))
     try:
         state["room"] = splat_object.create_splat_object(bpy.context, room, "Room")
         state["proxy"] = True
@@ -198,8 +199,8 @@ def record(shot: str, pkg: str) -> None:
             "room_bounds": corners, "room_display": room.display_type,
             "last_draw": {str(k): v for k, v in overlay.last_draw.items()}, "error": overlay.last_error}
     if bpy.context.scene.gs_ibl_overlay.show:
-        img = overlay.splat_image(room, r3d, region.width, region.height, bpy.context.scene.gs_ibl_overlay.resolution_scale,
-                                  slot="gui-check")
+        scale = bpy.context.scene.gs_ibl_overlay.resolution_scale
+        img = overlay.splat_image(room, r3d, region.width, region.height, scale, slot="gui-check")
         cov = os.path.join(OUT, f"{shot}_coverage.npy")
         np.save(cov, img.rgba[..., 3])
         info["coverage"], info["coverage_rect"] = os.path.basename(cov), list(img.view.ndc_rect)

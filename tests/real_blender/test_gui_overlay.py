@@ -114,7 +114,8 @@ def test_gui_overlay(tmp_path_factory):
         # splats in front of a mesh hide it: the red Blob is seen, not the grey Backdrop behind it
         blob = _patch(img_on, on, "blob")
         if not blob[0] > blob[1] + 0.25:
-            problems.append(f"view {view}: the red splat ball in front of the Backdrop cube is hidden ({blob.round(3)})")
+            problems.append(f"view {view}: the red splat ball in front of the Backdrop cube is hidden "
+                            f"({blob.round(3)})")
     # while the view moved the splats were drawn coarse; once still, a timed redraw drew them at the Resolution
     motion = result["motion"]
     draws = [(t, s) for t, s, _ms in motion["draws"]]
