@@ -45,15 +45,15 @@ def _ein(t: np.ndarray) -> np.ndarray:
     """Ein(t) = integral_0^t (1 - e^-x) / x dx: the footprint integral (in units of the area) of the coverage
     1 - exp(-t g) of a Gaussian optical depth of peak t."""
     t = np.asarray(t, np.float64)
-    small = t < 4.0
+    small = t < 12.0
     ts = np.where(small, t, 0.0)
     series = np.zeros_like(t)
     term = np.ones_like(t)
-    for k in range(1, 40):  # sum (-1)^(k+1) t^k / (k k!)
+    for k in range(1, 90):  # sum (-1)^(k+1) t^k / (k k!)
         term = term * ts / k
         series += (-1) ** (k + 1) * term / k
     # large t: ln t + gamma + E1(t), E1(t) ~ e^-t / t (1 - 1/t + 2/t^2)
-    tl = np.where(small, 4.0, t)
+    tl = np.where(small, 12.0, t)
     large = np.log(tl) + 0.5772156649015329 + np.exp(-tl) / tl * (1 - 1 / tl + 2 / tl ** 2 - 6 / tl ** 3)
     return np.where(small, series, large)
 
