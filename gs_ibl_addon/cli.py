@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from .core.settings import DEFAULT_METHOD, METHOD_NAMES
+from .core.settings import DEFAULT_LOD, DEFAULT_LOD_K, DEFAULT_METHOD, LOD_HELP, LOD_MODES, METHOD_NAMES
 
 DESCRIPTION = __doc__
 SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
@@ -55,6 +55,14 @@ def finite_float(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not np.isfinite(value):
         raise argparse.ArgumentTypeError(f"{text!r} is not a finite number; give an ordinary number")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0."""
+    value = finite_float(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"{value} must be more than 0")
     return value
 
 
@@ -224,7 +232,7 @@ def cmd_bake(a) -> int:
     # Everything that can be known wrong is refused here, before the file is read or anything rendered.
     check_input(a.scene)
     settings = ProbeSettings(method=a.method, face_size=a.face_size, irradiance_size=a.irradiance_size,
-                             tolerance=a.tolerance, glossy=a.glossy)
+                             tolerance=a.tolerance, glossy=a.glossy, lod=a.lod, lod_k=a.lod_k)
     check_settings(settings)
     probe = None if a.probe is None else check_probe_position(a.probe)
     ctx = _context()
@@ -344,6 +352,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--irradiance-size", type=positive_int, default=16, help="irradiance cube face size (default 16)")
     q.add_argument("--tolerance", type=fraction, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
     q.add_argument("--glossy", action="store_true", help="also write GGX prefiltered radiance (ggx_*.exr)")
+    q.add_argument("--lod", default=DEFAULT_LOD, choices=LOD_MODES, help=LOD_HELP)
+    q.add_argument("--lod-k", type=positive_float, default=DEFAULT_LOD_K,
+                   help=f"with --lod auto: merged splats are drawn once their cell spans at most this many pixels "
+                        f"(default {DEFAULT_LOD_K:g}; smaller is more accurate and slower)")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
     q.add_argument("--out", required=True, help="output folder")

@@ -21,8 +21,8 @@ from .probe.gpu_filters import gpu_ggx_prefilter
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
-from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE,
-                       MAX_IRRADIANCE_SIZE, METHOD_ALIASES, METHOD_NAMES)
+from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD, DEFAULT_LOD_K,
+                       DEFAULT_METHOD, DEFAULT_TOLERANCE, LOD_MODES, MAX_IRRADIANCE_SIZE, METHOD_ALIASES, METHOD_NAMES)
 
 # From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
 # face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
@@ -46,6 +46,8 @@ class ProbeSettings:
     sh_order: int = 2
     glossy: bool = False  # also GGX prefiltered radiance for glossy surfaces (slower)
     max_face_size: int = AUTO_MAX_FACE
+    lod: str = DEFAULT_LOD  # one of settings.LOD_MODES: "auto" renders merged splats where the probe allows
+    lod_k: float = DEFAULT_LOD_K  # with lod "auto": a merged node is drawn once its cell spans <= lod_k pixels
     extra: dict = field(default_factory=dict)  # passed through to filter_probe (sample counts, windows...)
 
 
@@ -65,6 +67,10 @@ def check_settings(s: ProbeSettings) -> str:
         raise BadSetting("irradiance_size", s.irradiance_size,
                          f"irradiance size {s.irradiance_size} is more than {MAX_IRRADIANCE_SIZE}; irradiance is "
                          "smooth and 16-64 is plenty: use 64 or less")
+    if s.lod not in LOD_MODES:
+        raise BadSetting("lod", s.lod, f"unknown level of detail {s.lod!r}: use one of {', '.join(LOD_MODES)}")
+    if isinstance(s.lod_k, bool) or not (isinstance(s.lod_k, (int, float)) and 0 < s.lod_k <= 64):
+        raise BadSetting("lod_k", s.lod_k, f"lod k {s.lod_k!r} must be a number of pixels above 0 and at most 64")
     if not (isinstance(s.tolerance, (int, float)) and 0 < s.tolerance < 1):
         raise BadSetting("tolerance", s.tolerance, f"tolerance {s.tolerance} must be a fraction between 0 and 1 "
                                                    "(0.01 = 1%)")
@@ -130,13 +136,16 @@ def relative_rms(a: np.ndarray, b: np.ndarray) -> float:
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
                        say: Callable[[str, float], None]) -> ProbeResult:
     """Render (and, with face size 0, search the face size), filter, and add the glossy maps when asked."""
+    # a renderer holding a level of detail draws from it when asked (one built without renders every splat)
+    lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
+
     def probe_at(face: int) -> ProbeResult:
         cube = ViewBatch.cubemap(pos, face)
         if face < FACE_BY_FACE_FROM:
             # The frame stays on the GPU: the filter reads back the irradiance only, the radiance is read once,
             # for the face size kept (below).
             # wait=False: the filter is queued behind the render and the host waits once for both.
-            res = r.render(cube, timestamps=True, wait=False)
+            res = r.render(cube, timestamps=True, wait=False, lod_k=lod_k)
             probe = filter_probe(res.frame, irradiance_size=s.irradiance_size, method=method, sh_order=s.sh_order,
                                  roughness=None, read_radiance=False, splat_count=splat_count,
                                  device=r.ctx.device_name, **s.extra)
@@ -146,7 +155,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             images, timings = [], {}
             for f, view in enumerate(cube.views):
                 say(f"rendering face {f + 1} of 6 ({face}x{face})", 0.2 + 0.6 * f / 6)
-                res = r.render(replace(cube, views=(view,)), timestamps=True)
+                res = r.render(replace(cube, views=(view,)), timestamps=True, lod_k=lod_k)
                 images += res.images
                 for k, v in res.timings_ms.items():
                     timings[f"render_{k}"] = timings.get(f"render_{k}", 0.0) + v
@@ -210,7 +219,7 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     try:
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
-            r = SplatRenderer(scene)
+            r = SplatRenderer(scene, lod=s.lod == "auto")
         result = _search_and_filter(r, r.scene_count, pos, s, method, say)
     except Exception as e:
         from .limits import out_of_memory_advice

@@ -42,6 +42,17 @@ MAX_FACE_SIZE = 2048  # the largest face size the panel offers
 MAX_IRRADIANCE_SIZE = 512  # irradiance is smooth: 16-64 is plenty; beyond this only the filter's cost grows
 
 
+# Level of detail (render/lod.py): "off" renders every splat; "auto" renders merged splats where a probe's pixel
+# allows, each node once its octree cell spans at most LOD_K pixels. Off by default: on the H200 run of
+# 2026-12-02 (docs/benchmarks.md) the irradiance error stayed under 0.5% on the random bench scenes at every k
+# tried, but not on the guitar capture (3.4% at 32^2, k = 0.5) nor the sample room (0.9% at 32^2, k = 1).
+LOD_MODES: tuple[str, ...] = ("off", "auto")
+DEFAULT_LOD = "off"
+DEFAULT_LOD_K = 1.0
+LOD_HELP = ("level of detail: off (every splat) or auto (merged splats where the probe's pixels allow; faster on "
+            "millions of splats, irradiance within ~1-3% on small probes, see docs/benchmarks.md)")
+
+
 def method_help() -> str:
     """One line per method for the command line's --help."""
     return "; ".join(f"{m.name}: {m.description}" for m in IRRADIANCE_METHODS)
