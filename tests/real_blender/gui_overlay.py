@@ -208,8 +208,44 @@ def record(shot: str, pkg: str) -> None:
     log(f"shot {shot}: {info['last_draw']} error={info['error']}")
 
 
+def shader_check(pkg: str) -> None:
+    """The overlay's shader against its numpy reference (overlay_math.to_display, window_depth): random colour,
+    coverage and distances drawn into an offscreen buffer exactly as the draw handler draws, read back."""
+    import gpu
+    overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
+    w, h = 96, 64
+    rng = np.random.default_rng(7)
+    rgba = rng.random((h, w, 4)).astype(np.float32) * np.float32(1.5)
+    rgba[..., 3] = rng.random((h, w)).astype(np.float32)
+    rgba[..., :3] *= rgba[..., 3:]  # premultiplied, some colours above 1
+    rgba[:4, :, 3] = 0.0  # uncovered rows
+    depth = (0.5 + 9.0 * rng.random((h, w))).astype(np.float32)
+    depth[:, :3] = 0.0  # no splat seen
+    view = om.overlay_view(om.look_at_view_matrix((0, -3, 1), (0, 0, 1)), om.perspective_matrix(50, w, h, 0.1, 30.0),
+                           w, h, 1.0)
+    exposure = 0.5
+    off = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        colour_tex, depth_tex = overlay.textures(rgba, depth)
+        overlay.draw_quads([(colour_tex, depth_tex, (-1.0, -1.0, 1.0, 1.0),
+                             overlay.shader_params(view, exposure))])
+        got = np.array(fb.read_color(0, 0, w, h, 4, 0, "FLOAT").to_list(), np.float32).reshape(h, w, 4)[::-1]
+        got_depth = np.array(fb.read_depth(0, 0, w, h).to_list(), np.float32).reshape(h, w)[::-1]
+    off.free()
+    a = rgba[..., 3]
+    want = np.where((a >= overlay.ALPHA_CUT)[..., None], om.to_display(rgba, exposure), 0.0)
+    want_depth = np.where(a >= overlay.OPAQUE_CUT, om.window_depth(depth, view, om.DEPTH_PULL), 1.0)
+    state["shader_check"] = {"colour_max_error": float(np.abs(got - want).max()),
+                             "depth_max_error": float(np.abs(got_depth - want_depth).max()),
+                             "pixels": w * h}
+    log(f"shader check: {state['shader_check']}")
+
+
 def steps(pkg: str):
     """The script: (seconds to wait before it, what to do), one after the other."""
+    yield 1.0, lambda: shader_check(pkg)
     yield 1.0, lambda: build(pkg)
     for name in VIEWS:
         yield 1.0, lambda name=name: (set_view(name), set_overlay(False, True))
@@ -412,6 +448,7 @@ def finish(error: str | None = None) -> None:
     state["error"] = error
     with open(os.path.join(OUT, "shots.json"), "w") as f:
         json.dump({"shots": state["shots"], "log": state["log"], "proxy": state.get("proxy"),
+                   "shader_check": state.get("shader_check"),
                    "motion": state.get("motion"),
                    "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error}, f, indent=1)
     if error:

@@ -90,6 +90,9 @@ def test_gui_overlay(tmp_path_factory):
     assert (out / "shots.json").exists(), f"gui_overlay.py wrote no shots.json (rc {r.returncode}); see {keep}"
     result = json.loads((out / "shots.json").read_text())
     assert not result["error"], f"gui_overlay.py failed in Blender {result['blender']}:\n{result['error']}"
+    # the overlay's shader (display colour, window depth) is its numpy reference's, to float precision
+    check = result["shader_check"]
+    assert check["colour_max_error"] < 1e-4 and check["depth_max_error"] < 1e-5, check
     shots = result["shots"]
     problems = []
     for view in ("a", "b"):
