@@ -5,7 +5,8 @@ here. What changed, and where it was seen:
 - Materials and Worlds: 4.x makes the node tree only when ``use_nodes`` is set; 5.0 always has one and deprecates
   ``use_nodes``.
 - Geometry Nodes modifier inputs: up to 5.1 an ID property of the modifier, ``mod[identifier] = value``; from 5.2
-  ``mod.properties.inputs.<identifier>.value`` (item assignment raises TypeError).
+  ``mod.properties.inputs.<identifier>.value`` (item assignment raises TypeError), which does not tag the object for
+  re-evaluation (seen in 5.2's GUI: the proxy kept drawing until the object was tagged).
 - Random Value node: up to 5.1 one output per data type (FLOAT_VECTOR, FLOAT, INT, BOOLEAN) with the unused ones
   disabled; from 5.2 a single output whose type follows ``data_type``.
 """
@@ -32,6 +33,7 @@ def set_modifier_input(mod, identifier: str, value) -> None:
     inputs = _modifier_inputs(mod)
     if inputs is not None:
         getattr(inputs, identifier).value = value
+        mod.id_data.update_tag()  # 5.2 does not re-evaluate the modifier after an input set this way
     else:
         mod[identifier] = value
 

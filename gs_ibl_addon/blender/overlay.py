@@ -279,7 +279,6 @@ def hide_helpers(show: bool) -> int:
             del obj[HIDDEN_KEY]
         else:
             continue
-        obj.update_tag()  # Blender 5.2 does not re-evaluate the modifier after an input set through .properties
         splat_cache.proxy_switched(obj)
         changed += 1
     return changed
