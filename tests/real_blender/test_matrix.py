@@ -59,6 +59,9 @@ def _ready(root: str) -> bool:
     return _roots("ready", root).returncode == 0
 
 
+CONVERTED = ("sog", "glb", "ksplat")  # formats Blender cannot read, written by our convert (SOG: WebP in Blender)
+
+
 def _build_inputs() -> dict[str, Path]:
     """The zip, built once, and the splat files every entry imports (SPZ and plain PLY made by our CLI)."""
     OUT.mkdir(parents=True, exist_ok=True)
@@ -67,11 +70,11 @@ def _build_inputs() -> dict[str, Path]:
                    capture_output=True, text=True)
     files = {"room": REPO / "samples" / "room.ply", "capture": CAPTURE,
              "spz": OUT / "inputs" / "guitar.spz", "ply": OUT / "inputs" / "guitar.ply",
-             "spz4": OUT / "inputs" / "guitar.v4.spz"}
+             "spz4": OUT / "inputs" / "guitar.v4.spz", **{k: OUT / "inputs" / f"guitar.{k}" for k in CONVERTED}}
     files["spz"].parent.mkdir(exist_ok=True)
-    for key in ("spz", "ply", "spz4"):
+    for key in ("spz", "ply", "spz4", *CONVERTED):
         files[key].unlink(missing_ok=True)  # the CLI never overwrites
-    for key in ("spz", "ply"):
+    for key in ("spz", "ply", *CONVERTED):
         subprocess.run([sys.executable, "-m", "gs_ibl_addon", "convert", str(CAPTURE), str(files[key])], cwd=REPO,
                        check=True, capture_output=True, text=True)
     # SPZ version 4 (ZSTD streams: the reader needs zstandard, which not every Blender ships); the CLI writes 3
@@ -200,7 +203,8 @@ def test_entry(entry: Entry, tmp_path_factory):
     shutil.copy(HERE / "scenario.py", runner.host / "scenario.py")
     args = {"entry": entry.name, "work": str(runner.inner), "user_dir": str(runner.inner / "home"),
             "result": str(runner.inner / "result.json"),
-            "files": {k: inner[k] for k in ("room", "capture", "spz", "ply", "spz4")}, "capture_count": CAPTURE_COUNT,
+            "files": {k: inner[k] for k in ("room", "capture", "spz", "ply", "spz4", *CONVERTED)},
+            "capture_count": CAPTURE_COUNT,
             "probe_in_room": [0.0, 0.45, 1.0], "face_size": 64, "albedo": 0.8, "size": 48,
             "eevee_samples": 4, "cycles_samples": 16, "gui_wait_s": 10.0}
     (runner.host / "args.json").write_text(json.dumps(args, indent=1))
@@ -214,7 +218,8 @@ def test_entry(entry: Entry, tmp_path_factory):
     t_scenario = time.perf_counter() - t0
     keep = OUT / entry.name
     shutil.rmtree(keep, ignore_errors=True)
-    shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.spz", "*.zip", "*.blend*"))
+    shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.spz", "*.zip", "*.blend*", "*.sog",
+                                                                  "*.glb", "*.ksplat"))
     result_file = keep / "result.json"
     runner.close()
     assert result_file.exists(), f"{entry.name}: the scenario wrote no result (rc {r.returncode}); see {keep}"
