@@ -5,6 +5,7 @@ const uint TILE = 16u;
 const uint MAX_VIEWS = 6u;
 const uint PREP = 5u;
 const uint DEPTH_KEY_SHIFT = 8u;
+const uint TIE_BITS = 8u;
 const uint SCAN_BLOCK = 1024u;
 const uint SORT_BLOCK = 4096u;
 #endif

@@ -80,6 +80,21 @@ vec3 sh_color(uint i, vec3 d) {
     return max(c + 0.5, vec3(0.0));
 }
 
+// PCG hash (Jarzynski & Olano 2020); render/splat_math.py tie_hash computes the same in numpy.
+uint pcg(uint v) {
+    uint state = v * 747796405u + 2891336453u;
+    uint word = ((state >> ((state >> 28u) + 4u)) ^ state) * 277803737u;
+    return (word >> 22u) ^ word;
+}
+
+// Distance bits, then TIE_BITS of a hash of the position: co-distant splats composite in an order fixed by where
+// they are, not by where the file stores them (constants.py).
+uint depth_sort_key(float dist, vec3 pos) {
+    uvec3 b = floatBitsToUint(pos);
+    uint h = pcg(b.x ^ pcg(b.y ^ pcg(b.z)));
+    return ((floatBitsToUint(dist) >> DEPTH_KEY_SHIFT) << TIE_BITS) | (h >> (32u - TIE_BITS));
+}
+
 void main() {
     uint i = linear_group() * 256u + gl_LocalInvocationID.x;
     if (i >= p.n) return;
@@ -133,5 +148,5 @@ void main() {
     prepared[PREP * i + 3u] = vec4(sh_color(i, mu / dist), opacity);
     prepared[PREP * i + 4u] = vec4(cutoff, 0.0, 0.0, 0.0);
     tile_count[i] = count;
-    depth_key[i] = floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
+    depth_key[i] = depth_sort_key(dist, po.xyz);
 }

@@ -21,7 +21,7 @@ import numpy as np
 
 from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
-from ..vk.constants import DEPTH_KEY_SHIFT  # shared with the GLSL
+from ..vk.constants import DEPTH_KEY_SHIFT, TIE_BITS  # shared with the GLSL
 
 DILATION_PX2 = 0.3
 ALPHA_MIN = 1.0 / 255.0  # 3DGS: a splat's footprint ends where its alpha falls below this
@@ -82,11 +82,25 @@ def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice,
     return np.sum(cr * cr, -1) / dd, -od / dd, od < 0
 
 
+def _pcg(v: np.ndarray) -> np.ndarray:
+    """PCG hash of uint32s (Jarzynski & Olano 2020), as pcg() in shaders/gs_preprocess.comp."""
+    state = v * np.uint32(747796405) + np.uint32(2891336453)
+    word = ((state >> ((state >> np.uint32(28)) + np.uint32(4))) ^ state) * np.uint32(277803737)
+    return (word >> np.uint32(22)) ^ word
+
+
+def tie_hash(positions: np.ndarray) -> np.ndarray:
+    """(N,) uint32 hash of each splat's float32 position bits: the depth sort's tie rule."""
+    b = np.ascontiguousarray(positions, np.float32).view(np.uint32).reshape(-1, 3)
+    with np.errstate(over="ignore"):
+        return _pcg(b[:, 0] ^ _pcg(b[:, 1] ^ _pcg(b[:, 2])))
 
 
 def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
-    """The GPU's sort keys: float32 distance bits without their low 8 bits. Splats whose distances agree to 3e-5
-    tie and keep storage order, on the GPU (stable radix sort) and here (stable argsort) alike."""
+    """The GPU's sort keys: float32 distance bits without their low 8 bits, then TIE_BITS of tie_hash. Splats whose
+    distances agree to 3e-5 composite in an order set by their positions, whatever the file's order; only those
+    whose hashes also agree keep storage order, on the GPU (stable radix sort) and here (stable argsort) alike."""
     mu = scene.positions.astype(np.float32) - np.asarray(origin, np.float32)
     dist = np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
-    return dist.view(np.uint32) >> DEPTH_KEY_SHIFT
+    tie = tie_hash(scene.positions) >> np.uint32(32 - TIE_BITS)
+    return ((dist.view(np.uint32) >> np.uint32(DEPTH_KEY_SHIFT)) << np.uint32(TIE_BITS)) | tie

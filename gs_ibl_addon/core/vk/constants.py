@@ -7,14 +7,18 @@ imports nothing, so the build script can load it without the package's dependenc
 TILE = 16  # pixels per tile side: gs_raster's workgroup is TILE x TILE
 MAX_VIEWS = 6  # views per batch (a cubemap): gs_preprocess keeps one tile rectangle per splat and view
 PREP = 5  # vec4s per prepared splat (three rows of the ray frame, colour + opacity, footprint cutoff)
-# Depth keys drop the low 8 mantissa bits of the distance (relative precision 3e-5): three 8-bit sort passes
-# instead of four, and only splats within 0.003% of the same distance can swap.
+# Depth keys drop the low 8 mantissa bits of the distance (relative precision 3e-5) and put TIE_BITS of a hash of
+# the splat's position below them. Splats within 0.003% of the same distance (a shell around the probe, a trainer's
+# background sphere) then composite in an order that has nothing to do with how the file stores them: a stable
+# sort alone keeps storage order, and a Morton-sorted file tinted every pixel toward one side (docs/stability.md).
+# The key uses 31 bits (the distance's sign bit is 0): four 8-bit sort passes.
 DEPTH_KEY_SHIFT = 8
-DEPTH_KEY_BITS = 32 - DEPTH_KEY_SHIFT
+TIE_BITS = 8
+DEPTH_KEY_BITS = 32 - DEPTH_KEY_SHIFT + TIE_BITS
 SCAN_BLOCK = 1024  # elements per workgroup of scan_block / scan_add (256 lanes x 4)
 SORT_BLOCK = 4096  # keys per workgroup of the radix histogram and scatter passes
 
-GLSL_CONSTANTS = ("TILE", "MAX_VIEWS", "PREP", "DEPTH_KEY_SHIFT", "SCAN_BLOCK", "SORT_BLOCK")
+GLSL_CONSTANTS = ("TILE", "MAX_VIEWS", "PREP", "DEPTH_KEY_SHIFT", "TIE_BITS", "SCAN_BLOCK", "SORT_BLOCK")
 
 
 def glsl_source() -> str:
