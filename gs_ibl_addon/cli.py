@@ -23,7 +23,8 @@ import time
 
 import numpy as np
 
-from .core.settings import DEFAULT_LOD, DEFAULT_LOD_K, DEFAULT_METHOD, LOD_HELP, LOD_MODES, METHOD_NAMES
+from .core.settings import (COLOUR_SPACE_CHOICES, COLOUR_SPACE_HELP, DEFAULT_COLOUR_SPACE_CHOICE, DEFAULT_LOD,
+                            DEFAULT_LOD_K, DEFAULT_METHOD, LOD_HELP, LOD_MODES, METHOD_NAMES)
 
 DESCRIPTION = __doc__
 SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
@@ -33,13 +34,16 @@ def _progress(msg: str, frac: float) -> None:
     print(f"[{100 * frac:3.0f}%] {msg}", file=sys.stderr, flush=True)
 
 
-def _load(path: str):
+def _load(path: str, colour_space: str = "auto"):
+    """The scene in ``path``; colour_space other than "auto" overrides what the file declares (--colour-space)."""
     from .core.formats import read_scene
     t = time.perf_counter()
     scene = read_scene(path)
+    if colour_space != "auto":
+        scene.colour_space = colour_space
     repairs = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items() if v) or "none"
-    print(f"read {path}: {scene.count:,} splats, SH degree {scene.sh_degree}, repairs: {repairs} "
-          f"({time.perf_counter() - t:.2f} s)", file=sys.stderr)
+    print(f"read {path}: {scene.count:,} splats, SH degree {scene.sh_degree}, colour space {scene.colour_space}, "
+          f"repairs: {repairs} ({time.perf_counter() - t:.2f} s)", file=sys.stderr)
     return scene
 
 
@@ -151,7 +155,7 @@ def cmd_render(a) -> int:
         check_output_file(a.depth, exr_bytes(w, h, 1), "--depth", (".exr",))
     if a.png:
         check_output_file(a.png, 4 * w * h + 4096, "--png", (".png",))
-    s = _load(a.scene)
+    s = _load(a.scene, a.colour_space)
     batch = ViewBatch.pinhole(camera, look_at, a.fov, w, h, up=up)
     _progress("rendering", 0.3)
     renderer = SplatRenderer(s)
@@ -206,7 +210,7 @@ def cmd_cubemap(a) -> int:
     ctx = _context()
     check_fits("face_size", n, cube_bytes(n, 1), lambda v: cube_bytes(v, 1), ctx, "^2 faces")
     check_output_dir(a.out, 6 * exr_bytes(n, n, 4) + exr_bytes(4 * n, 2 * n, 4), "--out")
-    s = _load(a.scene)
+    s = _load(a.scene, a.colour_space)
     _progress(f"rendering six {n}x{n} faces", 0.3)
     cube, res = _advise_on_memory(lambda: render_cubemap(s, probe, n, timestamps=True),
                                   f"rendering six {n}^2 faces of {s.count:,} splats",
@@ -241,7 +245,7 @@ def cmd_bake(a) -> int:
     check_probe_folder(a.out, "--out")
     if a.preview:
         check_output_file(a.preview, 4 << 20, "--preview", (".png",))
-    s = _load(a.scene)
+    s = _load(a.scene, a.colour_space)
     check_fits_device(settings, ctx, s.count, s.sh.shape[1])
     if probe is None:
         probe = default_probe_position(s)
@@ -298,9 +302,14 @@ def cmd_sample(a) -> int:
     check_output_file(a.out, 64 << 20, "out", (".ply",))
     s = sample_environment().with_sh_degree(0)
     with written_atomically(a.out) as tmp:
-        write_ply(tmp, s, comments=(axes_comment(*BLENDER_AXES),))  # made Z up: imports upright
+        write_ply(tmp, s, comments=(axes_comment(*BLENDER_AXES),))  # made Z up: imports upright; declares linear
     print(f"wrote {a.out}: {s.count:,} splats (the generated sample environment)")
     return 0
+
+
+def _colour_space_option(q: argparse.ArgumentParser) -> None:
+    q.add_argument("--colour-space", default=DEFAULT_COLOUR_SPACE_CHOICE, choices=COLOUR_SPACE_CHOICES,
+                   help=COLOUR_SPACE_HELP)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -328,6 +337,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--depth", help="also write a one-channel EXR of depth here: distance along the view axis of what "
                                    "each pixel shows (coverage-weighted), 0 where it shows nothing")
     q.add_argument("--exposure", type=finite_float, default=0.0, help="exposure (stops) of the PNG preview")
+    _colour_space_option(q)
     q.set_defaults(fn=cmd_render)
 
     q = sub.add_parser("cubemap", help="render the six cube faces seen from a probe point to EXRs, plus a lat-long")
@@ -335,6 +345,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--probe", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"), help="probe position")
     q.add_argument("--face-size", type=positive_int, default=256, help="pixels per face side (default 256)")
     q.add_argument("--out", required=True, help="output folder (face_posx.exr ... face_negz.exr, radiance.exr)")
+    _colour_space_option(q)
     q.set_defaults(fn=cmd_cubemap)
 
     q = sub.add_parser("bake", help="bake a light probe: radiance, irradiance (E/pi), SH, probe.json, preview.png")
@@ -360,6 +371,7 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
     q.add_argument("--out", required=True, help="output folder")
     q.add_argument("--preview", help="preview PNG path (default OUT/preview.png)")
+    _colour_space_option(q)
     q.set_defaults(fn=cmd_bake)
 
     q = sub.add_parser("convert", help="convert between splat formats (writes .ply, .spz, .splat, .sog, .glb or .ksplat)")

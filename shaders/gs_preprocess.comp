@@ -26,6 +26,7 @@ layout(push_constant) uniform P {
     uint energy_preserving;  // 1: the dilation keeps each splat's integral (probes); 0: 3DGS's look (views)
     uint lod;  // 1: nodes of a level of detail, drawn where in the cut of threshold lod_tau
     float lod_tau; float lod_cell; float lod_ox; float lod_oy; float lod_oz;  // threshold, level-1 cell, grid corner
+    uint srgb;  // the scene's colour space (core/colour.py): 1 "srgb" (trained on photos), 0 "linear"
 } p;
 
 const uint LOD_NO_PARENT = 255u;  // render/lod.py NO_PARENT: no stored ancestor, its error is infinite
@@ -56,6 +57,16 @@ vec3 sh_coeff(uint i, uint k) {
     return vec3(sh[b], sh[b + p.n], sh[b + 2u * p.n]);
 }
 
+// The colour rule, the one place the GPU applies it (numpy mirror: core/colour.py splat_radiance). "srgb": the
+// sRGB decoding curve extended as Blender's Cycles does (negatives 0, ((c + 0.055) / 1.055)^2.4 above 0.04045,
+// unclamped above 1); "linear": c is radiance already. Either way negatives give no light.
+vec3 splat_radiance(vec3 c) {
+    if (p.srgb == 0u) return max(c, vec3(0.0));
+    vec3 lo = max(c, vec3(0.0)) * (1.0 / 12.92);
+    vec3 hi = pow((max(c, vec3(0.04045)) + 0.055) * (1.0 / 1.055), vec3(2.4));
+    return mix(hi, lo, lessThan(c, vec3(0.04045)));
+}
+
 vec3 sh_color(uint i, vec3 d) {
     vec3 c = C0 * sh_coeff(i, 0u);
     if (p.sh_k > 1u) {
@@ -77,7 +88,7 @@ vec3 sh_color(uint i, vec3 d) {
         }
         for (uint k = 1u; k < p.sh_k; ++k) c += basis[k] * sh_coeff(i, k);
     }
-    return max(c + 0.5, vec3(0.0));
+    return splat_radiance(c + 0.5);
 }
 
 // PCG hash (Jarzynski & Olano 2020); render/splat_math.py tie_hash computes the same in numpy.

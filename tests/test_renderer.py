@@ -16,7 +16,7 @@ TOL = 2e-4
 def one_splat(pos, scale=(0.2, 0.2, 0.2), rgb=(1.0, 0.5, 0.25), opacity=0.9) -> SplatScene:
     return SplatScene(np.array([pos], np.float32), np.array([scale], np.float32),
                       np.array([[1, 0, 0, 0]], np.float32), np.array([opacity], np.float32),
-                      rgb_to_sh_dc(np.array([[rgb]], np.float32)))
+                      rgb_to_sh_dc(np.array([[rgb]], np.float32)), colour_space="linear")  # rgb is the light
 
 
 def assert_matches_reference(scene, batch, tol=TOL):

@@ -221,6 +221,7 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
         result = _search_and_filter(r, r.scene_count, pos, s, method, say)
+        result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count

@@ -3,7 +3,9 @@
 Values are *activated* (what the renderer uses), not the raw values stored in a 3DGS PLY:
 opacity is sigmoid(raw), scale is exp(raw), rotation is a unit quaternion (w, x, y, z).
 Colour is kept as SH coefficients exactly as 3DGS stores them: ``sh[:, 0]`` is f_dc, and the
-rendered colour toward direction d is ``max(0, SH_C0 * sh[:, 0] + 0.5 + sum_l>0 Y_lm(d) * sh[:, k])``.
+evaluated colour toward direction d is ``c = SH_C0 * sh[:, 0] + 0.5 + sum_l>0 Y_lm(d) * sh[:, k]``, and the light
+it stands for depends on the scene's ``colour_space`` (core/colour.py): srgb_to_linear(c) for "srgb" (captures
+trained on photos, Blender's rule, the default for files from outside), max(c, 0) for "linear".
 """
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .colour import check_colour_space
 from .sh import C0 as SH_C0  # re-exported: the degree-0 colour rule's constant, under its 3DGS name
 from .sh import coeff_count, degree_of
 
@@ -38,8 +41,10 @@ class SplatScene:
     sh: np.ndarray  # (N, (degree+1)^2, 3) float32; [:, 0] is f_dc, [:, 1:] the f_rest in 3DGS order
     source: str = "<memory>"  # file it came from, for messages
     repairs: dict[str, int] = field(default_factory=dict)  # what reading repaired, with counts
+    colour_space: str = "srgb"  # what SH + 0.5 means (core/colour.py): "srgb" (trained on photos) or "linear"
 
     def __post_init__(self) -> None:
+        check_colour_space(self.colour_space, f"{self.source}: colour space")
         n = len(self.positions)
         for name, arr, shape in (
             ("positions", self.positions, (n, 3)),
@@ -68,11 +73,12 @@ class SplatScene:
         sh = np.zeros((self.count, k, 3), np.float32)
         m = min(k, self.sh.shape[1])
         sh[:, :m] = self.sh[:, :m]
-        return SplatScene(self.positions, self.scales, self.rotations, self.opacities, sh, self.source, dict(self.repairs))
+        return SplatScene(self.positions, self.scales, self.rotations, self.opacities, sh, self.source, dict(self.repairs),
+                          self.colour_space)
 
     def subset(self, index: np.ndarray) -> "SplatScene":
         return SplatScene(self.positions[index], self.scales[index], self.rotations[index], self.opacities[index],
-                          self.sh[index], self.source, dict(self.repairs))
+                          self.sh[index], self.source, dict(self.repairs), self.colour_space)
 
     def transformed(self, matrix: np.ndarray) -> "SplatScene":
         """Splats moved by a 4x4 similarity transform (rotation, uniform scale, translation).
@@ -89,7 +95,7 @@ class SplatScene:
         pos = self.positions.astype(np.float64) @ lin.T + m[:3, 3]
         q = quat_multiply(matrix_to_quat(r), self.rotations.astype(np.float64))
         return SplatScene(pos.astype(np.float32), (self.scales * s).astype(np.float32), q.astype(np.float32),
-                          self.opacities, self.sh, self.source, dict(self.repairs))
+                          self.opacities, self.sh, self.source, dict(self.repairs), self.colour_space)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if self.count == 0:

@@ -53,6 +53,25 @@ LOD_HELP = ("level of detail: off (every splat) or auto (merged splats where the
             "millions of splats, irradiance within ~1-3% on small probes, see docs/benchmarks.md)")
 
 
+# The colour rule (core/colour.py): what a splat's SH + 0.5 means. One vocabulary for the command line's
+# --colour-space, probe.json, the splat object's property in Blender and its panel row.
+COLOUR_SPACE_ITEMS: tuple[tuple[str, str, str], ...] = (
+    ("srgb", "sRGB (trained on photos)",
+     "SH + 0.5 is an sRGB-encoded colour, decoded to linear light (as Blender 5.3 reads splats): 3DGS captures"),
+    ("linear", "Linear",
+     "SH + 0.5 is scene-linear radiance: HDR-trained captures and gs-ibl's synthetic scenes and sample"),
+)
+COLOUR_SPACE_CHOICES: tuple[str, ...] = tuple(i[0] for i in COLOUR_SPACE_ITEMS) + ("auto",)
+DEFAULT_COLOUR_SPACE_CHOICE = "auto"  # the command line: what the file declares, else srgb
+COLOUR_SPACE_HELP = ("what the splats' colours mean: srgb (trained on photos: decoded as Blender 5.3 does), linear "
+                     "(HDR-trained or synthetic), auto (what the file declares, else srgb; default)")
+
+
+def blender_colour_space_items() -> list[tuple[str, str, str]]:
+    """EnumProperty items of the splat object's colour space: identifier (the name in capitals), label, tip."""
+    return [(name.upper(), label, tip) for name, label, tip in COLOUR_SPACE_ITEMS]
+
+
 def method_help() -> str:
     """One line per method for the command line's --help."""
     return "; ".join(f"{m.name}: {m.description}" for m in IRRADIANCE_METHODS)

@@ -10,6 +10,8 @@
 Coverage and colour along rays are checked with render.reference.composite_rays, the renderer's numpy reference.
 
 All scenes are SH degree 0 unless said otherwise (``scene.with_sh_degree`` pads), Z is up, units are metres.
+Their colours are scene-linear radiance (a lamp at 33 is HDR light, not an sRGB value): every scene made here
+declares colour space "linear" (core/colour.py), and files written from them say so in their header.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import numpy as np
 from .scene import SplatScene, rgb_to_sh_dc
 
 RadianceFn = Callable[[np.ndarray], np.ndarray]
+SYNTHETIC_COLOUR_SPACE = "linear"
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -128,7 +131,8 @@ def _disks(centres: np.ndarray, normals: np.ndarray, rgb: np.ndarray, sigma: np.
     scales = np.stack([sig, sig, sig * flatness], -1)
     return SplatScene(np.asarray(centres, np.float32), scales.astype(np.float32),
                       quat_z_to(normals).astype(np.float32), np.full(n, opacity, np.float32),
-                      rgb_to_sh_dc(np.asarray(rgb, np.float32))[:, None, :], source="<synthetic>")
+                      rgb_to_sh_dc(np.asarray(rgb, np.float32))[:, None, :], source="<synthetic>",
+                      colour_space=SYNTHETIC_COLOUR_SPACE)
 
 
 def concat(scenes: list[SplatScene], source: str = "<synthetic>") -> SplatScene:
@@ -136,7 +140,8 @@ def concat(scenes: list[SplatScene], source: str = "<synthetic>") -> SplatScene:
     deg = max(s.sh_degree for s in scenes)
     scenes = [s.with_sh_degree(deg) for s in scenes]
     return SplatScene(*(np.concatenate([getattr(s, f) for s in scenes]) for f in
-                        ("positions", "scales", "rotations", "opacities", "sh")), source=source)
+                        ("positions", "scales", "rotations", "opacities", "sh")), source=source,
+                      colour_space=SYNTHETIC_COLOUR_SPACE)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -289,7 +294,8 @@ def random_scene(n: int, seed: int = 0, sh_degree: int = 3, extent: float = 1.0)
                                     for _ in range(2 * l + 1)], f32)
     sh *= band_scale[:, None]
     sh[:, 0] = rgb_to_sh_dc(sh[:, 0] + f32(0.5))  # DC renders as RGB uniform in [0.02, 0.98]
-    return SplatScene(pos, scales, rot, opa, sh, source=f"<random n={n} seed={seed}>")
+    return SplatScene(pos, scales, rot, opa, sh, source=f"<random n={n} seed={seed}>",
+                      colour_space=SYNTHETIC_COLOUR_SPACE)
 
 
 def _sphere_object(centre, radius: float, rgb, spacing: float) -> SplatScene:

@@ -85,8 +85,11 @@ def read_scene(path: str | os.PathLike) -> SplatScene:
         if b"element chunk" in header or b"packed_position" in header:
             from .compressed_ply import read_compressed_ply
             return read_compressed_ply(path)
+        from .colour_space import DEFAULT_FOR_FILES, declared_colour_space
         from .ply import read_ply
-        return read_ply(path)
+        scene = read_ply(path)
+        scene.colour_space = declared_colour_space(path) or DEFAULT_FOR_FILES  # gs-ibl's own files say theirs
+        return scene
     if head[:4] == b"PK\x03\x04" or ext == ".sog" or os.path.basename(path).lower() == "meta.json":
         from .sog import read_sog
         return read_sog(path)

@@ -24,17 +24,25 @@ def axes_comment(forward: str, up: str) -> str:
     return f"{_PREFIX} forward={forward} up={up}"
 
 
-def declared_axes(path: str | os.PathLike) -> tuple[str, str] | None:
-    """(forward, up) a PLY file's header declares, or None (not a PLY, no declaration, unreadable)."""
+def header_comments(path: str | os.PathLike) -> list[str]:
+    """The text of a PLY header's ``comment`` lines (without ``comment ``); [] for a file that is not a PLY or
+    cannot be read. Shared by every declaration gs-ibl writes into headers (axes here, colour space in
+    formats/colour_space.py)."""
     try:
         with open(path, "rb") as f:
             head = f.read(HEADER_LIMIT)
     except OSError:
-        return None
+        return []
     if not head.startswith(b"ply"):
-        return None
-    for raw in head.split(b"end_header", 1)[0].splitlines():
-        m = _PATTERN.match(raw.decode("ascii", "replace").strip())
+        return []
+    lines = (raw.decode("ascii", "replace").strip() for raw in head.split(b"end_header", 1)[0].splitlines())
+    return [line[len("comment "):] for line in lines if line.startswith("comment ")]
+
+
+def declared_axes(path: str | os.PathLike) -> tuple[str, str] | None:
+    """(forward, up) a PLY file's header declares, or None (not a PLY, no declaration, unreadable)."""
+    for text in header_comments(path):
+        m = _PATTERN.match("comment " + text)
         if m:
             return m.group(1), m.group(2)
     return None

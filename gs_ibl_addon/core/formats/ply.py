@@ -274,7 +274,9 @@ def _invert_exactly(forward, y: np.ndarray, guess: np.ndarray, lo: float, hi: fl
 def write_ply(path: str | os.PathLike, scene: SplatScene, ascii: bool = False, byte_order: str = "<",
               comments: tuple[str, ...] = ()) -> None:
     """Write ``scene`` in the standard 3DGS layout (raw values: logit opacity, log scale; normals written as 0),
-    with ``comments`` in the header after ours (e.g. the axes declaration of formats/axes.py).
+    with ``comments`` in the header after ours (e.g. the axes declaration of formats/axes.py). A scene whose
+    colour space is not what undeclared files are taken to hold (linear: synthetic scenes) declares it
+    (formats/colour_space.py), so reading the file back applies the same colour rule.
 
     ``read_ply`` of the result gives back the scene's positions, SH and unit quaternions bit-for-bit, and opacities
     and scales bit-for-bit wherever the float32 value is reachable as the activation of a float32 raw value (always
@@ -297,4 +299,9 @@ def write_ply(path: str | os.PathLike, scene: SplatScene, ascii: bool = False, b
     rows[:, e + 4:e + 8] = scene.rotations
     records = rows.view(np.dtype([(name, "f4") for name in names])).reshape(n)
     PlyData([PlyElement.describe(records, "vertex")], text=ascii, byte_order=byte_order,
-            comments=["written by gs-ibl (standard 3DGS layout)", *comments]).write(path)
+            comments=["written by gs-ibl (standard 3DGS layout)", *comments, *_colour_declaration(scene)]).write(path)
+
+
+def _colour_declaration(scene: SplatScene) -> list[str]:
+    from .colour_space import DEFAULT_FOR_FILES, colour_space_comment
+    return [] if scene.colour_space == DEFAULT_FOR_FILES else [colour_space_comment(scene.colour_space)]

@@ -266,7 +266,7 @@ def build_lod(scene: SplatScene) -> LodTree:
         np.concatenate([scene.rotations.astype(f32)] + [q.astype(f32) for q in rot]),
         np.concatenate([scene.opacities.astype(f32)] + [o.astype(f32) for o in opa]),
         np.concatenate([scene.sh.astype(f32)] + [s.astype(f32) for s in shs]),
-        source=f"{scene.source} (level of detail)")
+        source=f"{scene.source} (level of detail)", colour_space=scene.colour_space)
     return LodTree(all_scene, n,
                    np.concatenate([np.zeros(n, np.int64)] + lvl).astype(np.uint8),
                    np.concatenate([leaf_parent] + plv).astype(np.uint8),

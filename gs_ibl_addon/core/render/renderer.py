@@ -26,6 +26,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..colour import check_colour_space
 from ..scene import SplatScene
 from ..vk import Buffer, Program, Recorder, get_context, groups
 from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
@@ -199,6 +200,9 @@ class SplatRenderer:
     def __init__(self, scene: SplatScene, ctx=None, near: float = DEFAULT_NEAR, lod: bool | LodTree = False) -> None:
         self.ctx = ctx or get_context()
         self.scene_count = scene.count
+        # The colour rule (core/colour.py), applied in gs_preprocess; may be changed later: it is a push constant,
+        # so a new rule records new commands and uploads nothing.
+        self.colour_space = check_colour_space(scene.colour_space)
         self.lod: LodTree | None = (lod if isinstance(lod, LodTree) else build_lod(scene)) if lod else None
         if self.lod is not None:
             if self.lod.leaves != scene.count:
@@ -348,7 +352,7 @@ class SplatRenderer:
                  depth: bool, lod_k: float = 0.0) -> Program:
         shape = tuple((v.width, v.height) for v in batch.views)
         key = (shape, float(batch.pixel_angle), bool(batch.energy_preserving), bool(timestamps), bool(depth),
-               self.capacity, lod_k, getattr(self, "cut_capacity", 0))
+               self.capacity, lod_k, getattr(self, "cut_capacity", 0), check_colour_space(self.colour_space))
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -390,7 +394,8 @@ class SplatRenderer:
                           self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
                          groups(n, 256, c),
                          n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
-                         energy_preserving=int(batch.energy_preserving), **grid)
+                         energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
+                         **grid)
             rec.timestamp("preprocess")
             if tree is not None:
                 # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)

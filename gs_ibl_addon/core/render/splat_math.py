@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..colour import splat_radiance
 from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
 from ..vk.constants import DEPTH_KEY_SHIFT, TIE_BITS  # shared with the GLSL
@@ -53,7 +54,7 @@ def prepare(scene: SplatScene, origin: np.ndarray, pixel_angle: float, near: flo
     whiten = np.transpose(rot, (0, 2, 1)) / sp[:, :, None]
     origin_local = -np.einsum("nij,nj->ni", whiten, mu)
     dirs = mu / np.maximum(dist, 1e-30)[:, None]
-    color = eval_sh_color(scene.sh, dirs)
+    color = splat_radiance(eval_sh_color(scene.sh, dirs), scene.colour_space)  # the colour rule (core/colour.py)
     op = scene.opacities.astype(np.float64)
     # The footprint stays 3DGS's (undimmed alpha >= 1/255): a splat dimmed for energy keeps its extent and its light
     cutoff = 2.0 * np.log(np.maximum(op / ALPHA_MIN, 1e-30))
