@@ -33,7 +33,10 @@ def _import_shell(tmp_path, write_3dgs_ply, center=(0.0, 0.0, 0.0)):
     path = tmp_path / "shell.ply"
     write_3dgs_ply(path, shell_scene(SKY, SHELL_N, SHELL_R, center))
     assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
-    return bpy.context.active_object
+    obj = bpy.context.active_object
+    assert obj.gs_ibl_splats.colour_space == "SRGB"  # the file declares nothing: Blender's rule
+    obj.gs_ibl_splats.colour_space = "LINEAR"  # the shell's colours are linear radiance
+    return obj
 
 
 def test_bake_operator_matches_core_result(blender, tmp_path, write_3dgs_ply):

@@ -27,7 +27,7 @@ from bpy.app.handlers import persistent
 from . import splat_cache
 from .overlay_math import DEPTH_PULL, SplatOverlay, ViewMotion, view_key
 from .compat import get_modifier_input, modifier_input_identifiers, set_modifier_input
-from .splat_object import PROXY_MODIFIER, is_splat_object
+from .splat_object import PROXY_MODIFIER, is_mesh_splats, is_splat_object
 
 HIDDEN_KEY = "gs_ibl_proxy_fraction"  # on a splat object while the overlay shows: its proxy's fraction to restore
 ALPHA_CUT = 1.0 / 255.0  # fragments with less coverage are not drawn
@@ -201,7 +201,7 @@ def draw_callback() -> None:
     try:
         view, window = np.array(rv3d.view_matrix), np.array(rv3d.window_matrix)
         eye = np.linalg.inv(view)[:3, 3]
-        objs = [o for o in context.visible_objects if is_splat_object(o)]
+        objs = [o for o in context.visible_objects if is_mesh_splats(o)]  # Blender draws its native splats itself
         objs.sort(key=lambda o: -np.linalg.norm(np.array(o.matrix_world.translation) - eye))  # far first
         slot = region.as_pointer()
         now = time.monotonic()

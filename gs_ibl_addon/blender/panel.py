@@ -11,7 +11,7 @@ from mathutils import Vector
 from . import bake as gb
 from . import world as gw
 from .properties import PROBE_NAME, is_probe
-from .splat_object import is_splat_object
+from .splat_object import is_native_splats, is_splat_object, splat_count
 
 
 def find_probe(context) -> bpy.types.Object | None:
@@ -156,11 +156,15 @@ class GSIBL_PT_panel(bpy.types.Panel):
         layout.operator("gs_ibl.import_splats", icon="IMPORT")
         obj = context.active_object
         if is_splat_object(obj):
-            info = obj["gs_ibl"]
             box = layout.box()
-            box.label(text=f"{len(obj.data.vertices):,} splats, SH {info.get('sh_degree', '?')}")
-            source = str(info.get("source", ""))
-            box.label(text=os.path.basename(source) or source)  # the path would be cut; its file name fits
+            if is_native_splats(obj):
+                box.label(text=f"{splat_count(obj):,} splats (Blender's Gaussian splats)")
+            else:
+                info = obj["gs_ibl"]
+                box.label(text=f"{splat_count(obj):,} splats, SH {info.get('sh_degree', '?')}")
+                source = str(info.get("source", ""))
+                box.label(text=os.path.basename(source) or source)  # the path would be cut; its file name fits
+            box.prop(obj.gs_ibl_splats, "colour_space", text="Colours")
         ov = context.scene.gs_ibl_overlay
         row = layout.row(align=True)
         row.prop(ov, "show", toggle=True, icon="HIDE_OFF" if ov.show else "HIDE_ON")

@@ -5,7 +5,7 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 from ..core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
-                             MAX_IRRADIANCE_SIZE, blender_method_items)
+                             MAX_IRRADIANCE_SIZE, blender_colour_space_items, blender_method_items)
 from .splat_object import is_splat_object
 
 PROBE_NAME = "GS-IBL Probe"
@@ -91,14 +91,26 @@ class GSIBL_OverlaySettings(bpy.types.PropertyGroup):
                             description="Stops of brightness applied to the splats in the viewport only")
 
 
-CLASSES = (GSIBL_ProbeSettings, GSIBL_OverlaySettings)
+class GSIBL_SplatSettings(bpy.types.PropertyGroup):
+    """Settings of a splat object (ours or a Blender 5.3 Gaussian-splat Point Cloud)."""
+    colour_space: EnumProperty(
+        name="Colour Space",
+        items=blender_colour_space_items(),  # core/settings.py: the one vocabulary
+        default="SRGB",  # Blender's rule; our importer sets what the file declares
+        update=_overlay_display,  # the overlay redraws; bakes read it when they run
+        description="What the splats' colours mean, for probe bakes and the overlay")
+
+
+CLASSES = (GSIBL_ProbeSettings, GSIBL_OverlaySettings, GSIBL_SplatSettings)
 
 
 def register_properties() -> None:
     bpy.types.Object.gs_ibl_probe = PointerProperty(type=GSIBL_ProbeSettings)
     bpy.types.Scene.gs_ibl_overlay = PointerProperty(type=GSIBL_OverlaySettings)
+    bpy.types.Object.gs_ibl_splats = PointerProperty(type=GSIBL_SplatSettings)
 
 
 def unregister_properties() -> None:
+    del bpy.types.Object.gs_ibl_splats
     del bpy.types.Scene.gs_ibl_overlay
     del bpy.types.Object.gs_ibl_probe

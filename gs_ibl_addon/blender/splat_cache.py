@@ -2,8 +2,9 @@
 
 Reading a splat object (``scene_from_object``) and uploading it (``SplatRenderer``) cost about as much as a small
 bake, and a scene on the GPU twice costs twice the memory, so both are done once per object and reused until the
-object changes: the entry's key is the object's mesh (identity, vertex count, a generation bumped by every
-geometry edit of that mesh, seen by a depsgraph handler) and its world matrix. Entries of deleted objects are
+object changes: the entry's key is the object's geometry, our mesh or a native splat Point Cloud alike (identity,
+point count, a generation bumped by every geometry edit of it, seen by a depsgraph handler) and its world matrix.
+The object's colour space is not part of the key: it is a push constant of the renderer, set on every get(). Entries of deleted objects are
 dropped at the next depsgraph update; everything is freed when a file is loaded and when the extension is
 disabled. Renderers stay on the GPU between bakes (that is what makes "Update When Moved" cheap).
 """
@@ -15,7 +16,10 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from .splat_object import scene_from_object
+from .splat_object import colour_space_of, scene_from_object, splat_count
+
+# What a splat object's data can be: a change to one of these is a geometry edit (PointCloud: Blender 5.3 splats).
+_GEOMETRY = tuple(t for t in (bpy.types.Mesh, getattr(bpy.types, "PointCloud", None)) if t is not None)
 
 
 @dataclass
@@ -39,9 +43,9 @@ def uid(idb) -> int:
 
 
 def data_key(obj: bpy.types.Object) -> tuple:
-    """What the uploaded splats depend on: which mesh, its size, its edits and the object's world matrix."""
+    """What the uploaded splats depend on: which geometry, its size, its edits and the object's world matrix."""
     mesh = uid(obj.data)
-    return (mesh, len(obj.data.vertices), _mesh_generation.get(mesh, 0),
+    return (mesh, splat_count(obj), _mesh_generation.get(mesh, 0),
             np.array(obj.matrix_world, np.float64).tobytes())
 
 
@@ -53,13 +57,13 @@ def get(obj: bpy.types.Object) -> CachedSplats:
     global uploads
     key = data_key(obj)
     entry = _entries.get(uid(obj))
-    if entry is not None and entry.key == key:
-        return entry
-    release(uid(obj))
-    from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
-    entry = CachedSplats(key, SplatRenderer(scene_from_object(obj)))
-    _entries[uid(obj)] = entry
-    uploads += 1
+    if entry is None or entry.key != key:
+        release(uid(obj))
+        from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
+        entry = CachedSplats(key, SplatRenderer(scene_from_object(obj)))
+        _entries[uid(obj)] = entry
+        uploads += 1
+    entry.renderer.colour_space = colour_space_of(obj)  # the colour rule: nothing uploaded again when it changes
     return entry
 
 
@@ -85,7 +89,7 @@ def clear() -> None:
 def on_depsgraph_update(scene, depsgraph) -> None:
     """Counts geometry edits per mesh (they invalidate its entry) and frees entries of deleted objects."""
     for u in depsgraph.updates:
-        if u.is_updated_geometry and isinstance(u.id, bpy.types.Mesh):
+        if u.is_updated_geometry and isinstance(u.id, _GEOMETRY):
             mesh = uid(u.id.original)
             if mesh not in _proxy_only:
                 _mesh_generation[mesh] = _mesh_generation.get(mesh, 0) + 1

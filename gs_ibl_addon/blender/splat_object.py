@@ -1,4 +1,14 @@
-"""The splat object: a mesh of loose vertices that carries every splat, saved inside the .blend.
+"""Splat objects: the two kinds a probe bakes from, read by one function (``scene_from_object``).
+
+* Ours: a mesh of loose vertices that carries every splat, saved inside the .blend (below).
+* Blender 5.3+'s native splats: a Point Cloud with ``type == 'GAUSSIAN_SPLAT'`` (made by Blender's PLY, SPZ and glTF
+  importers), whose point attributes are ``radiance:base`` (FLOAT4: f_dc RGB as stored, then opacity after the
+  sigmoid), ``scale`` (after exp), ``rotation`` (QUATERNION, w x y z) and ``radiance:sh_0`` .. ``radiance:sh_14``
+  (one RGB per higher SH coefficient, 3DGS order). Read with foreach_get straight into numpy.
+Either kind carries a colour space (Object.gs_ibl_splats.colour_space, core/colour.py): ours takes the file's
+declaration at import, a native one defaults to sRGB, Blender's own rule.
+
+Our mesh:
 
 One vertex per splat (its position); the other activated SplatScene fields are point-domain attributes:
   gs_scale (FLOAT_VECTOR), gs_rotation (QUATERNION, w x y z), gs_opacity (FLOAT), gs_sh_00 .. gs_sh_NN
@@ -17,6 +27,7 @@ import numpy as np
 from mathutils import Matrix
 
 from ..core.scene import SplatScene, sh_dc_to_rgb
+from ..core.sh import degree_of
 from .compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
 from .datablocks import MARKER, find_ours
 
@@ -33,8 +44,29 @@ BOUNDS_ABOVE = 5_000_000  # above this many splats the object shows as its bound
 _SH_NAME = "gs_sh_{:02d}"
 
 
-def is_splat_object(obj: bpy.types.Object | None) -> bool:
+def is_mesh_splats(obj: bpy.types.Object | None) -> bool:
+    """One of ours: a mesh made by our importer."""
     return obj is not None and obj.type == "MESH" and MARKER in obj.keys()
+
+
+def is_native_splats(obj: bpy.types.Object | None) -> bool:
+    """A Blender 5.3+ Gaussian-splat Point Cloud (Blender draws and renders it itself)."""
+    return obj is not None and obj.type == "POINTCLOUD" and getattr(obj.data, "type", None) == "GAUSSIAN_SPLAT"
+
+
+def is_splat_object(obj: bpy.types.Object | None) -> bool:
+    """Either kind of splat object: what a probe can bake from."""
+    return is_mesh_splats(obj) or is_native_splats(obj)
+
+
+def splat_count(obj: bpy.types.Object) -> int:
+    return len(obj.data.points) if is_native_splats(obj) else len(obj.data.vertices)
+
+
+def colour_space_of(obj: bpy.types.Object) -> str:
+    """The object's colour space, as the core names it ("srgb" or "linear")."""
+    settings = getattr(obj, "gs_ibl_splats", None)
+    return settings.colour_space.lower() if settings is not None else "srgb"
 
 
 def _new_attr(mesh: bpy.types.Mesh, name: str, kind: str, field: str, values: np.ndarray) -> None:
@@ -130,6 +162,8 @@ def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str
         _fill_mesh(mesh, scene)
         obj = bpy.data.objects.new(name, mesh)
         obj[MARKER] = {"source": scene.source, "sh_degree": scene.sh_degree, "version": 1}
+        if hasattr(obj, "gs_ibl_splats"):  # registered (not in a bare bpy that only builds objects)
+            obj.gs_ibl_splats.colour_space = scene.colour_space.upper()  # the file's declaration (else sRGB)
         if matrix is not None:
             # a Matrix, not nested lists: RNA would read nested lists column-major (transposed)
             obj.matrix_world = Matrix([list(r) for r in np.asarray(matrix, np.float64)])
@@ -149,42 +183,82 @@ def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str
     return obj
 
 
-def _get_attr(mesh: bpy.types.Mesh, name: str, field: str, width: int) -> np.ndarray:
-    attr = mesh.attributes.get(name)
+# Attribute data type -> foreach_get key and floats per element (Blender 5.3's FLOAT4 reads as "vector").
+_FIELDS = {"FLOAT": ("value", 1), "FLOAT_VECTOR": ("vector", 3), "QUATERNION": ("value", 4),
+           "FLOAT_COLOR": ("color", 4), "FLOAT4": ("vector", 4), "FLOAT2": ("vector", 2)}
+
+
+def _read_attr(geometry, name: str, n: int, width: int) -> np.ndarray:
+    """Attribute ``name`` of ``n`` points as (n, width) float32 (n,) for width 1, without a Python list."""
+    attr = geometry.attributes.get(name)
     if attr is None:
-        raise ValueError(f"splat object {mesh.name!r} lacks attribute {name!r}: re-import the splat file")
-    n = len(mesh.vertices)
+        raise ValueError(f"splat object {geometry.name!r} lacks attribute {name!r}: re-import the splat file")
+    key, w = _FIELDS.get(attr.data_type, (None, 0))
+    if w != width:
+        raise ValueError(f"splat object {geometry.name!r}: attribute {name!r} is {attr.data_type}, expected "
+                         f"{width} floats per point: re-import the splat file")
     out = np.empty(n * width, np.float32)
-    attr.data.foreach_get(field, out)
+    attr.data.foreach_get(key, out)
     return out.reshape((n, width)) if width > 1 else out
+
+
+def _get_attr(mesh: bpy.types.Mesh, name: str, field: str, width: int) -> np.ndarray:
+    return _read_attr(mesh, name, len(mesh.vertices), width)
 
 
 def scene_from_mesh(mesh: bpy.types.Mesh, source: str = "<blender>") -> SplatScene:
     """The splats as stored, in the object's local space."""
     n = len(mesh.vertices)
-    pos = np.empty(n * 3, np.float32)
-    mesh.attributes["position"].data.foreach_get("vector", pos)
+    pos = _read_attr(mesh, "position", n, 3)
     k = 0
     while mesh.attributes.get(_SH_NAME.format(k)) is not None:
         k += 1
     if k not in (1, 4, 9, 16):
         raise ValueError(f"splat object {mesh.name!r} has {k} SH attributes (expected 1, 4, 9 or 16): re-import it")
     sh = np.stack([_get_attr(mesh, _SH_NAME.format(i), "vector", 3) for i in range(k)], 1)
-    return SplatScene(pos.reshape(n, 3), _get_attr(mesh, "gs_scale", "vector", 3),
+    return SplatScene(pos, _get_attr(mesh, "gs_scale", "vector", 3),
                       _get_attr(mesh, "gs_rotation", "value", 4), _get_attr(mesh, "gs_opacity", "value", 1), sh,
                       source=source)
 
 
+_NATIVE_SH = "radiance:sh_{}"
+
+
+def scene_from_pointcloud(cloud, source: str = "<blender>") -> SplatScene:
+    """A native Gaussian-splat Point Cloud's splats as Blender stores them, in the object's local space."""
+    n = len(cloud.points)
+    base = _read_attr(cloud, "radiance:base", n, 4)
+    rest = 0
+    while cloud.attributes.get(_NATIVE_SH.format(rest)) is not None:
+        rest += 1
+    try:
+        degree_of(rest + 1)
+    except ValueError:
+        raise ValueError(f"splat object {cloud.name!r} has {rest} radiance:sh_* attributes (expected 0, 3, 8 or "
+                         "15): re-import it") from None
+    sh = np.empty((n, rest + 1, 3), np.float32)
+    sh[:, 0] = base[:, :3]
+    for k in range(rest):
+        sh[:, k + 1] = _read_attr(cloud, _NATIVE_SH.format(k), n, 3)
+    return SplatScene(_read_attr(cloud, "position", n, 3), _read_attr(cloud, "scale", n, 3),
+                      _read_attr(cloud, "rotation", n, 4), np.ascontiguousarray(base[:, 3]), sh, source=source)
+
+
 def scene_from_object(obj: bpy.types.Object) -> SplatScene:
-    """The object's splats in Blender world space (its matrix_world applied): what a probe bake needs.
+    """Either kind of splat object's splats in Blender world space (its matrix_world applied), with its colour
+    space: what a probe bake needs. SH view dependence stays in the object's frame (core SplatScene.transformed).
 
     Raises ValueError naming the object when its transform cannot move splats (non-uniform or mirrored scale).
     """
-    if not is_splat_object(obj):
-        raise ValueError(f"{obj.name if obj else None!r} is not a GS-IBL splat object (import a splat file first)")
-    info = obj[MARKER]
-    source = str(info.get("source", obj.name)) if hasattr(info, "get") else obj.name
-    local = scene_from_mesh(obj.data, source)
+    if is_native_splats(obj):
+        local = scene_from_pointcloud(obj.data, obj.name)
+    elif is_mesh_splats(obj):
+        info = obj[MARKER]
+        local = scene_from_mesh(obj.data, str(info.get("source", obj.name)) if hasattr(info, "get") else obj.name)
+    else:
+        raise ValueError(f"{obj.name if obj else None!r} is not a splat object (import a splat file first, or pick "
+                         "a Gaussian-splat Point Cloud)")
+    local.colour_space = colour_space_of(obj)
     try:
         return local.transformed(np.array(obj.matrix_world, np.float64))
     except ValueError as e:
