@@ -4,9 +4,10 @@ Reading a splat object (``scene_from_object``) and uploading it (``SplatRenderer
 bake, and a scene on the GPU twice costs twice the memory, so both are done once per object and reused until the
 object changes: the entry's key is the object's geometry, our mesh or a native splat Point Cloud alike (identity,
 point count, a generation bumped by every geometry edit of it, seen by a depsgraph handler) and its world matrix.
-The object's colour space is not part of the key: it is a push constant of the renderer, set on every get(). Entries of deleted objects are
-dropped at the next depsgraph update; everything is freed when a file is loaded and when the extension is
-disabled. Renderers stay on the GPU between bakes (that is what makes "Update When Moved" cheap).
+The object's colour space is not part of the key: it is a push constant of the renderer, set on every get().
+Entries of deleted objects are dropped at the next depsgraph update; everything is freed when a file is loaded
+and when the extension is disabled. Renderers stay on the GPU between bakes (that is what makes "Update When
+Moved" cheap).
 """
 from __future__ import annotations
 
