@@ -23,8 +23,9 @@ import time
 
 import numpy as np
 
-from .core.settings import (COLOUR_SPACE_CHOICES, COLOUR_SPACE_HELP, DEFAULT_COLOUR_SPACE_CHOICE, DEFAULT_LOD,
-                            DEFAULT_LOD_K, DEFAULT_METHOD, LOD_HELP, LOD_MODES, METHOD_NAMES)
+from .core.settings import (COLOUR_SPACE_CHOICES, COLOUR_SPACE_HELP, DEFAULT_COLOUR_SPACE_CHOICE, DEFAULT_HOLE_FILL,
+                            DEFAULT_LOD, DEFAULT_LOD_K, DEFAULT_METHOD, HOLE_FILL_HELP, LOD_HELP, LOD_MODES,
+                            METHOD_NAMES)
 
 DESCRIPTION = __doc__
 SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
@@ -234,9 +235,15 @@ def cmd_bake(a) -> int:
     from .core.probe import write_probe
     from .core.probe.result import check_probe_folder
     # Everything that can be known wrong is refused here, before the file is read or anything rendered.
+    fill = a.hole_fill or ("constant" if a.hole_colour else DEFAULT_HOLE_FILL)
+    if fill == "constant" and not a.hole_colour:
+        raise ValueError("--hole-fill constant: give the colour with --hole-colour R G B (linear radiance)")
+    if a.hole_colour and fill != "constant":
+        raise ValueError(f"--hole-colour: only used with --hole-fill constant, not {fill}")
     check_input(a.scene)
     settings = ProbeSettings(method=a.method, face_size=a.face_size, irradiance_size=a.irradiance_size,
-                             tolerance=a.tolerance, glossy=a.glossy, lod=a.lod, lod_k=a.lod_k)
+                             tolerance=a.tolerance, glossy=a.glossy, lod=a.lod, lod_k=a.lod_k, hole_fill=fill,
+                             hole_colour=tuple(a.hole_colour or (0.0, 0.0, 0.0)))
     check_settings(settings)
     probe = None if a.probe is None else check_probe_position(a.probe)
     ctx = _context()
@@ -262,13 +269,15 @@ def cmd_bake(a) -> int:
             preview(outside)
         written = write_probe(result, a.out, half=a.half, cube_faces=a.faces,
                               extra=None if a.preview else {"preview.png": preview})
+    from .core.probe.holes import hole_fill_text, hole_warning
     t = result.timings_ms
     print(f"method {result.settings['method']} (asked: {a.method}), faces {result.settings['face_size']}^2, "
           f"cubemap GPU {t.get('render_total', 0):.2f} ms, filter {t.get('irradiance', 0):.2f} ms, "
-          f"holes {100 * result.hole_fraction:.2f}%, device {result.device}")
-    if result.hole_fraction > 0.01:
-        print(f"warning: {100 * result.hole_fraction:.1f}% of directions from the probe see no splat (holes); "
-              "they add no light", file=sys.stderr)
+          f"device {result.device}")
+    print(hole_fill_text(result.hole_fill))
+    warning = hole_warning(result.hole_fill)
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     print("wrote " + ", ".join(sorted(written)) + (f" and {a.preview}" if a.preview else "") + f" in {a.out}")
     return 0
 
@@ -367,6 +376,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--lod-k", type=positive_float, default=DEFAULT_LOD_K,
                    help=f"with --lod auto: merged splats are drawn once their cell spans at most this many pixels "
                         f"(default {DEFAULT_LOD_K:g}; smaller is more accurate and slower)")
+    q.add_argument("--hole-fill", choices=("mean", "constant", "black"), help=HOLE_FILL_HELP)
+    q.add_argument("--hole-colour", nargs=3, type=finite_float, metavar=("R", "G", "B"),
+                   help="linear radiance of the holes (implies --hole-fill constant)")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
     q.add_argument("--out", required=True, help="output folder")

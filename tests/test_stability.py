@@ -4,13 +4,21 @@ Storage order: a closed shell whose radiance is linear in direction (its irradia
 Morton order as compressed PLY and SOG files store splats, against the same splats shuffled. Every splat sits at
 the same distance from the centre, so the depth sort's ties decide the compositing order; before the tie rule
 (render/splat_math.py depth_keys) the Morton file's irradiance was 0.88% off and the shuffled one 0.05%.
+
+Holes: directions that meet no splat are filled before filtering (core/probe/holes.py), reported in probe.json
+and the command line's summary; a window filled with a colour lights like a wall of that colour.
 """
+import json
+
 import numpy as np
 import pytest
 
+from gs_ibl_addon.cli import main
 from gs_ibl_addon.core import cubemap, synthetic
-from gs_ibl_addon.core.bake import ProbeSettings, bake_probe
+from gs_ibl_addon.core.bake import BadSetting, ProbeSettings, bake_probe, check_settings, relative_rms
 from gs_ibl_addon.core.formats.compressed_ply import morton_order
+from gs_ibl_addon.core.formats.ply import write_ply
+from gs_ibl_addon.core.image_io import read_exr
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.splat_math import depth_keys, tie_hash
@@ -74,3 +82,79 @@ def test_reference_follows_the_tie_rule():
         assert np.abs(gpu - ref).max() < 2e-4
         images.append(ref)
     assert np.abs(images[0] - images[1]).max() < 1e-6
+
+
+# Holes: a room with an open window, and a probe outside the room.
+
+@pytest.fixture(scope="module")
+def room():
+    return synthetic.room_scene(skylight=None)
+
+
+def window_panel(room, colour) -> "synthetic.SplatScene":
+    """Splats of radiance ``colour`` 1 m outside the window, covering all it shows from inside: the window closed
+    by a wall of that colour. Not nearer: the depth order is per splat, and a panel's centre just behind the wall
+    would be nearer to the probe than the wall's splats at the window's edge, and drawn over them."""
+    (ax, side, (u0, u1), (v0, v1)), = room.openings
+    x, s, grow = room.hi[0] + 1.0, room.sigma, 1.5
+    yy, zz = np.meshgrid(np.arange(u0 * grow - 2 * s, u1 * grow + 2 * s, s),
+                         np.arange(1.5 + (v0 - 1.5) * grow - 2 * s, 1.5 + (v1 - 1.5) * grow + 2 * s, s), indexing="ij")
+    n = yy.size
+    centres = np.stack([np.full(n, x), yy.ravel(), zz.ravel()], -1)
+    return synthetic._disks(centres, np.tile([-1.0, 0, 0], (n, 1)), np.tile(colour, (n, 1)), s, 0.05, 0.99)
+
+
+def test_a_window_filled_with_a_colour_lights_like_a_wall_of_that_colour(room):
+    colour = (2.0, 2.3, 2.8)
+    settings = dict(face_size=64, irradiance_size=IRR)
+    filled = bake_probe(room.scene, (0, 0, 1.5), ProbeSettings(hole_fill="constant", hole_colour=colour, **settings))
+    closed = bake_probe(synthetic.concat([room.scene, window_panel(room, colour)]), (0, 0, 1.5),
+                        ProbeSettings(**settings))
+    black = bake_probe(room.scene, (0, 0, 1.5), ProbeSettings(hole_fill="black", **settings))
+    assert filled.hole_fill["method"] == "constant" and filled.hole_fill["value"] == pytest.approx(colour)
+    assert 0.005 < filled.hole_fraction < 0.05 and closed.hole_fraction < 1e-3
+    assert relative_rms(filled.irradiance, closed.irradiance) < 0.005
+    assert relative_rms(black.irradiance, closed.irradiance) > 0.05  # what black holes cost
+
+
+def test_the_default_fill_is_the_mean_of_the_covered_directions(room):
+    settings = dict(face_size=32, irradiance_size=IRR)
+    black = bake_probe(room.scene, (0, 0, 1.5), ProbeSettings(hole_fill="black", **settings))
+    mean = bake_probe(room.scene, (0, 0, 1.5), ProbeSettings(**settings))
+    rad = black.radiance
+    w = cubemap.texel_solid_angles(32)[None]
+    want = (rad[..., :3] * w[..., None]).sum((0, 1, 2)) / (rad[..., 3] * w).sum()
+    assert mean.hole_fill["method"] == "mean" and mean.hole_fill["value"] == pytest.approx(want, rel=1e-4)
+    assert mean.hole_fill["fraction"] == pytest.approx(black.hole_fraction)
+    np.testing.assert_allclose(mean.radiance[..., :3], rad[..., :3] + (1 - rad[..., 3:]) * want, atol=1e-5)
+    np.testing.assert_allclose(mean.radiance[..., 3], rad[..., 3])  # alpha still shows the coverage
+    assert np.all(mean.irradiance >= black.irradiance - 1e-5)
+
+
+def test_a_probe_outside_the_room_is_mostly_fill_and_says_so(room, tmp_path, capsys):
+    path = tmp_path / "room.ply"
+    write_ply(str(path), room.scene)
+    out = tmp_path / "probe"
+    assert main(["bake", str(path), "--probe", "10", "0", "1.5", "--face-size", "32", "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    meta = json.loads((out / "probe.json").read_text())
+    fill = meta["hole_fill"]
+    assert fill["method"] == "mean" and fill["fraction"] > 0.95
+    assert meta["hole_fraction"] == pytest.approx(fill["fraction"], rel=1e-5)
+    assert "THE PROBE IS PROBABLY OUTSIDE THE SPLATS" in captured.err
+    assert "hole fill: mean of the covered directions" in captured.out
+    # nearly all of its light is the fill: the irradiance is about the fill value, not black
+    irr = read_exr(str(out / "irradiance.exr"))[..., :3]
+    assert np.allclose(irr.mean((0, 1)), fill["value"], rtol=0.1)
+
+
+def test_bad_hole_settings_are_refused_before_work(tmp_path, capsys):
+    with pytest.raises(BadSetting, match="hole fill"):
+        check_settings(ProbeSettings(hole_fill="grey"))
+    with pytest.raises(BadSetting, match="hole colour"):
+        check_settings(ProbeSettings(hole_fill="constant", hole_colour=(1.0, -1.0, 0.0)))
+    with pytest.raises(ValueError, match="environment"):
+        bake_probe(synthetic.room_scene(spacing=0.5).scene, (0, 0, 1.5),
+                   ProbeSettings(face_size=32, hole_fill="environment"))
+    assert main(["bake", str(tmp_path / "missing.ply"), "--hole-fill", "constant", "--out", str(tmp_path / "o")]) != 0
+    assert "--hole-colour" in capsys.readouterr().err

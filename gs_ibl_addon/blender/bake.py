@@ -14,6 +14,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ..core.bake import ProbeSettings, bake_probe, check_fits_device
+from ..core.probe.holes import hole_fill_text, hole_warning
 from ..core.probe.latlong import cube_to_latlong
 from ..core.settings import method_from_blender
 from . import splat_cache
@@ -108,10 +109,11 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     face = st.get("face_size", np.asarray(result.radiance).shape[1])
     lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
              f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
+    lines.append(hole_fill_text(result.hole_fill))
     warning = None
     if result.hole_fraction > HOLE_WARNING:
-        warning = (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of directions have no splat "
-                   "(they light meshes black: move the probe inside the splats or fill the gaps)")
+        warning = hole_warning(result.hole_fill) or (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of "
+                                                     "directions have no splat")
     return lines, warning
 
 

@@ -18,11 +18,13 @@ import numpy as np
 from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import gpu_ggx_prefilter
+from .probe.holes import fill_holes
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
-from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD, DEFAULT_LOD_K,
-                       DEFAULT_METHOD, DEFAULT_TOLERANCE, LOD_MODES, MAX_IRRADIANCE_SIZE, METHOD_ALIASES, METHOD_NAMES)
+from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_HOLE_FILL, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD,
+                       DEFAULT_LOD_K, DEFAULT_METHOD, DEFAULT_TOLERANCE, HOLE_FILLS, LOD_MODES, MAX_IRRADIANCE_SIZE,
+                       METHOD_ALIASES, METHOD_NAMES)
 
 # From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
 # face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
@@ -48,6 +50,8 @@ class ProbeSettings:
     max_face_size: int = AUTO_MAX_FACE
     lod: str = DEFAULT_LOD  # one of settings.LOD_MODES: "auto" renders merged splats where the probe allows
     lod_k: float = DEFAULT_LOD_K  # with lod "auto": a merged node is drawn once its cell spans <= lod_k pixels
+    hole_fill: str = DEFAULT_HOLE_FILL  # one of settings.HOLE_FILLS: the light of directions with no splat
+    hole_colour: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the fill's radiance with hole_fill "constant"
     extra: dict = field(default_factory=dict)  # passed through to filter_probe (sample counts, windows...)
 
 
@@ -71,6 +75,16 @@ def check_settings(s: ProbeSettings) -> str:
         raise BadSetting("lod", s.lod, f"unknown level of detail {s.lod!r}: use one of {', '.join(LOD_MODES)}")
     if isinstance(s.lod_k, bool) or not (isinstance(s.lod_k, (int, float)) and 0 < s.lod_k <= 64):
         raise BadSetting("lod_k", s.lod_k, f"lod k {s.lod_k!r} must be a number of pixels above 0 and at most 64")
+    if s.hole_fill not in HOLE_FILLS:
+        raise BadSetting("hole_fill", s.hole_fill, f"unknown hole fill {s.hole_fill!r}: use one of "
+                                                   f"{', '.join(HOLE_FILLS)}")
+    try:
+        colour = np.asarray(s.hole_colour, np.float64).reshape(3)
+    except (TypeError, ValueError):
+        colour = None
+    if colour is None or not np.all(np.isfinite(colour)) or np.any(colour < 0):
+        raise BadSetting("hole_colour", s.hole_colour, f"hole colour {s.hole_colour!r} must be three numbers "
+                                                       "R G B, 0 or more (linear radiance)")
     if not (isinstance(s.tolerance, (int, float)) and 0 < s.tolerance < 1):
         raise BadSetting("tolerance", s.tolerance, f"tolerance {s.tolerance} must be a fraction between 0 and 1 "
                                                    "(0.01 = 1%)")
@@ -134,8 +148,10 @@ def relative_rms(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
-                       say: Callable[[str, float], None]) -> ProbeResult:
-    """Render (and, with face size 0, search the face size), filter, and add the glossy maps when asked."""
+                       say: Callable[[str, float], None],
+                       hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None) -> ProbeResult:
+    """Render (and, with face size 0, search the face size), fill the holes, filter, and add the glossy maps when
+    asked."""
     # a renderer holding a level of detail draws from it when asked (one built without renders every splat)
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
 
@@ -187,6 +203,16 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
         frame = r.last_frame
         result.radiance = frame.read_cube()
+    # Holes are filled on the radiance read back (the search above compared the unfilled probes: a fill moves
+    # every size alike) and the kept size is filtered again from it; a probe without holes pays nothing.
+    result.radiance, result.hole_fill = fill_holes(result.radiance, s.hole_fill, s.hole_colour, hole_radiance)
+    if result.hole_fill["fraction"] > 0 and s.hole_fill != "black":
+        t0 = time.perf_counter()
+        filled = filter_probe(result.radiance[..., :3], irradiance_size=s.irradiance_size, method=method,
+                              sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
+        result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
+        result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
+        frame = None  # the glossy maps take the filled radiance
     if s.glossy:
         say("prefiltering glossy maps", 0.85)
         result.prefiltered, ggx_ms = gpu_ggx_prefilter(frame if frame is not None else np.asarray(result.radiance),
@@ -202,14 +228,22 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
 
 def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSettings | dict | None = None,
                renderer: SplatRenderer | None = None,
-               progress: Callable[[str, float], None] | None = None) -> ProbeResult:
+               progress: Callable[[str, float], None] | None = None,
+               hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None) -> ProbeResult:
     """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX).
+
+    Directions that meet no splat are filled by ``settings.hole_fill`` (core/probe/holes.py); ``hole_radiance``,
+    a function of (M, 3) unit directions returning (M, 3) linear RGB, is the light of hole fill "environment"
+    (Blender passes its World).
 
     ``scene`` may be None when ``renderer`` already holds the splats and ``probe_position`` is given: a caller that
     keeps splats on the GPU (Blender's splat_cache) then needs no CPU copy of them.
     """
     s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
     method = check_settings(s)
+    if s.hole_fill == "environment" and hole_radiance is None:
+        raise BadSetting("hole_fill", s.hole_fill, "hole fill 'environment' needs the environment's radiance "
+                                                   "(bake_probe's hole_radiance); use mean, constant or black")
     if scene is None and (renderer is None or probe_position is None):
         raise ValueError("bake_probe without a scene needs both a renderer holding the splats and a probe position")
     pos = check_probe_position(default_probe_position(scene) if probe_position is None else probe_position)
@@ -220,7 +254,7 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        result = _search_and_filter(r, r.scene_count, pos, s, method, say)
+        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance)
         result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
     except Exception as e:
         from .limits import out_of_memory_advice

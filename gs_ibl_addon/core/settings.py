@@ -52,6 +52,13 @@ DEFAULT_LOD_K = 1.0
 LOD_HELP = ("level of detail: off (every splat) or auto (merged splats where the probe's pixels allow; faster on "
             "millions of splats, irradiance within ~1-3% on small probes, see docs/benchmarks.md)")
 
+# Holes (directions that meet no splat) get light by a stated rule before filtering (core/probe/holes.py): the
+# mean of the covered directions by default; "environment" is the caller's radiance (Blender: the World).
+HOLE_FILLS: tuple[str, ...] = ("mean", "constant", "environment", "black")
+DEFAULT_HOLE_FILL = "mean"
+HOLE_FILL_HELP = ("light for directions that meet no splat: mean (of the directions that do, default), constant "
+                  "(--hole-colour), black (none)")
+
 
 # The colour rule (core/colour.py): what a splat's SH + 0.5 means. One vocabulary for the command line's
 # --colour-space, probe.json, the splat object's property in Blender and its panel row.

@@ -34,7 +34,9 @@ CONVENTIONS = {
     "sh": "real orthonormal SH with Condon-Shortley phase (= 3DGS basis for l<=3), order l=0.., m=-l..l; "
           "coefficients are of the radiance; irradiance E/pi = sum_l (A_l/pi) w_l sum_m L_lm Y_lm(n), "
           "A_0=pi, A_1=2pi/3, A_2=pi/4",
-    "holes": "directions without splats are black (premultiplied alpha); hole_fraction = share of the sphere",
+    "holes": "directions without splats: alpha < 1 in the radiance cube; hole_fraction = share of the sphere; "
+             "hole_fill = how their light was filled before filtering (method mean|constant|environment|black, "
+             "value = the fill's mean RGB over the holes, fraction = hole_fraction)",
 }
 
 
@@ -50,6 +52,7 @@ class ProbeResult:
     splat_count: int = 0
     device: str = ""
     hole_fraction: float = 0.0
+    hole_fill: dict[str, Any] | None = None  # {"method", "value", "fraction"} (probe.holes.fill_holes); None: unfilled
 
 
 def _jsonable(v: Any) -> Any:
@@ -180,6 +183,8 @@ def _write_all(result: ProbeResult, out_dir: str, half: bool, cube_faces: bool, 
         "splat_count": int(result.splat_count),
         "device": result.device,
         "hole_fraction": float(result.hole_fraction),
+        "hole_fill": result.hole_fill or {"method": "black", "value": [0.0, 0.0, 0.0],
+                                          "fraction": float(result.hole_fraction)},
         "files": sorted(written),
     }
     with open(os.path.join(out_dir, PROBE_JSON), "w", encoding="utf-8") as f:
