@@ -60,7 +60,8 @@ def cmd_plot_order(a) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    runs = [("before (ties keep storage order)", np.load(a.before)), ("after (ties by position hash)", np.load(a.after))]
+    runs = [("before (ties keep storage order)", np.load(a.before)),
+            ("after (ties by position hash)", np.load(a.after))]
     lim = max(float(np.abs(r[k][..., 2]).max()) for _, r in runs for k in ("ordered", "shuffled"))
     fig, axes = plt.subplots(2, 2, figsize=(9, 5), constrained_layout=True)
     for row, (label, r) in enumerate(runs):
@@ -126,10 +127,13 @@ def cmd_holes(a) -> None:
         ax.set_yticks([])
 
     ib, im, ob, om = bakes["in_black"], bakes["in_mean"], bakes["out_black"], bakes["out_mean"]
-    show(axes[0, 0], ib.radiance, f"inside: radiance, window = hole ({100 * ib.hole_fraction:.1f}%, magenta)", ib.radiance)
+    show(axes[0, 0], ib.radiance, f"inside: radiance, window = hole ({100 * ib.hole_fraction:.1f}%, magenta)",
+         ib.radiance)
     top, bottom = float(im.irradiance.max()), float(om.irradiance.max())  # one exposure per row
-    show(axes[0, 1], ib.irradiance, f"irradiance, holes black: {100 * channel_rms(ib.irradiance, closed.irradiance).max():.1f}% off", scale=top)
-    show(axes[0, 2], im.irradiance, f"holes filled with the mean: {100 * channel_rms(im.irradiance, closed.irradiance).max():.3f}% off\n"
+    off_black = 100 * channel_rms(ib.irradiance, closed.irradiance).max()
+    off_mean = 100 * channel_rms(im.irradiance, closed.irradiance).max()
+    show(axes[0, 1], ib.irradiance, f"irradiance, holes black: {off_black:.1f}% off", scale=top)
+    show(axes[0, 2], im.irradiance, f"holes filled with the mean: {off_mean:.3f}% off\n"
                                     "(reference: window closed by a wall of that colour)", scale=top)
     show(axes[1, 0], ob.radiance, f"outside (10 m): radiance, {100 * ob.hole_fraction:.0f}% holes", ob.radiance)
     show(axes[1, 1], ob.irradiance, "irradiance, holes black (the old probe)", scale=bottom)
