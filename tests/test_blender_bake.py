@@ -297,3 +297,30 @@ def test_bake_refuses_a_size_that_does_not_fit_before_uploading(blender, tmp_pat
     with pytest.raises(RuntimeError, match=r"1024\^2 faces needs about .* use \d+ or less"):
         bpy.ops.gs_ibl.bake_probe()  # the operator's ERROR report surfaces as RuntimeError in the bpy module
     assert splat_cache.uploads == uploads and probe.gs_ibl_probe.world is None
+
+
+def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch):
+    """With our World assigned, Blender 5.3's native splats stop lighting meshes through Cycles' bounces (their
+    light is in the World), camera rays still see them, and Restore Previous World gives the bounces back exactly
+    as they were. (bpy 5.0 has no native splats: an ordinary object stands in for one here; the bpy 5.3 run of
+    tests/real_blender/test_native_splats.py does it with a real one.)"""
+    from gs_ibl_addon.blender import splat_object
+    shell = _import_shell(tmp_path, write_3dgs_ply)
+    bpy.context.scene.world = bpy.data.worlds.new("The user's World")
+    bpy.ops.mesh.primitive_cube_add()
+    native = bpy.context.active_object
+    native.visible_glossy = False  # the user's own setting, to be given back as it was
+    monkeypatch.setattr(splat_object, "is_native_splats", lambda o: o is not None and o.name == native.name)
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.face_size, probe.gs_ibl_probe.irradiance_size = 16, 8
+    probe.gs_ibl_probe.splats = shell  # the stand-in is only to be muted, not baked from
+    assert probe.gs_ibl_probe.mute_native_splats
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert not native.visible_diffuse and not native.visible_glossy and native.visible_camera
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}  # a re-bake keeps the first saved state
+    assert bpy.ops.gs_ibl.restore_world() == {"FINISHED"}
+    assert native.visible_diffuse and not native.visible_glossy and "gs_ibl_ray_visibility" not in native.keys()
+    probe.gs_ibl_probe.mute_native_splats = False
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert native.visible_diffuse

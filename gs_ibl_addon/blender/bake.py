@@ -77,6 +77,10 @@ def apply_probe_images(scene: bpy.types.Scene, probe: bpy.types.Object, radiance
     s.world = gw.build_world(s.radiance_image, s.strength, s.keep_background, previous, replace=_own(probe, "world"))
     if s.assign_world:
         gw.use_world(scene, s.world)
+        if s.mute_native_splats:
+            gw.mute_native_splats(scene)
+        else:
+            gw.unmute_native_splats(scene)
     return s.world
 
 

@@ -191,6 +191,10 @@ class GSIBL_PT_panel(bpy.types.Panel):
         col.prop(s, "strength")
         col.prop(s, "keep_background")
         col.prop(s, "assign_world")
+        if s.assign_world and gw.native_splats_in(context.scene):
+            # shown only where it matters: the scene renders Blender 5.3 native splats, whose bounce light Cycles
+            # would add to the same light in our World
+            col.prop(s, "mute_native_splats")
         col.prop(s, "pack_images")
         col.prop(s, "auto_update")
         if s.auto_update:

@@ -52,6 +52,11 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     assign_world: BoolProperty(name="Use as Scene World", default=True,
                                description="Make the GS-IBL World the scene's World after baking (the previous one "
                                            "is remembered and can be restored)")
+    mute_native_splats: BoolProperty(
+        name="Native Splats Light Once", default=True,
+        description="Blender 5.3's native splats stop lighting meshes through Cycles' bounces while the baked World "
+                    "carries their light (it would count twice); the camera still sees them. Restore Previous World "
+                    "gives the bounces back")
     pack_images: BoolProperty(name="Pack Images", default=True,
                               description="Keep baked images inside the .blend; off: save EXR files next to it")
     auto_update: BoolProperty(name="Update When Moved", default=False,

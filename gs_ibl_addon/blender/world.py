@@ -25,6 +25,7 @@ WORLD_NAME = "GS-IBL World"
 IRRADIANCE_GROUP = "GS-IBL Irradiance"
 PREVIOUS_WORLD = "gs_ibl_previous_world"  # scene custom property: the World use_world() replaced
 WRITTEN_FILE = "gs_ibl_file"  # image custom property: the EXR file we wrote for it (files we may overwrite)
+RAY_VISIBILITY = "gs_ibl_ray_visibility"  # on a native splat object: its (diffuse, glossy) before we muted them
 
 
 # ---------------------------------------------------------------------------------------------- images
@@ -220,13 +221,47 @@ def use_world(scene: bpy.types.Scene, world: bpy.types.World) -> None:
 
 
 def restore_world(scene: bpy.types.Scene) -> bool:
-    """Put back the World that use_world() replaced; False if there is none to restore."""
+    """Put back the World that use_world() replaced (and the native splats' bounce light); False if there is none
+    to restore."""
     prev = scene.get(PREVIOUS_WORLD)
     if not isinstance(prev, bpy.types.World):
         return False
+    unmute_native_splats(scene)
     scene.world = prev
     del scene[PREVIOUS_WORLD]
     return True
+
+
+# ---------------------------------------------------------------------------------------------- no double light
+
+def native_splats_in(scene: bpy.types.Scene) -> list[bpy.types.Object]:
+    from .splat_object import is_native_splats
+    return [o for o in scene.objects if is_native_splats(o)]
+
+
+def mute_native_splats(scene: bpy.types.Scene) -> list[str]:
+    """Blender 5.3's native splats stop lighting meshes through Cycles' diffuse and glossy bounces while our World
+    carries their light (it would count twice); camera rays still see them. Each object keeps what it had
+    (RAY_VISIBILITY) for unmute_native_splats. Returns the names of the objects changed now."""
+    changed = []
+    for obj in native_splats_in(scene):
+        if RAY_VISIBILITY not in obj.keys():
+            obj[RAY_VISIBILITY] = [int(obj.visible_diffuse), int(obj.visible_glossy)]
+            obj.visible_diffuse = obj.visible_glossy = False
+            changed.append(obj.name)
+    return changed
+
+
+def unmute_native_splats(scene: bpy.types.Scene) -> list[str]:
+    """Give native splats back the bounce visibility mute_native_splats took."""
+    changed = []
+    for obj in scene.objects:
+        saved = obj.get(RAY_VISIBILITY)
+        if saved is not None:
+            obj.visible_diffuse, obj.visible_glossy = bool(saved[0]), bool(saved[1])
+            del obj[RAY_VISIBILITY]
+            changed.append(obj.name)
+    return changed
 
 
 # ---------------------------------------------------------------------------------------------- node group

@@ -63,6 +63,10 @@ def main() -> dict:
             obj.gs_ibl_splats.colour_space = "LINEAR"
             linear, _, _ = gb.bake_into_world(bpy.context.scene, probe)
             rec["linear_over_srgb"] = float(np.mean(linear.irradiance) / np.mean(result.irradiance))
+            # no double light: Cycles' bounces stop seeing the splats while our World carries their light
+            rec["muted"] = [obj.visible_camera, obj.visible_diffuse, obj.visible_glossy]
+            gw = importlib.import_module(f"{MODULE}.blender.world")
+            rec["restored"] = [gw.restore_world(bpy.context.scene), obj.visible_diffuse, obj.visible_glossy]
             rec["ok"] = True
         except Exception:  # noqa: BLE001 (reported to the test, which fails on it)
             rec.update(ok=False, error=traceback.format_exc())

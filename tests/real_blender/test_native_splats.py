@@ -86,6 +86,8 @@ def test_bake_from_blenders_native_splats(tmp_path):
             assert rec.get("ok"), f"{key}: {rec.get('error')}"
             assert rec["native"] and rec["splat_object"] and rec["data_type"] == "GAUSSIAN_SPLAT", rec
             assert rec["colour_space"] == "srgb" and rec["probe_colour_space"] == "srgb" and rec["world_is_ours"]
+            assert rec["muted"] == [True, False, False], rec["muted"]  # seen by the camera, not by bounces
+            assert rec["restored"] == [True, True, True], rec["restored"]
             got = np.load(runner.host / f"{key}.npz")
             ours = read_scene(path)
             assert ours.colour_space == "srgb" and len(got["positions"]) == ours.count
