@@ -51,6 +51,10 @@ def write_preview(result: ProbeResult, path: str | os.PathLike, title: str = "")
     if rad.shape[-1] == 4 and result.hole_fraction > 0:
         holes = rad_ll[..., 3] < 0.5
         axes[0].contour(holes, levels=[0.5], colors="magenta", linewidths=0.8)
+        fill = (result.hole_fill or {}).get("method", "black")
+        how = "left black" if fill == "black" else f"filled ({fill})"
+        axes[0].set_title(f"radiance (lat-long, Blender mapping)\nmagenta outline: holes, no splat seen; {how}",
+                          fontsize=9)
     s = result.settings
     sub = (f"{result.splat_count:,} splats \u00b7 {face}\u00b2 faces \u00b7 method {s.get('method')} \u00b7 "
            f"holes {100 * result.hole_fraction:.1f}% \u00b7 {result.device}")
