@@ -38,10 +38,10 @@ def _progress(msg: str, frac: float) -> None:
 def _load(path: str, colour_space: str = "auto"):
     """The scene in ``path``; colour_space other than "auto" overrides what the file declares (--colour-space)."""
     from .core.formats import read_scene
+    from .core.formats.colour_space import resolve_colour_space
     t = time.perf_counter()
     scene = read_scene(path)
-    if colour_space != "auto":
-        scene.colour_space = colour_space
+    scene.colour_space = resolve_colour_space(colour_space, path)
     repairs = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items() if v) or "none"
     print(f"read {path}: {scene.count:,} splats, SH degree {scene.sh_degree}, colour space {scene.colour_space}, "
           f"repairs: {repairs} ({time.perf_counter() - t:.2f} s)", file=sys.stderr)

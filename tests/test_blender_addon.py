@@ -272,7 +272,10 @@ def test_unpacked_images_never_overwrite_a_file_not_ours(blender, tmp_path):
         # the file itself holds the linear floats (read by OpenImageIO, not by Blender, which would undo its own
         # encoding): what a compositor or another renderer will see
         on_disk = read_exr(bpy.path.abspath(s.radiance_image.filepath))
-        assert on_disk.dtype == np.float32
+        import OpenImageIO as oiio
+        stored = oiio.ImageInput.open(bpy.path.abspath(s.radiance_image.filepath))
+        assert str(stored.spec().format) == "float"  # 32-bit in the file, not half
+        stored.close()
         np.testing.assert_allclose(on_disk[..., :3], k * rad, rtol=1e-6)
     # a file counts as ours only for the image that wrote it: any other writer moves on to a free name
     assert gw.our_file_path(str(tmp_path), "gs_ibl_GS-IBL_Probe_radiance", s.radiance_image) == \

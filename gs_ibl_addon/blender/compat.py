@@ -33,9 +33,9 @@ def set_modifier_input(mod, identifier: str, value) -> None:
     inputs = _modifier_inputs(mod)
     if inputs is not None:
         getattr(inputs, identifier).value = value
-        mod.id_data.update_tag()  # 5.2 does not re-evaluate the modifier after an input set this way
     else:
         mod[identifier] = value
+    mod.id_data.update_tag()  # neither way tags the object for re-evaluation (seen in 5.2's GUI)
 
 
 def get_modifier_input(mod, identifier: str):

@@ -191,6 +191,17 @@ def draw_quads(quads: list[tuple]) -> None:
         gpu.state.blend_set(saved[2])
 
 
+def _forget_undrawn(slot: int, drawn: set[int]) -> None:
+    """Free the textures of objects this region no longer draws, and the images of deleted splat objects (their
+    renderers are freed by splat_cache); otherwise they would stay on the GPU until Show Splats is turned off."""
+    for key in [k for k in _textures if k[1] == slot and k[0] not in drawn]:
+        del _textures[key]
+    if len(_overlays) > len(drawn):
+        live = {splat_cache.uid(o) for o in bpy.data.objects if is_splat_object(o)}
+        for uid in [u for u in _overlays if u not in live]:
+            _overlays.pop(uid).close()
+
+
 def draw_callback() -> None:
     global last_error
     context = bpy.context
@@ -215,6 +226,7 @@ def draw_callback() -> None:
                           shader_params(img.view, settings.exposure)))
         if quads:
             draw_quads(quads)
+        _forget_undrawn(slot, {splat_cache.uid(o) for o in objs})
         last_draw[slot] = {"scale": scale, "render_ms": ms, "objects": len(objs), "time": now}
         draw_log.append((now, slot, scale, ms))
         _schedule_refine(now)
@@ -265,6 +277,8 @@ def hide_helpers(show: bool) -> int:
     """
     changed = 0
     for obj in bpy.data.objects:
+        if obj.library is not None or (HIDDEN_KEY in obj.keys()) == show:
+            continue  # linked (not ours to edit), or already as wanted: the depsgraph handler calls this often
         mod = obj.modifiers.get(PROXY_MODIFIER) if is_splat_object(obj) else None
         if mod is None or mod.node_group is None:
             continue

@@ -111,6 +111,9 @@ def read_ksplat(path: str | os.PathLike) -> SplatScene:
                     raise _fail(path, f"section {s} has quantised positions but no buckets: damaged")
                 centres = np.frombuffer(data, "<f4", 3 * buckets, at + 4 * partial_n).reshape(buckets, 3)
                 sizes = np.frombuffer(data, "<u4", partial_n, at).astype(np.int64)
+                if sizes.sum() > count:  # before np.repeat: a damaged count must not claim gigabytes
+                    raise _fail(path, f"section {s}: its bucket sizes add up to {int(sizes.sum()):,}, more than "
+                                      f"its {count:,} splats: damaged")
                 fulls = min(full * bucket_cap, count)
                 bucket = np.concatenate([np.arange(fulls) // bucket_cap,
                                          np.repeat(np.arange(full, full + partial_n), sizes)])[:count]

@@ -7,8 +7,8 @@ a fill radiance, before filtering, and records what it did (ProbeResult.hole_fil
   mean         the solid-angle mean of the covered radiance (the default: the light the probe does see, spread
                into what it does not; neutral for a small gap, a guess for a large one)
   constant     a colour the user gives (``hole_colour``)
-  environment  a radiance per direction supplied by the caller (Blender passes its World; bake_probe's
-               ``hole_radiance``)
+  environment  a radiance per direction supplied by the caller (bake_probe's ``hole_radiance``; meant for
+               Blender's previous World, which the extension does not pass yet)
   black        nothing (the renderer's raw output)
 """
 from __future__ import annotations

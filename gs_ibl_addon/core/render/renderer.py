@@ -215,42 +215,47 @@ class SplatRenderer:
         self._pending: tuple | None = None  # the render submitted and not yet waited for (render(wait=False))
         self._owned: list = []  # every GPU object this renderer made, destroyed by close()
         self._programs: dict[tuple, Program] = {}
-        n = max(1, scene.count)
-        buf = self._buffer
-        self.pos_op, self.scale, self.rot = buf(n * 16, "pos_op"), buf(n * 16, "scale"), buf(n * 16, "rot")
-        self.sh = buf(n * self.sh_k * 12, "sh")
-        if scene.count:
-            self.pos_op.write(np.concatenate([scene.positions, scene.opacities[:, None]], 1).astype(np.float32))
-            self.scale.write(np.concatenate([scene.scales, np.zeros((scene.count, 1))], 1).astype(np.float32))
-            self.rot.write(scene.rotations.astype(np.float32))
-            # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
-            self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
-        self.prepared = buf(n * PREP * 16, "prepared")
-        self.tile_count, self.depth_key, self.depth_val = buf(n * 4, "tile_count"), buf(n * 4, "depth_key"), buf(n * 4, "depth_val")
-        self.rects = buf(n * MAX_VIEWS * 8, "rects")  # tile rectangle per splat and view
-        self.offsets = buf(n * 4, "offsets")
-        self.count = buf(16, "count")
-        self.n_count = buf(16, "n_count")
-        self.n_count.write(np.array([scene.count, 0, 0, 0], np.uint32))
-        self.origin = buf(16, "origin")
-        self.views = buf(MAX_VIEWS * 80, "views")
-        self.no_depth = buf(16, "no-depth")  # bound where depth is not written
-        if self.lod is not None:
-            self.lod_words = buf(n * 8, "lod")
-            self.lod_words.write(self.lod.words())
-            self.sort_key, self.sort_val = buf(n * 4, "lod-sort-key"), buf(n * 4, "lod-sort-val")
-            self.lod_scanner = self._own(Scanner(self.ctx, n))
-            # A probe's cut is a small part of the tree: the stages after the compaction (depth sort, counts, emit)
-            # are sized for the cut, from the previous frame, and a frame whose cut outgrew them is drawn again.
-            self.cut_sorter = None
-            self._grow_cut(max(1 << 16, self.scene_count // 8))
-        self.drawn = self.scene_count  # splats (or nodes of the cut) the last render drew
-        self.depth_sorter = self._own(RadixSorter(self.ctx, n)) if self.lod is None else None
-        self.scanner = self._own(Scanner(self.ctx, n))
-        self.capacity = 0
-        self.tile_sorter = None
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
-        self._ensure_capacity(max(1 << 16, 4 * (self.cut_capacity if self.lod is not None else n)))
+        try:
+            n = max(1, scene.count)
+            buf = self._buffer
+            self.pos_op, self.scale, self.rot = buf(n * 16, "pos_op"), buf(n * 16, "scale"), buf(n * 16, "rot")
+            self.sh = buf(n * self.sh_k * 12, "sh")
+            if scene.count:
+                self.pos_op.write(np.concatenate([scene.positions, scene.opacities[:, None]], 1).astype(np.float32))
+                self.scale.write(np.concatenate([scene.scales, np.zeros((scene.count, 1))], 1).astype(np.float32))
+                self.rot.write(scene.rotations.astype(np.float32))
+                # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
+                self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
+            self.prepared = buf(n * PREP * 16, "prepared")
+            self.tile_count = buf(n * 4, "tile_count")
+            self.depth_key, self.depth_val = buf(n * 4, "depth_key"), buf(n * 4, "depth_val")
+            self.rects = buf(n * MAX_VIEWS * 8, "rects")  # tile rectangle per splat and view
+            self.offsets = buf(n * 4, "offsets")
+            self.count = buf(16, "count")
+            self.n_count = buf(16, "n_count")
+            self.n_count.write(np.array([scene.count, 0, 0, 0], np.uint32))
+            self.origin = buf(16, "origin")
+            self.views = buf(MAX_VIEWS * 80, "views")
+            self.no_depth = buf(16, "no-depth")  # bound where depth is not written
+            if self.lod is not None:
+                self.lod_words = buf(n * 8, "lod")
+                self.lod_words.write(self.lod.words())
+                self.sort_key, self.sort_val = buf(n * 4, "lod-sort-key"), buf(n * 4, "lod-sort-val")
+                self.lod_scanner = self._own(Scanner(self.ctx, n))
+                # A probe's cut is a small part of the tree: the stages after the compaction (depth sort, counts, emit)
+                # are sized for the cut, from the previous frame, and a frame whose cut outgrew them is drawn again.
+                self.cut_sorter = None
+                self._grow_cut(max(1 << 16, self.scene_count // 8))
+            self.drawn = self.scene_count  # splats (or nodes of the cut) the last render drew
+            self.depth_sorter = self._own(RadixSorter(self.ctx, n)) if self.lod is None else None
+            self.scanner = self._own(Scanner(self.ctx, n))
+            self.capacity = 0
+            self.tile_sorter = None
+            self._ensure_capacity(max(1 << 16, 4 * (self.cut_capacity if self.lod is not None else n)))
+        except BaseException:
+            self.close()  # a failure partway (out of memory) leaves nothing on the GPU
+            raise
 
     def _own(self, obj):
         self._owned.append(obj)
