@@ -151,9 +151,6 @@ class ViewMotion:
         waits = [max(0.0, st[1] + self.settle_s - now) for st in self._slots.values() if st[2]]
         return min(waits) if waits else None
 
-    def forget(self, slot: object) -> None:
-        self._slots.pop(slot, None)
-
 
 def to_display(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     """Premultiplied linear RGBA -> premultiplied RGBA with sRGB-encoded colour, clipped to [0, 1].

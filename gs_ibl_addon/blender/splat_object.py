@@ -202,10 +202,6 @@ def _read_attr(geometry, name: str, n: int, width: int) -> np.ndarray:
     return out.reshape((n, width)) if width > 1 else out
 
 
-def _get_attr(mesh: bpy.types.Mesh, name: str, field: str, width: int) -> np.ndarray:
-    return _read_attr(mesh, name, len(mesh.vertices), width)
-
-
 def scene_from_mesh(mesh: bpy.types.Mesh, source: str = "<blender>") -> SplatScene:
     """The splats as stored, in the object's local space."""
     n = len(mesh.vertices)
@@ -215,10 +211,9 @@ def scene_from_mesh(mesh: bpy.types.Mesh, source: str = "<blender>") -> SplatSce
         k += 1
     if k not in (1, 4, 9, 16):
         raise ValueError(f"splat object {mesh.name!r} has {k} SH attributes (expected 1, 4, 9 or 16): re-import it")
-    sh = np.stack([_get_attr(mesh, _SH_NAME.format(i), "vector", 3) for i in range(k)], 1)
-    return SplatScene(pos, _get_attr(mesh, "gs_scale", "vector", 3),
-                      _get_attr(mesh, "gs_rotation", "value", 4), _get_attr(mesh, "gs_opacity", "value", 1), sh,
-                      source=source)
+    sh = np.stack([_read_attr(mesh, _SH_NAME.format(i), n, 3) for i in range(k)], 1)
+    return SplatScene(pos, _read_attr(mesh, "gs_scale", n, 3), _read_attr(mesh, "gs_rotation", n, 4),
+                      _read_attr(mesh, "gs_opacity", n, 1), sh, source=source)
 
 
 _NATIVE_SH = "radiance:sh_{}"
