@@ -28,6 +28,7 @@ from mathutils import Matrix
 
 from ..core.scene import SplatScene, sh_dc_to_rgb
 from ..core.sh import degree_of
+from ..core.sh_rotation import rotate_sh
 from .compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
 from .datablocks import MARKER, find_ours
 
@@ -241,7 +242,8 @@ def scene_from_pointcloud(cloud, source: str = "<blender>") -> SplatScene:
 
 def scene_from_object(obj: bpy.types.Object) -> SplatScene:
     """Either kind of splat object's splats in Blender world space (its matrix_world applied), with its colour
-    space: what a probe bake needs. SH view dependence stays in the object's frame (core SplatScene.transformed).
+    space: what a probe bake needs. View-dependent colour (SH degree >= 1) turns with the object, as Blender's own
+    splats do (it evaluates them in the object's frame): the SH are rotated by the matrix's rotation.
 
     Raises ValueError naming the object when its transform cannot move splats (non-uniform or mirrored scale).
     """
@@ -254,8 +256,13 @@ def scene_from_object(obj: bpy.types.Object) -> SplatScene:
         raise ValueError(f"{obj.name if obj else None!r} is not a splat object (import a splat file first, or pick "
                          "a Gaussian-splat Point Cloud)")
     local.colour_space = colour_space_of(obj)
+    matrix = np.array(obj.matrix_world, np.float64)
     try:
-        return local.transformed(np.array(obj.matrix_world, np.float64))
+        world = local.transformed(matrix)
     except ValueError as e:
         # The core's message says what is wrong with the matrix; the user needs to know which object has it.
         raise ValueError(f"{obj.name}: {e}") from e
+    if world.sh.shape[1] > 1:
+        u, _, vt = np.linalg.svd(matrix[:3, :3])  # the rotation nearest the (uniformly scaled) matrix
+        world.sh = rotate_sh(world.sh, u @ vt)
+    return world
