@@ -54,9 +54,9 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                            "is remembered and can be restored)")
     mute_native_splats: BoolProperty(
         name="Native Splats Light Once", default=True,
-        description="Blender 5.3's native splats stop lighting meshes through Cycles' bounces while the baked World "
-                    "carries their light (it would count twice); the camera still sees them. Restore Previous World "
-                    "gives the bounces back")
+        description="Blender 5.3's native splats stop lighting meshes through Cycles' bounces and casting shadows "
+                    "while the baked World carries their light (it would count twice, and their shadows would darken "
+                    "it); the camera still sees them. Restore Previous World gives them back")
     pack_images: BoolProperty(name="Pack Images", default=True,
                               description="Keep baked images inside the .blend; off: save EXR files next to it")
     auto_update: BoolProperty(name="Update When Moved", default=False,
