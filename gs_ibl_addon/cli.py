@@ -63,6 +63,17 @@ def finite_float(text: str) -> float:
     return value
 
 
+def highlight_gain(text: str) -> float | str:
+    """--highlight-gain: 'auto' or a number of at least 1."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    value = finite_float(text)
+    if value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the gain is the highlights' real brightness over 1.0, so 1 "
+                                         "(off) or more, or auto")
+    return value
+
+
 def positive_float(text: str) -> float:
     """argparse type: a finite number > 0."""
     value = finite_float(text)
@@ -243,7 +254,8 @@ def cmd_bake(a) -> int:
     check_input(a.scene)
     settings = ProbeSettings(method=a.method, face_size=a.face_size, irradiance_size=a.irradiance_size,
                              tolerance=a.tolerance, glossy=a.glossy, lod=a.lod, lod_k=a.lod_k, hole_fill=fill,
-                             hole_colour=tuple(a.hole_colour or (0.0, 0.0, 0.0)))
+                             hole_colour=tuple(a.hole_colour or (0.0, 0.0, 0.0)), highlight_gain=a.highlight_gain,
+                             lights=a.lights)
     check_settings(settings)
     probe = None if a.probe is None else check_probe_position(a.probe)
     ctx = _context()
@@ -274,10 +286,16 @@ def cmd_bake(a) -> int:
     print(f"method {result.settings['method']} (asked: {a.method}), faces {result.settings['face_size']}^2, "
           f"cubemap GPU {t.get('render_total', 0):.2f} ms, filter {t.get('irradiance', 0):.2f} ms, "
           f"device {result.device}")
+    from .core.probe.highlights import highlight_text
+    from .core.probe.lights import lights_text
+    from .core.probe.near import near_warning
     print(hole_fill_text(result.hole_fill))
-    warning = hole_warning(result.hole_fill)
-    if warning:
-        print(f"warning: {warning}", file=sys.stderr)
+    for line in (highlight_text(result.highlights), lights_text(result.lights)):
+        if line:
+            print(line)
+    for warning in (hole_warning(result.hole_fill), near_warning(result.near_splats)):
+        if warning:
+            print(f"warning: {warning}", file=sys.stderr)
     print("wrote " + ", ".join(sorted(written)) + (f" and {a.preview}" if a.preview else "") + f" in {a.out}")
     return 0
 
@@ -379,6 +397,13 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--hole-fill", choices=("mean", "constant", "black"), help=HOLE_FILL_HELP)
     q.add_argument("--hole-colour", nargs=3, type=finite_float, metavar=("R", "G", "B"),
                    help="linear radiance of the holes (implies --hole-fill constant)")
+    q.add_argument("--highlight-gain", type=highlight_gain, default=1.0, metavar="GAIN",
+                   help="clipped highlights (colours at the top of the range, as 8-bit photos leave windows and "
+                        "lamps) times GAIN, the light's real brightness over 1.0 (2^stops); auto: estimated from the "
+                        "brightest unclipped directions (a guess, often low); default 1 (off)")
+    q.add_argument("--lights", type=int, default=0, choices=range(0, 9), metavar="N",
+                   help="split up to N (0-8) bright compact regions (sun, lamp, window) off the probe as lights, "
+                        "listed in probe.json for Blender sun lights with shadows; default 0")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
     q.add_argument("--out", required=True, help="output folder")

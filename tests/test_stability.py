@@ -158,3 +158,75 @@ def test_bad_hole_settings_are_refused_before_work(tmp_path, capsys):
                    ProbeSettings(face_size=32, hole_fill="environment"))
     assert main(["bake", str(tmp_path / "missing.ply"), "--hole-fill", "constant", "--out", str(tmp_path / "o")]) != 0
     assert "--hole-colour" in capsys.readouterr().err
+
+
+# Clipped highlights and lights: a shell whose sun (radiance 60) an 8-bit capture stored as 1.0.
+
+SUN = synthetic.BrightPatch(intensity=120.0, colour=(1.0, 1.0, 1.0))  # disc radiance 60, 7 degrees across
+
+
+@pytest.fixture(scope="module")
+def sun_shells():
+    return {"float": synthetic.shell_scene(SUN, 20000),
+            "clipped": synthetic.shell_scene(lambda d: np.minimum(SUN(d), 1.0), 20000)}
+
+
+@pytest.fixture(scope="module")
+def sun_float(sun_shells):
+    return bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(face_size=64, irradiance_size=IRR))
+
+
+def test_clipped_highlights_with_their_gain_light_like_the_float_capture(sun_shells, sun_float):
+    settings = dict(face_size=64, irradiance_size=IRR)
+    clipped = bake_probe(sun_shells["clipped"], (0, 0, 0), ProbeSettings(**settings))
+    gained = bake_probe(sun_shells["clipped"], (0, 0, 0), ProbeSettings(highlight_gain=60.0, **settings))
+    assert relative_rms(clipped.irradiance, sun_float.irradiance) > 0.4  # what clipping costs: 44%
+    assert relative_rms(gained.irradiance, sun_float.irradiance) < 1e-4
+    h = gained.highlights
+    assert h["on"] == "splats" and h["splats"] == 77 and h["gain"] == 60.0
+    assert h["share_before"] < 0.01 < 0.3 < h["share_after"]
+    # Without the splats (a renderer holding them), the cube's clipped texels: the blurred edge of a 7-degree disc
+    # falls below the clip and keeps its value, so it gets part of the light back only.
+    with SplatRenderer(sun_shells["clipped"]) as r:
+        on_cube = bake_probe(None, (0, 0, 0), ProbeSettings(highlight_gain=60.0, **settings), renderer=r)
+    assert on_cube.highlights["on"] == "cube"
+    assert 0.05 < relative_rms(on_cube.irradiance, sun_float.irradiance) < 0.4
+
+
+def test_a_sun_split_off_as_a_light_keeps_the_light_and_stops_sh_ringing(sun_shells, sun_float):
+    from gs_ibl_addon.core.probe.lights import lights_irradiance
+    normals = cubemap.face_directions(IRR)
+    settings = dict(face_size=64, irradiance_size=IRR)
+    split = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(lights=2, **settings))
+    (light,) = split.lights  # one compact bright region: the sky's gradient is no light
+    assert np.dot(light["direction"], np.asarray(SUN.direction) / np.linalg.norm(SUN.direction)) > 0.999
+    assert 0.2 < light["share"] < 0.4 and 10 < light["angle"] < 25
+    assert relative_rms(split.irradiance + lights_irradiance(split.lights, normals), sun_float.irradiance) < 0.01
+    sh = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(method="sh", **settings))
+    sh_split = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(method="sh", lights=1, **settings))
+    assert relative_rms(sh.irradiance, sun_float.irradiance) > 0.03
+    assert relative_rms(sh_split.irradiance + lights_irradiance(sh_split.lights, normals), sun_float.irradiance) < 0.006
+
+
+def test_lights_and_highlights_reach_probe_json_and_the_summary(sun_shells, tmp_path, capsys):
+    path = tmp_path / "clipped.ply"
+    write_ply(str(path), sun_shells["clipped"])
+    out = tmp_path / "probe"
+    assert main(["bake", str(path), "--probe", "0", "0", "0", "--face-size", "32", "--highlight-gain", "60",
+                 "--lights", "1", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    meta = json.loads((out / "probe.json").read_text())
+    assert meta["highlights"]["gain"] == 60.0 and meta["highlights"]["splats"] == 77
+    (light,) = meta["lights"]
+    assert set(light) == {"direction", "solid_angle", "angle", "irradiance", "share"}
+    assert "highlights: 77 splats clipped" in printed and "lights split from the probe (1)" in printed
+
+
+def test_bad_highlight_and_light_settings_are_refused(tmp_path, capsys):
+    with pytest.raises(BadSetting, match="highlight gain"):
+        check_settings(ProbeSettings(highlight_gain=0.5))
+    with pytest.raises(BadSetting, match="lights"):
+        check_settings(ProbeSettings(lights=20))
+    with pytest.raises(SystemExit):
+        main(["bake", str(tmp_path / "x.ply"), "--highlight-gain", "0.3", "--out", str(tmp_path / "o")])
+    assert "--highlight-gain" in capsys.readouterr().err

@@ -18,7 +18,10 @@ import numpy as np
 from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import gpu_ggx_prefilter
+from .probe.highlights import gain_clipped_splats, recover_highlights
 from .probe.holes import fill_holes
+from .probe.lights import extract_lights
+from .probe.near import near_splats
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
@@ -52,6 +55,8 @@ class ProbeSettings:
     lod_k: float = DEFAULT_LOD_K  # with lod "auto": a merged node is drawn once its cell spans <= lod_k pixels
     hole_fill: str = DEFAULT_HOLE_FILL  # one of settings.HOLE_FILLS: the light of directions with no splat
     hole_colour: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the fill's radiance with hole_fill "constant"
+    highlight_gain: float | str = 1.0  # clipped splats' light times this, or "auto" (core/probe/highlights.py)
+    lights: int = 0  # split up to this many bright compact regions off as lights (core/probe/lights.py)
     extra: dict = field(default_factory=dict)  # passed through to filter_probe (sample counts, windows...)
 
 
@@ -85,6 +90,12 @@ def check_settings(s: ProbeSettings) -> str:
     if colour is None or not np.all(np.isfinite(colour)) or np.any(colour < 0):
         raise BadSetting("hole_colour", s.hole_colour, f"hole colour {s.hole_colour!r} must be three numbers "
                                                        "R G B, 0 or more (linear radiance)")
+    if s.highlight_gain != "auto" and (isinstance(s.highlight_gain, bool) or not isinstance(
+            s.highlight_gain, (int, float)) or not 1 <= s.highlight_gain <= 1e6):
+        raise BadSetting("highlight_gain", s.highlight_gain, f"highlight gain {s.highlight_gain!r} must be a number "
+                                                             "from 1 (off) up, or auto")
+    if isinstance(s.lights, bool) or not isinstance(s.lights, (int, np.integer)) or not 0 <= s.lights <= 8:
+        raise BadSetting("lights", s.lights, f"lights {s.lights!r} must be a whole number from 0 (none) to 8")
     if not (isinstance(s.tolerance, (int, float)) and 0 < s.tolerance < 1):
         raise BadSetting("tolerance", s.tolerance, f"tolerance {s.tolerance} must be a fraction between 0 and 1 "
                                                    "(0.01 = 1%)")
@@ -149,7 +160,8 @@ def relative_rms(a: np.ndarray, b: np.ndarray) -> float:
 
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
                        say: Callable[[str, float], None],
-                       hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None) -> ProbeResult:
+                       hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
+                       highlights_done: bool = False) -> ProbeResult:
     """Render (and, with face size 0, search the face size), fill the holes, filter, and add the glossy maps when
     asked."""
     # a renderer holding a level of detail draws from it when asked (one built without renders every splat)
@@ -206,7 +218,10 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     # Holes are filled on the radiance read back (the search above compared the unfilled probes: a fill moves
     # every size alike) and the kept size is filtered again from it; a probe without holes pays nothing.
     result.radiance, result.hole_fill = fill_holes(result.radiance, s.hole_fill, s.hole_colour, hole_radiance)
-    if result.hole_fill["fraction"] > 0 and s.hole_fill != "black":
+    if s.highlight_gain != 1 and not highlights_done:  # no scene to gain the splats of: the cube's clipped texels
+        result.radiance, result.highlights = recover_highlights(result.radiance, s.highlight_gain, r.colour_space)
+    result.radiance, result.lights = extract_lights(result.radiance, s.lights)
+    if (result.hole_fill["fraction"] > 0 and s.hole_fill != "black") or result.highlights or result.lights:
         t0 = time.perf_counter()
         filled = filter_probe(result.radiance[..., :3], irradiance_size=s.irradiance_size, method=method,
                               sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
@@ -250,12 +265,18 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     say = progress or (lambda _msg, _frac: None)
     t0 = time.perf_counter()
     r = renderer
+    highlights = None
+    if scene is not None and renderer is None:  # clipped splats gained before upload (core/probe/highlights.py)
+        scene, highlights = gain_clipped_splats(scene, s.highlight_gain)
     try:
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance)
+        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None)
+        result.highlights = highlights or result.highlights
         result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
+        if scene is not None:
+            result.near_splats = near_splats(scene, pos)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count
