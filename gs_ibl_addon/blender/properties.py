@@ -2,7 +2,8 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
+                       StringProperty)
 
 from ..core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
                              MAX_IRRADIANCE_SIZE, blender_colour_space_items, blender_method_items)
@@ -64,6 +65,17 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     update_interval: FloatProperty(name="Update Delay", default=0.5, min=0.0, soft_max=10.0, unit="TIME_ABSOLUTE",
                                    description="Seconds the probe and its splats must stay still before the "
                                                "automatic re-bake (a drag bakes once, at its end)")
+    # More than one probe (blender/object_probes.py, probe_grid.py)
+    variation_tolerance: FloatProperty(name="Variation Tolerance", default=0.05, min=0.005, max=1.0, precision=3,
+                                       subtype="FACTOR",
+                                       description="Check Light Variation warns about a mesh whose irradiance at "
+                                                   "its bounding-box corners differs more than this from its centre")
+    grid_region: PointerProperty(name="Grid Region", type=bpy.types.Object,
+                                 description="An Empty whose box (Cube display, its size and scale) the probe grid "
+                                             "spans; none: the lit meshes' bounds")
+    grid_resolution: IntVectorProperty(name="Grid", size=3, default=(3, 3, 2), min=1, max=16,
+                                       description="Probes along X, Y and Z of the probe grid")
+    local_report: StringProperty(name="Local Light", default="", options={"HIDDEN"})
     # Shown after a bake (read-only in the panel): what the last bake did.
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"})
     # What the last bake of this probe wrote: re-bakes update these in place, Strength edits this World only.
