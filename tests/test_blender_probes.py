@@ -111,3 +111,77 @@ def test_group_renders_the_numpy_grid(blender, engine, tmp_path):
     ll.unlight_object(sphere)
     assert not ll.in_material(mat) and bsdf.outputs[0].links[0].to_node.bl_idname == "ShaderNodeOutputMaterial"
     assert ll.has_local_light(sphere) is None and len(nt.nodes) == 2
+
+
+ROOM = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "samples", "room.ply")
+
+
+def test_operators_bake_save_reload_and_remove(blender, tmp_path):
+    """The sample room, a probe in its middle, a sphere by the window and a cube in the far corner: Check Light
+    Variation names the sphere; Per-Object Probes sets each mesh's coefficients (its centre's SH minus the World
+    probe's, as the core computes them) and inserts the group into its material without losing the user's shader; the
+    grid lights them after a save and reload; Remove Local Light gives back the material as it was."""
+    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients
+    assert bpy.ops.gs_ibl.import_splats(filepath=ROOM, axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    room = bpy.context.active_object
+    assert room.gs_ibl_splats.colour_space == "LINEAR"
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(2.2, 0.0, 1.4))
+    sphere = bpy.context.active_object
+    sphere.name = "Sphere"
+    mat = bpy.data.materials.new("user")
+    nt = node_tree(mat, clear=True)
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.5, 0.6, 0.7, 1.0)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    sphere.data.materials.append(mat)
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(-2.3, 1.9, 0.5))  # no material: gets our grey one
+    cube = bpy.context.active_object
+    cube.name = "Cube"
+    bpy.context.scene.cursor.location = (0.0, 0.0, 1.2)
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    s = probe.gs_ibl_probe
+    s.splats, s.face_size, s.irradiance_size = room, 32, 8
+    # local light needs the World it corrects
+    with pytest.raises(RuntimeError, match="Bake 'GS-IBL Probe' first"):
+        bpy.ops.gs_ibl.object_probes()
+    assert not ll.in_material(mat)
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert bpy.ops.gs_ibl.check_variation() == {"FINISHED"}  # nothing selected: the meshes inside the room
+    report = s.local_report
+    print("\n" + report)
+    assert "Sphere: light varies" in report and "use a per-object probe or a grid" in report.split("Sphere:")[1]
+    assert "Cube:" in report
+    assert bpy.ops.gs_ibl.object_probes() == {"FINISHED"}
+    r = splat_cache.get(room).renderer
+    d = monomial_coefficients(bake_sh_points(r, np.array([[0.0, 0.0, 1.2], [2.2, 0.0, 1.4]])))
+    got = np.array([sphere[ll.SH_PROP.format(k)] for k in range(9)])
+    np.testing.assert_allclose(got, d[1] - d[0], atol=1e-4)
+    assert ll.has_local_light(sphere) == "probe" and ll.has_local_light(cube) == "probe"
+    group_node = bsdf.outputs[0].links[0].to_node
+    assert group_node.bl_idname == "ShaderNodeGroup" and out.inputs["Surface"].links[0].from_node == group_node
+    assert tuple(group_node.inputs["Albedo"].default_value)[:3] == pytest.approx((0.5, 0.6, 0.7))
+    assert cube.material_slots[0].material.get("gs_ibl") == ll.DEFAULT_MATERIAL_ROLE
+    # a grid instead, kept through save and reload
+    s.grid_resolution = (2, 2, 2)
+    assert bpy.ops.gs_ibl.probe_grid() == {"FINISHED"}
+    assert ll.has_local_light(sphere) == "grid" and "Probe grid 2x2x2" in s.local_report
+    path = str(tmp_path / "local.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    sphere, cube = bpy.data.objects["Sphere"], bpy.data.objects["Cube"]
+    mat = bpy.data.materials["user"]
+    assert ll.has_local_light(sphere) == "grid" and ll.in_material(mat)
+    grid = next(i for i in bpy.data.images if i.get("gs_ibl") == "grid")
+    px = np.empty(grid.size[0] * grid.size[1] * 4, np.float32)
+    grid.pixels.foreach_get(px)
+    assert grid.size[:] == (18, 4) and np.abs(px).max() > 0
+    assert bpy.ops.gs_ibl.remove_local_light() == {"FINISHED"}
+    assert not ll.in_material(mat) and ll.has_local_light(sphere) is None and len(cube.material_slots) == 0
+    nt = mat.node_tree
+    assert [n.bl_idname for n in nt.nodes] == ["ShaderNodeBsdfPrincipled", "ShaderNodeOutputMaterial"]
+    assert nt.nodes[0].outputs[0].links[0].to_node == nt.nodes[1]

@@ -321,8 +321,11 @@ def unlight_object(obj: bpy.types.Object) -> None:
         mat = obj.material_slots[i].material
         if mat is None or mat in still_lit:
             continue
-        if is_ours(mat, DEFAULT_MATERIAL_ROLE) and obj.type == "MESH":
-            obj.data.materials.pop(index=i)
+        if is_ours(mat, DEFAULT_MATERIAL_ROLE):
+            # the slot goes too (Mesh.materials.pop leaves the object's slot count behind)
+            obj.active_material_index = i
+            with bpy.context.temp_override(object=obj, active_object=obj, selected_objects=[obj]):
+                bpy.ops.object.material_slot_remove()
             if mat.users == 0:
                 bpy.data.materials.remove(mat)
             continue
