@@ -24,9 +24,10 @@ from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import BATCH_METHODS, filter_probes, gpu_ggx_prefilter
 from .probe.holes import fill_holes
-from .render.renderer import SplatRenderer
+from .render.renderer import SplatRenderer, largest_probe_face
 from .scene import SplatScene
 from .settings import AUTO_FIRST_FACE
+from .vk import get_context
 
 
 def check_probe_positions(positions) -> np.ndarray:
@@ -82,6 +83,12 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
     if scene is None and renderer is None:
         raise ValueError("bake_probes without a scene needs a renderer holding the splats")
     pos = check_probe_positions(positions)
+    ctx = renderer.ctx if renderer is not None else get_context()
+    largest = largest_probe_face(ctx, len(pos)) if len(pos) > 1 else int(s.max_face_size)
+    if (s.face_size or AUTO_FIRST_FACE) > largest:  # checked before anything is uploaded
+        raise BadSetting("face_size", s.face_size, f"{len(pos)} probes of {s.face_size or AUTO_FIRST_FACE}^2 faces "
+                                                   f"do not fit {ctx.device_name} at once: use faces of {largest}^2 or "
+                                                   "less, or bake fewer probes per call")
     say = progress or (lambda _msg, _frac: None)
     t0 = time.perf_counter()
     r = renderer
@@ -89,7 +96,7 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        results = _bake(r, pos, s, method, say, hole_radiance, keep_radiance)
+        results = _bake(r, pos, s, method, say, hole_radiance, keep_radiance, largest)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count
@@ -110,7 +117,7 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
 
 
 def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say, hole_radiance,
-          keep_radiance: bool) -> list[ProbeResult]:
+          keep_radiance: bool, largest: int) -> list[ProbeResult]:
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     n = len(pos)
 
@@ -127,7 +134,7 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
     frame, sh, irr, holes, timings = at(face)
     if not s.face_size:
         trials.append({"face_size": face, "change": None})
-        while face < s.max_face_size:
+        while face < min(s.max_face_size, largest):  # the search stops where the batch's frame would not fit
             face *= 2
             frame, sh2, irr2, holes, timings = at(face)
             change = max(relative_rms(a, b) for a, b in zip(irr, irr2))

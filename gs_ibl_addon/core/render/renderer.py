@@ -76,6 +76,35 @@ INSTANCES_PER_PAIR = 2  # planning figure for sizing (a 32^2 probe of bench_scen
 GROUP_HEAP_SHARE = 0.5  # of the device's largest heap, for the pair and instance buffers of one group
 
 
+# Frame bytes per cube pixel of a batch: the RGBA float image, and the filter's packed RGB copy (gpu_filters).
+FRAME_BYTES_PER_PIXEL = 16 + 12
+
+
+def _binding_limit(ctx) -> int:
+    return int(ctx.vk.vkGetPhysicalDeviceProperties(ctx.physical_device).limits.maxStorageBufferRange)
+
+
+def largest_probe_face(ctx, n_probes: int) -> int:
+    """The largest power-of-two face size whose frame of ``n_probes`` cubemaps fits one storage binding and
+    GROUP_HEAP_SHARE of the device's largest heap (the frame is one buffer; the pair buffers split into groups,
+    the frame does not)."""
+    from ..limits import device_local_bytes
+    room = min(_binding_limit(ctx) // 16, int(GROUP_HEAP_SHARE * device_local_bytes(ctx)) // FRAME_BYTES_PER_PIXEL)
+    face = 1
+    while 6 * n_probes * (2 * face) ** 2 <= room:
+        face *= 2
+    return face
+
+
+def check_probes_fit(ctx, n_probes: int, face_size: int) -> None:
+    """A ValueError naming what fits when the frame of ``n_probes`` cubemaps of ``face_size``^2 does not."""
+    if n_probes > 1 and face_size > largest_probe_face(ctx, n_probes):
+        mib = n_probes * 6 * face_size ** 2 * FRAME_BYTES_PER_PIXEL / 2 ** 20
+        raise ValueError(f"{n_probes} probes of {face_size}^2 faces need a {mib:,.0f} MiB frame, more than "
+                         f"{ctx.device_name} holds in one buffer: use faces of {largest_probe_face(ctx, n_probes)}^2 "
+                         "or less, or fewer probes per batch")
+
+
 def probes_per_group(ctx, nodes: int, n_probes: int, lod: bool = False) -> int:
     """How many probes of ``nodes`` splats (or level-of-detail nodes) one group renders at once: every per-pair
     buffer within the device's largest storage binding, pairs and instances within GROUP_HEAP_SHARE of its
@@ -83,8 +112,7 @@ def probes_per_group(ctx, nodes: int, n_probes: int, lod: bool = False) -> int:
     renderer always needed)."""
     from ..limits import device_local_bytes
     nodes = max(1, int(nodes))
-    limits = ctx.vk.vkGetPhysicalDeviceProperties(ctx.physical_device).limits
-    binding = int(limits.maxStorageBufferRange)
+    binding = _binding_limit(ctx)
     per_probe = nodes * ((PAIR_BYTES_LOD if lod else PAIR_BYTES) + INSTANCES_PER_PAIR * INSTANCE_BYTES)
     g = min(int(n_probes), int(ctx.max_workgroups[2]),
             binding // (nodes * PREP * 16),  # the largest per-pair buffer
@@ -388,6 +416,8 @@ class SplatRenderer:
         self.resolve()  # the previous render reads the views and origins written below
         view_data, total_tiles, total_pixels = _views_buffer_data(batch)
         probes = batch.n_probes
+        if probes > 1:
+            check_probes_fit(self.ctx, probes, batch.views[0].width)
         group = probes_per_group(self.ctx, self.nodes, probes, self.lod is not None) if probes > 1 else 1
         if depth and group < probes:
             raise ValueError(f"depth of {probes} probes does not fit one group of this device ({group}): "
