@@ -43,10 +43,12 @@ REPO = matrix.REPO
 OUT = matrix.OUT / "cycles-reference"
 ENTRY = next(e for e in matrix.ENTRIES if e.name == "bpy-5.3")
 
-SHELL_R = 10.0  # sphere radius / shell radius = 0.5%: the single probe's parallax error stays below 0.3%
+SHELL_R = 10.0
 SHELL_SPLATS = 6000
-SPHERE = {"centre": [0.0, 0.0, 0.0], "radius": 0.05}
-SPHERE_CAMERA = {"position": [0.06, -0.19, 0.05], "look_at": SPHERE["centre"], "fov_deg": 32.0}
+# sphere radius / shell radius = 0.25%: the one probe at the sphere's centre misses the light's change across the
+# sphere (parallax) by at most ~0.45% here (0.9% at 0.5%, in the sRGB case's darkest channel)
+SPHERE = {"centre": [0.0, 0.0, 0.0], "radius": 0.025}
+SPHERE_CAMERA = {"position": [0.03, -0.095, 0.025], "look_at": SPHERE["centre"], "fov_deg": 32.0}
 VIEW_CAMERA = {"position": [0.0, 0.0, 0.0], "look_at": [3.0, -4.0, 2.0], "fov_deg": 60.0}
 SPHERE_SIZE = 40  # pixels square; the sphere covers ~60% of them
 VIEW_SIZE = (48, 32)
@@ -56,7 +58,7 @@ WORLD_SAMPLES = 256
 ALBEDO = 0.8
 BLOCKS = 3  # the sphere's face split into BLOCKS x BLOCKS screen blocks, each compared on its own
 SPHERE_RTOL = 0.02  # the issue's bar: Cycles' native render = our bake's prediction within 2%
-VIEW_RTOL = 0.05  # mean |ours - Cycles| over the mean radiance of the camera view
+VIEW_RTOL = 0.03  # mean |ours - Cycles| over the mean radiance of the camera view (measured 1.2-1.8%)
 COVERAGE_TOL = 0.01  # mean |alpha ours - alpha Cycles|
 
 
