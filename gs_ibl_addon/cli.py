@@ -25,7 +25,7 @@ import numpy as np
 
 from .core.settings import (COLOUR_SPACE_CHOICES, COLOUR_SPACE_HELP, DEFAULT_COLOUR_SPACE_CHOICE, DEFAULT_HOLE_FILL,
                             DEFAULT_LOD, DEFAULT_LOD_K, DEFAULT_METHOD, HOLE_FILL_HELP, LOD_HELP, LOD_MODES,
-                            METHOD_NAMES)
+                            DEFAULT_TOLERANCE, METHOD_NAMES, TOLERANCE_HELP)
 
 DESCRIPTION = __doc__
 SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
@@ -93,17 +93,18 @@ def positive_int(text: str) -> int:
     return value
 
 
-def face_size(text: str) -> int:
-    """argparse type for --face-size of bake: 0 (search) or a size >= 1."""
+def tolerance(text: str) -> float:
+    """argparse type for --tolerance: a fraction in the range core/tolerance.py validates."""
+    from .core.tolerance import check_tolerance
+    try:
+        return check_tolerance(finite_float(text))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def size_or_zero(text: str) -> int:
+    """argparse type for --face-size and --irradiance-size of bake: 0 (from the tolerance) or a size >= 1."""
     return 0 if text.strip() == "0" else positive_int(text)
-
-
-def fraction(text: str) -> float:
-    """argparse type for --tolerance: a number strictly between 0 and 1."""
-    value = finite_float(text)
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"{value} must lie strictly between 0 and 1 (0.01 = 1%)")
-    return value
 
 
 def field_of_view(text: str) -> float:
@@ -284,8 +285,12 @@ def cmd_bake(a) -> int:
     from .core.probe.holes import hole_fill_text, hole_warning
     t = result.timings_ms
     print(f"method {result.settings['method']} (asked: {a.method}), faces {result.settings['face_size']}^2, "
-          f"cubemap GPU {t.get('render_total', 0):.2f} ms, filter {t.get('irradiance', 0):.2f} ms, "
-          f"device {result.device}")
+          f"irradiance {result.settings['irradiance_size']}^2, cubemap GPU {t.get('render_total', 0):.2f} ms, "
+          f"filter {t.get('irradiance', 0):.2f} ms, device {result.device}")
+    from .core.tolerance import plan_text
+    line = plan_text(result.settings)
+    if line:
+        print(line)
     from .core.probe.highlights import highlight_text
     from .core.probe.lights import lights_text
     from .core.probe.near import near_warning
@@ -384,11 +389,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "texel integrated with its exact solid angle), sh (9 SH coefficients: rings near small "
                         "bright sources), conv (cosine convolution, the thesis's method), box (box-filtered "
                         "mips, fast and rough); docs/accuracy.md compares them")
-    q.add_argument("--face-size", type=face_size, default=0,
-                   help="radiance face size (default 0: start at 32 and double until the irradiance changes by "
-                        "less than --tolerance)")
-    q.add_argument("--irradiance-size", type=positive_int, default=16, help="irradiance cube face size (default 16)")
-    q.add_argument("--tolerance", type=fraction, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
+    q.add_argument("--face-size", type=size_or_zero, default=0,
+                   help="radiance face size (default 0: the smallest estimated to meet --tolerance)")
+    q.add_argument("--irradiance-size", type=size_or_zero, default=0,
+                   help="irradiance cube face size (default 0: 8, 16 or 32, the smallest whose reads between texels "
+                        "meet --tolerance)")
+    q.add_argument("--tolerance", type=tolerance, default=DEFAULT_TOLERANCE, help=TOLERANCE_HELP)
     q.add_argument("--glossy", action="store_true", help="also write GGX prefiltered radiance (ggx_*.exr)")
     q.add_argument("--lod", default=DEFAULT_LOD, choices=LOD_MODES, help=LOD_HELP)
     q.add_argument("--lod-k", type=positive_float, default=DEFAULT_LOD_K,

@@ -115,7 +115,7 @@ def test_bundled_sample_is_the_generated_one():
     ["render", "X", "--camera", "0", "0", "0", "--look-at", "1", "0", "0", "--size", "0", "48", "--out", "o.exr"],
     ["cubemap", "X", "--probe", "0", "0", "0", "--face-size", "0", "--out", "o"],
     ["bake", "X", "--face-size", "-4", "--out", "o"],
-    ["bake", "X", "--irradiance-size", "0", "--out", "o"],
+    ["bake", "X", "--irradiance-size", "-1", "--out", "o"],
 ])
 def test_bad_sizes_are_refused_before_any_work(args, capsys):
     with pytest.raises(SystemExit) as e:
