@@ -177,3 +177,28 @@ def test_group_size_fits_the_device():
         assert probes_per_group(r.ctx, 1000, 125) == 125
         huge = probes_per_group(r.ctx, 50_000_000, 125)
         assert 1 <= huge < 125 and huge * 50_000_000 * 80 <= max(limits.maxStorageBufferRange, 50_000_000 * 80)
+
+
+def test_single_probe_filters_refuse_a_batch_frame():
+    """A filter of one probe given a frame of several would read the first probe only: it says what to use."""
+    with SplatRenderer(_scene(0)) as r:
+        frame = r.render_probes(_origins(2), 32).frame
+        with pytest.raises(ValueError, match="filter_probes"):
+            filter_probe(frame, 8, "exact", roughness=None)
+        with pytest.raises(ValueError, match="read_probes"):
+            frame.read_cube()
+
+
+def test_a_frame_too_big_for_the_device_is_refused_before_drawing():
+    from gs_ibl_addon.core.render.renderer import largest_probe_face
+    scene = _scene(0)
+    with SplatRenderer(scene) as r:
+        n = 1000
+        face = 2 * largest_probe_face(r.ctx, n)
+        generation = r.generation
+        with pytest.raises(ValueError, match=f"use faces of {face // 2}"):
+            r.render_probes(_origins(n), face)
+        assert r.generation == generation  # nothing was drawn
+        with pytest.raises(BadSetting, match="do not fit") as e:
+            bake_probes(None, _origins(n), ProbeSettings(face_size=face), renderer=r)
+        assert e.value.option == "face_size"

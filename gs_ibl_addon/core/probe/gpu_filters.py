@@ -39,7 +39,7 @@ from ..vk import Buffer, Recorder, get_context
 from ..vk import Program, groups, scratch
 from ..vk.kernels import KERNELS
 from .box import box_level_size, halving_sizes
-from .convolve import check_steps
+from .convolve import check_steps, source_sizes
 from .ggx import DEFAULT_ROUGHNESS, ggx_samples, level_sizes
 from .reference import integration_size
 from .sampling import split_alpha
@@ -263,10 +263,12 @@ def gpu_sh_irradiance(coeffs: np.ndarray, size: int, window: str = "none", windo
     return irr, rec.timings_ms
 
 
-def _record_convolve(rec: Recorder, src: Buffer, n: int, out: Buffer, size: int, phi_steps: int,
+def _record_convolve(rec: Recorder, scratch: _Scratch, src: Buffer, n: int, out: Buffer, size: int, phi_steps: int,
                      theta_steps: int) -> None:
+    sizes = source_sizes(n, theta_steps)  # the grid reads a cube matched to its spacing
+    src = _downsample(rec, scratch, sizes, src)[-1]
     rec.dispatch(KERNELS["probe_convolve"], [src, out], groups(6 * size * size, 64, rec.ctx),
-                 n=n, m=size, phi_steps=phi_steps, theta_steps=theta_steps)
+                 n=sizes[-1], m=size, phi_steps=phi_steps, theta_steps=theta_steps)
     rec.timestamp("convolve")
 
 
@@ -279,7 +281,7 @@ def gpu_cosine_convolve(cube, size: int, phi_steps: int = 64, theta_steps: int =
         out = scratch.empty(6 * size * size * 3 * 4, "probe-irradiance")
         with Recorder(ctx, timestamps=True) as rec:
             src, n = scratch.source(rec, cube)
-            _record_convolve(rec, src, n, out, size, phi_steps, theta_steps)
+            _record_convolve(rec, scratch, src, n, out, size, phi_steps, theta_steps)
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
 
@@ -442,7 +444,7 @@ class FilterPlan:
         rec.timestamp("sh_project")
         if method == "convolve":
             check_steps(params["phi_steps"], params["theta_steps"])
-            _record_convolve(rec, rgb, n, self.out, size, params["phi_steps"], params["theta_steps"])
+            _record_convolve(rec, s, rgb, n, self.out, size, params["phi_steps"], params["theta_steps"])
         elif method == "box":
             _record_box(rec, s, rgb, n, self.out, size, box_level_size(n, size, params["box_level_size"]))
         elif method == "exact":
@@ -547,7 +549,7 @@ def filter_probes(frame, irradiance_size: int = 16, method: str = "exact", downs
     if not _is_frame(frame):
         raise TypeError("filter_probes takes a GpuFrame of SplatRenderer.render_probes")
     frame.check()
-    n, probes, ctx = frame.face_size, frame.probes, frame.ctx
+    n, probes, ctx = frame.cube_face_size, frame.probes, frame.ctx
     params = dict(phi_steps=64, theta_steps=16, box_level_size=1, downsample_to=downsample_to)
     plan = plan_for(ctx, frame.image, True, n, method, int(irradiance_size), probes, **params)
     plan.program.start()

@@ -155,7 +155,16 @@ class GpuFrame:
 
     @property
     def face_size(self) -> int:
-        """The face size of a cubemap frame (six square views)."""
+        """The face size of a one-probe cubemap frame (six square views). A frame of several probes refuses, so
+        that a single-probe filter never reads only its first probe: see cube_face_size."""
+        if self.probes != 1:
+            raise ValueError(f"this frame holds {self.probes} probes: filter them with probe.gpu_filters."
+                             "filter_probes, or read them with read_probes()")
+        return self.cube_face_size
+
+    @property
+    def cube_face_size(self) -> int:
+        """The face size of each cubemap of the frame (render_probes: every probe's)."""
         v = self.batch.views
         if len(v) != 6 or any(x.width != v[0].width or x.height != v[0].width for x in v):
             raise ValueError("this frame is not a cubemap (six square faces)")
@@ -194,7 +203,7 @@ class GpuFrame:
 
     def read_probes(self) -> np.ndarray:
         """A frame of P cubemaps (render_probes) as one (P, 6, N, N, 4) float32 array read back from the GPU."""
-        n = self.face_size
+        n = self.cube_face_size
         self.wait()
         return self.image.read(np.float32, self.probes * 6 * n * n * 4).reshape(self.probes, 6, n, n, 4)
 
