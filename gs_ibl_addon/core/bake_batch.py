@@ -56,9 +56,19 @@ def _filter_batch(frame, s: ProbeSettings, method: str) -> tuple[np.ndarray, np.
         f = filter_probes(frame, s.irradiance_size, method, s.extra.get("downsample_to", 32),
                           s.extra.get("sh_window", "none"))
         return f.sh_coefficients, f.irradiance, f.hole_fraction, f.timings_ms
-    cubes = frame.read_probes()  # convolve, box: one filter per probe, from the one read-back
+    return _filter_cubes(frame.read_probes(), s, method, frame.ctx)
+
+
+def _filter_cubes(cubes: np.ndarray, s: ProbeSettings, method: str, ctx
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """As _filter_batch, of cubes (N, 6, n, n, 3|4) on the host: one upload and submission for the batched
+    methods, one filter per probe for convolve and box."""
+    if method in BATCH_METHODS:
+        f = filter_probes(cubes, s.irradiance_size, method, s.extra.get("downsample_to", 32),
+                          s.extra.get("sh_window", "none"), ctx=ctx)
+        return f.sh_coefficients, f.irradiance, f.hole_fraction, f.timings_ms
     out = [filter_probe(c, irradiance_size=s.irradiance_size, method=method, sh_order=2, roughness=None,
-                        use_gpu=True, vk_context=frame.ctx, **s.extra) for c in cubes]
+                        use_gpu=True, vk_context=ctx, **s.extra) for c in cubes]
     return (np.stack([p.sh_coefficients for p in out]), np.stack([p.irradiance for p in out]),
             np.array([p.hole_fraction for p in out]), {"filter_per_probe": sum(p.timings_ms.get("irradiance", 0.0)
                                                                                 for p in out)})
@@ -150,19 +160,11 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
     out = []
     for k in range(n):
         p = ProbeResult(radiance=radiance[k], irradiance=irr[k], sh_coefficients=sh[k], settings={},
-                        timings_ms={**timings, "render_filter_per_probe": timings.get("render_total", 0.0) / n},
+                        timings_ms={**timings, "gpu_per_probe": (timings.get("render_total", 0.0)
+                                                                 + timings.get("filter_total", 0.0)) / n},
                         splat_count=r.scene_count, device=r.ctx.device_name, hole_fraction=float(holes[k]))
         if radiance[k] is not None:
             p.radiance, p.hole_fill = fill_holes(radiance[k], s.hole_fill, s.hole_colour, hole_radiance)
-            if p.hole_fill["fraction"] > 0 and s.hole_fill != "black":
-                filled = filter_probe(p.radiance[..., :3], irradiance_size=s.irradiance_size, method=method,
-                                      sh_order=2, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
-                p.irradiance, p.sh_coefficients = filled.irradiance, filled.sh_coefficients
-            if s.glossy:
-                p.prefiltered, _ = gpu_ggx_prefilter(np.asarray(p.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
-                p.roughness = list(GLOSSY_ROUGHNESS)
-            if not keep_radiance:
-                p.radiance = None
         else:  # nothing to fill (no holes, or black): recorded as fill_holes would
             p.hole_fill = {"method": s.hole_fill, "value": [0.0, 0.0, 0.0], "fraction": float(holes[k])}
         p.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
@@ -170,4 +172,18 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
                            "probe_position": [float(x) for x in pos[k]], "colour_space": r.colour_space,
                            "batch": {"probes": n, "index": k}})
         out.append(p)
+    # Probes with holes are filtered again from their filled radiance, all in one batch (as bake_probe does one).
+    filled = [p for p in out if s.hole_fill != "black" and p.hole_fill["fraction"] > 0]
+    if filled:
+        t0 = time.perf_counter()
+        again = _filter_cubes(np.stack([p.radiance for p in filled]), s, method, r.ctx)
+        for p, sh_k, irr_k in zip(filled, again[0], again[1]):
+            p.sh_coefficients, p.irradiance = sh_k, irr_k
+            p.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
+    for p in out:
+        if s.glossy:
+            p.prefiltered, _ = gpu_ggx_prefilter(np.asarray(p.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
+            p.roughness = list(GLOSSY_ROUGHNESS)
+        if not keep_radiance:
+            p.radiance = None
     return out

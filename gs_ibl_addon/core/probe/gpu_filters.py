@@ -536,26 +536,40 @@ class ProbesFiltered:
 
 
 def filter_probes(frame, irradiance_size: int = 16, method: str = "exact", downsample_to: int | None = 32,
-                  sh_window: str = "none") -> ProbesFiltered:
-    """Irradiance of every probe of a frame of SplatRenderer.render_probes, in one submission over the whole
-    (6P faces) frame: split -> SH projection -> exact integral (method "exact", probe.reference.exact_irradiance
-    of the cube box-downsampled to ``downsample_to``), or the order-2 SH evaluated per probe on the host (method
-    "sh": 9 coefficients, nothing to batch). The render may still be in flight (render_probes(wait=False)): the
-    filter is queued behind it and the host waits once for both. Each probe's result is what filter_probe gives
-    for that probe's cube alone."""
+                  sh_window: str = "none", ctx=None) -> ProbesFiltered:
+    """Irradiance of every probe of a frame of SplatRenderer.render_probes (or of a numpy stack of cubes
+    (P, 6, n, n, 3|4), uploaded once), in one submission over all 6P faces: split -> SH projection -> exact
+    integral (method "exact", probe.reference.exact_irradiance of the cube box-downsampled to ``downsample_to``),
+    or the order-2 SH evaluated per probe on the host (method "sh": 9 coefficients, nothing to batch). The
+    render may still be in flight (render_probes(wait=False)): the filter is queued behind it and the host waits
+    once for both. Each probe's result is what filter_probe gives for that probe's cube alone."""
     from .sh_project import sh_irradiance
     if method not in BATCH_METHODS:
         raise ValueError(f"filter_probes takes method {' or '.join(BATCH_METHODS)}, not {method!r}")
-    if not _is_frame(frame):
-        raise TypeError("filter_probes takes a GpuFrame of SplatRenderer.render_probes")
-    frame.check()
-    n, probes, ctx = frame.cube_face_size, frame.probes, frame.ctx
     params = dict(phi_steps=64, theta_steps=16, box_level_size=1, downsample_to=downsample_to)
-    plan = plan_for(ctx, frame.image, True, n, method, int(irradiance_size), probes, **params)
-    plan.program.start()
-    if frame.wait():  # the render was drawn again after this filter was queued: filter it again
-        plan.program.wait()
-    coeffs, irr, holes, timings = plan.finish_all()
+    upload = None
+    if _is_frame(frame):
+        frame.check()
+        n, probes, ctx = frame.cube_face_size, frame.probes, frame.ctx
+        plan = plan_for(ctx, frame.image, True, n, method, int(irradiance_size), probes, **params)
+        plan.program.start()
+        if frame.wait():  # the render was drawn again after this filter was queued: filter it again
+            plan.program.wait()
+    else:
+        cubes = np.asarray(frame)
+        if cubes.ndim != 5 or cubes.shape[1] != 6 or cubes.shape[2] != cubes.shape[3] or cubes.shape[4] not in (3, 4):
+            raise ValueError(f"filter_probes takes a GpuFrame or cubes (P, 6, n, n, 3|4), got shape {cubes.shape}")
+        rgb = np.ascontiguousarray(cubes[..., :3], np.float32)  # premultiplied: holes are black, as split_alpha
+        probes, n, ctx = len(rgb), rgb.shape[2], ctx or get_context()
+        upload = scratch(ctx, rgb.nbytes, "probe-radiance")
+        upload.write(rgb)
+        plan = plan_for(ctx, upload, False, n, method, int(irradiance_size), probes, **params)
+        plan.program.start()
+    try:
+        coeffs, irr, holes, timings = plan.finish_all()
+    finally:
+        if upload is not None:
+            upload.close()
     if irr is None:
         t0 = time.perf_counter()
         dirs = cubemap.face_directions(int(irradiance_size))
