@@ -315,3 +315,33 @@ def test_irradiance_changes_smoothly_along_a_path():
                for y in ys]
     steps = np.array([relative_rms(b, a) for a, b in zip(irr, irr[1:])])
     assert steps.max() < 1.5 * np.median(steps), np.round(100 * steps, 2)  # no pop (measured 1.3x over 4 m)
+
+
+def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_shells, sun_float, tmp_path,
+                                                                    write_3dgs_ply):
+    """In a real bpy: a probe with Lights 1 over the sun shell gets one sun (the core's direction, irradiance and
+    angle; shadows on) in "GS-IBL Lights"; a re-bake replaces it, Lights 0 removes it."""
+    from gs_ibl_addon.blender.lights_from_probe import COLLECTION, lights_of
+    path = tmp_path / "sun.ply"
+    write_3dgs_ply(path, sun_shells["float"])
+    assert blender.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    blender.context.active_object.gs_ibl_splats.colour_space = "LINEAR"
+    blender.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = blender.context.active_object
+    s = probe.gs_ibl_probe
+    s.face_size, s.irradiance_size, s.lights = 64, IRR, 1
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}  # again: replaced, not added
+    (sun,) = lights_of(probe)
+    core = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(face_size=64, irradiance_size=IRR, lights=1))
+    (want,) = core.lights
+    axis = np.array(sun.matrix_world.to_3x3().col[2])  # a sun shines along -Z: +Z points at the light
+    assert np.dot(axis, want["direction"]) > 0.9999
+    assert sun.data.type == "SUN" and sun.data.use_shadow
+    assert sun.data.energy == pytest.approx(max(want["irradiance"]), rel=1e-4)
+    assert np.degrees(sun.data.angle) == pytest.approx(want["angle"], rel=1e-4)
+    assert sun.users_collection[0].name == COLLECTION
+    assert "lights split from the probe (1)" in s.last_report
+    s.lights = 0
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert not lights_of(probe) and not any(o.type == "LIGHT" for o in blender.data.objects)

@@ -14,11 +14,14 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ..core.bake import ProbeSettings, bake_probe, check_fits_device
+from ..core.probe.highlights import highlight_text
 from ..core.probe.holes import hole_fill_text, hole_warning
+from ..core.probe.lights import lights_text
 from ..core.probe.latlong import cube_to_latlong
 from ..core.settings import method_from_blender
 from . import splat_cache
 from . import world as gw
+from .lights_from_probe import sync_lights
 from .properties import is_probe
 from .splat_object import is_splat_object
 
@@ -28,7 +31,8 @@ HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
 def probe_settings(props) -> ProbeSettings:
     """The core's settings from a probe's properties (Object.gs_ibl_probe)."""
     return ProbeSettings(method=method_from_blender(props.method), face_size=int(props.face_size),
-                         irradiance_size=int(props.irradiance_size), tolerance=float(props.tolerance))
+                         irradiance_size=int(props.irradiance_size), tolerance=float(props.tolerance),
+                         highlight_gain=float(props.highlight_gain), lights=int(props.lights))
 
 
 def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,
@@ -114,6 +118,7 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
              f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
     lines.append(hole_fill_text(result.hole_fill))
+    lines += [line for line in (highlight_text(result.highlights), lights_text(result.lights)) if line]
     warning = None
     if result.hole_fraction > HOLE_WARNING:
         warning = hole_warning(result.hole_fill) or (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of "
@@ -146,6 +151,7 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     radiance = result_latlong(result, "radiance", max(2 * face, 32))
     irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
     apply_probe_images(scene, probe, radiance, irradiance)
+    sync_lights(scene, probe, result.lights, probe.gs_ibl_probe.strength)
     _baked[(scene.name, probe.name)] = bake_state(probe, splats)
     lines, warning = summary(result, time.perf_counter() - t0)
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([warning] if warning else []))

@@ -188,6 +188,8 @@ class GSIBL_PT_panel(bpy.types.Panel):
         col.prop(s, "face_size")
         col.prop(s, "irradiance_size")
         col.prop(s, "tolerance")
+        col.prop(s, "highlight_gain")
+        col.prop(s, "lights")
         col.prop(s, "strength")
         col.prop(s, "keep_background")
         col.prop(s, "assign_world")

@@ -46,6 +46,13 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                              "and 2x as high")
     tolerance: FloatProperty(name="Tolerance", default=DEFAULT_TOLERANCE, min=1e-4, max=0.5, precision=3,
                              description="Relative irradiance change that ends the face-size search (Face Size 0)")
+    lights: IntProperty(name="Lights", default=0, min=0, max=8,
+                        description="Split up to this many bright compact regions (sun, lamp, window) off the probe "
+                                    "as sun lights with shadows; the World keeps the rest")
+    highlight_gain: FloatProperty(name="Highlight Gain", default=1.0, min=1.0, soft_max=100.0,
+                                  description="Directions clipped at the top of the range (windows and lamps in a "
+                                              "capture trained on 8-bit photos) times this: the light's real "
+                                              "brightness over 1.0")
     strength: FloatProperty(name="Strength", default=1.0, min=0.0, soft_max=10.0, update=_strength_changed,
                             description="Multiplier of the probe's light in the World")
     keep_background: BoolProperty(name="Keep Background", default=True,
