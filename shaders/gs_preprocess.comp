@@ -168,7 +168,7 @@ void main() {
     prepared[PREP * q + 1u] = vec4(w1, ol.y);
     prepared[PREP * q + 2u] = vec4(w2, ol.z);
     prepared[PREP * q + 3u] = vec4(sh_color(i, mu / dist), opacity);
-    prepared[PREP * q + 4u] = vec4(cutoff, uintBitsToFloat(probe * probe_tiles), 0.0, 0.0);
+    prepared[PREP * q + 4u] = vec4(cutoff, float(probe * probe_tiles), 0.0, 0.0);  // exact below 2^24 (renderer.py)
     tile_count[q] = count;
     depth_key[q] = depth_sort_key(dist, po.xyz);
 }

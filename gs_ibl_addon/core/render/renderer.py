@@ -76,6 +76,10 @@ INSTANCES_PER_PAIR = 2  # planning figure for sizing (a 32^2 probe of bench_scen
 GROUP_HEAP_SHARE = 0.5  # of the device's largest heap, for the pair and instance buffers of one group
 
 
+# A pair's first tile travels as a float in its prepared record (gs_preprocess -> gs_emit): exact below 2^24, so a
+# group's tiles stay below it (a thousand 256^2 probes are 1.5M tiles).
+MAX_GROUP_TILES = 1 << 24
+
 # Frame bytes per cube pixel of a batch: the RGBA float image, and the filter's packed RGB copy (gpu_filters).
 FRAME_BYTES_PER_PIXEL = 16 + 12
 
@@ -428,6 +432,8 @@ class SplatRenderer:
         if probes > 1:
             check_probes_fit(self.ctx, probes, batch.views[0].width)
         group = probes_per_group(self.ctx, self.nodes, probes, self.lod is not None) if probes > 1 else 1
+        if group * total_tiles >= MAX_GROUP_TILES:
+            group = max(1, (MAX_GROUP_TILES - 1) // total_tiles)
         if depth and group < probes:
             raise ValueError(f"depth of {probes} probes does not fit one group of this device ({group}): "
                              "render them without depth, or fewer at a time")
