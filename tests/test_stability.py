@@ -19,6 +19,7 @@ from gs_ibl_addon.core.bake import BadSetting, ProbeSettings, bake_probe, check_
 from gs_ibl_addon.core.formats.compressed_ply import morton_order
 from gs_ibl_addon.core.formats.ply import write_ply
 from gs_ibl_addon.core.image_io import read_exr
+from gs_ibl_addon.core.probe.latlong import cube_to_latlong
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.splat_math import depth_keys, tie_hash
@@ -345,3 +346,20 @@ def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_
     s.lights = 0
     assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert not lights_of(probe) and not any(o.type == "LIGHT" for o in blender.data.objects)
+
+
+def test_blender_highlight_gain_lights_the_clipped_capture_like_the_float_one(blender, sun_shells, sun_float,
+                                                                             tmp_path, write_3dgs_ply):
+    from gs_ibl_addon.blender import world as gw
+    path = tmp_path / "clipped.ply"
+    write_3dgs_ply(path, sun_shells["clipped"])
+    assert blender.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    blender.context.active_object.gs_ibl_splats.colour_space = "LINEAR"
+    blender.ops.gs_ibl.add_probe(place="CURSOR")
+    s = blender.context.active_object.gs_ibl_probe
+    s.face_size, s.irradiance_size, s.highlight_gain = 64, IRR, 60.0
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    image = blender.data.node_groups["GS-IBL Irradiance"].nodes["GS-IBL Irradiance Image"].image
+    want = cube_to_latlong(sun_float.irradiance, 4 * IRR)
+    assert relative_rms(gw.image_latlong_pixels(image), want) < 1e-3
+    assert "highlights: 77 splats clipped" in s.last_report

@@ -143,8 +143,12 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
     cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
     check_fits_device(settings, cached.renderer.ctx, cached.renderer.scene_count)
-    result = bake_probe(None, np.array(probe.matrix_world.translation, np.float64), settings,
-                        renderer=cached.renderer, progress=progress)
+    where = np.array(probe.matrix_world.translation, np.float64)
+    if settings.highlight_gain != 1:  # the gain goes on the splats (exact), so this bake uploads its own copy
+        from .splat_object import scene_from_object
+        result = bake_probe(scene_from_object(splats), where, settings, progress=progress)
+    else:
+        result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress)
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]
     # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
