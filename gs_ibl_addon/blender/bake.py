@@ -14,6 +14,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ..core.bake import ProbeSettings, bake_probe, check_fits_device
+from ..core.tolerance import plan_text
 from ..core.probe.highlights import highlight_text
 from ..core.probe.holes import hole_fill_text, hole_warning
 from ..core.probe.lights import lights_text
@@ -118,6 +119,8 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
              f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
     lines.append(hole_fill_text(result.hole_fill))
+    if plan_text(st):  # what the tolerance chose and the estimated error (core/tolerance.py)
+        lines.append(plan_text(st))
     lines += [line for line in (highlight_text(result.highlights), lights_text(result.lights)) if line]
     warning = None
     if result.hole_fraction > HOLE_WARNING:

@@ -6,7 +6,8 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, I
                        StringProperty)
 
 from ..core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
-                             MAX_IRRADIANCE_SIZE, blender_colour_space_items, blender_method_items)
+                             MAX_IRRADIANCE_SIZE, MAX_TOLERANCE, MIN_TOLERANCE, blender_colour_space_items,
+                             blender_method_items)
 from .splat_object import is_splat_object
 
 PROBE_NAME = "GS-IBL Probe"
@@ -39,13 +40,15 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
         default=DEFAULT_METHOD.upper())
     face_size: IntProperty(name="Face Size", default=0, min=0, max=MAX_FACE_SIZE,
                            description="Resolution of each of the six radiance faces rendered from the probe "
-                                       "(0: doubled from 32 until the irradiance changes by less than the tolerance)")
+                                       "(0: the smallest estimated to meet the tolerance)")
     irradiance_size: IntProperty(name="Irradiance Size", default=DEFAULT_IRRADIANCE_SIZE, min=4,
                                  max=MAX_IRRADIANCE_SIZE,
                                  description="Face size of the irradiance cube; its lat-long image is 4x as wide "
                                              "and 2x as high")
-    tolerance: FloatProperty(name="Tolerance", default=DEFAULT_TOLERANCE, min=1e-4, max=0.5, precision=3,
-                             description="Relative irradiance change that ends the face-size search (Face Size 0)")
+    tolerance: FloatProperty(name="Tolerance", default=DEFAULT_TOLERANCE, min=MIN_TOLERANCE, max=MAX_TOLERANCE,
+                             precision=3,
+                             description="Relative RMS irradiance error allowed: with Face Size 0 the face size is "
+                                         "chosen from an error estimate to meet it (the report gives the estimate)")
     lights: IntProperty(name="Lights", default=0, min=0, max=8,
                         description="Split up to this many bright compact regions (sun, lamp, window) off the probe "
                                     "as sun lights with shadows; the World keeps the rest")

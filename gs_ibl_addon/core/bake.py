@@ -262,8 +262,12 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
 def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSettings | dict | None = None,
                renderer: SplatRenderer | None = None,
                progress: Callable[[str, float], None] | None = None,
-               hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None) -> ProbeResult:
+               hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
+               estimate_from: SplatScene | None = None) -> ProbeResult:
     """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX).
+
+    ``estimate_from``: the splats on the host for the face-size error model when ``scene`` is None (without them the
+    model falls back to the changes' tail, core/tolerance.py).
 
     Directions that meet no splat are filled by ``settings.hole_fill`` (core/probe/holes.py); ``hole_radiance``,
     a function of (M, 3) unit directions returning (M, 3) linear RGB, is the light of hole fill "environment"
@@ -290,7 +294,8 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        prints = footprints(scene, pos) if scene is not None and not s.face_size else None
+        host = scene if scene is not None else estimate_from
+        prints = footprints(host, pos) if host is not None and not s.face_size else None
         result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None,
                                     prints)
         result.highlights = highlights or result.highlights
