@@ -1,7 +1,7 @@
 """Many probes in one batch (SplatRenderer.render_probes + gpu_filters.filter_probes) against the same probes one
 at a time: GPU and wall time per batch and per probe, with and without a level of detail.
 
-Run: python benchmarks/multi_probe_bench.py [--counts 1000000] [--probes 1,8,27,125] [--faces 32] [--ks 0,1]
+Run: python benchmarks/multi_probe_bench.py [--counts 1000000] [--probes 1,8,27,125] [--faces 32] [--ks 0,1,2]
      [--repeats 10] [--hold-clock] [--csv out/bench/multi_probe.csv] [--quick]
 
 Probes sit on a regular grid inside bench_scene's box (N = 1: its centre; 8, 27, 125: 2^3, 3^3, 5^3 grids over
@@ -105,7 +105,7 @@ def main() -> None:
     ap.add_argument("--counts", default="1000000")
     ap.add_argument("--probes", default="1,8,27,125")
     ap.add_argument("--faces", default="32")
-    ap.add_argument("--ks", default="0,1", help="0: full detail; > 0: level of detail with that lod_k")
+    ap.add_argument("--ks", default="0,1,2", help="0: full detail; > 0: level of detail with that lod_k")
     ap.add_argument("--repeats", type=int, default=10)
     ap.add_argument("--hold-clock", action="store_true")
     ap.add_argument("--skip-single", action="store_true", help="batches only (no one-at-a-time comparison)")

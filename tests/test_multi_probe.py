@@ -202,3 +202,19 @@ def test_a_frame_too_big_for_the_device_is_refused_before_drawing():
         with pytest.raises(BadSetting, match="do not fit") as e:
             bake_probes(None, _origins(n), ProbeSettings(face_size=face), renderer=r)
         assert e.value.option == "face_size"
+
+
+@pytest.mark.parametrize("lod", [False, True], ids=["full", "lod"])
+def test_trim_gives_back_what_a_batch_grew(lod):
+    scene = _scene(0)
+    o = _origins(7, seed=3)
+    with SplatRenderer(scene, lod=lod) as r:
+        slots, capacity = r.slots, r.capacity
+        before = _singles(r, o[:1], 64, LOD_K if lod else 0.0)[0]
+        frame = r.render_probes(o, 64, lod_k=LOD_K if lod else 0.0).frame
+        assert r.slots == 7 and r.capacity > capacity
+        r.trim()
+        assert (r.slots, r.capacity) == (slots, capacity)
+        with pytest.raises(Exception, match="overwritten"):
+            frame.read_probes()
+        np.testing.assert_array_equal(_singles(r, o[:1], 64, LOD_K if lod else 0.0)[0], before)

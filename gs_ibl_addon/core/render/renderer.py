@@ -378,6 +378,19 @@ class SplatRenderer:
             per_probe = self.cut_capacity // old_slots if old_slots else max(1 << 16, self.scene_count // 8)
             self._grow_cut(per_probe * self.slots)
 
+    def trim(self) -> None:
+        """Give back what a batch of many probes grew (pair buffers for a group, the instance list) and keep what
+        one probe needs: a renderer kept between bakes (Blender's splat cache) then holds no more than before its
+        batch. The next render re-records its program; the frame buffers stay."""
+        self.resolve()
+        self.generation += 1  # the last frame's pairs are gone
+        for name in self._PAIR_BUFFERS + ("inst_key", "inst_val", "tile_sorter", "cut_sorter"):
+            self._drop(getattr(self, name, None))
+            setattr(self, name, None)
+        self.slots = self.capacity = self.cut_capacity = 0
+        self._ensure_slots(1)
+        self._ensure_capacity(max(1 << 16, 4 * (self.cut_capacity if self.lod is not None else self.nodes)))
+
     def _ensure_capacity(self, need: int) -> None:
         if need <= self.capacity:
             return
