@@ -13,7 +13,7 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-from ..core.probe.grid import bake_sh_points, monomial_coefficients
+from ..core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coefficients
 from ..core.probe.variation import Variation, box_points, variation_from_sh
 from . import local_light as ll
 from . import splat_cache
@@ -103,7 +103,8 @@ def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects:
         ll.light_object(obj, strength)
         obj.update_tag()
     names = ", ".join(o.name for o in objects[:6]) + (", ..." if len(objects) > 6 else "")
-    text = f"Per-object probes for {len(objects)} meshes ({names}), 32x32 faces, SH order 2"
+    text = (f"Per-object probes for {len(objects)} meshes ({names}), {POINT_FACE_SIZE}x{POINT_FACE_SIZE} faces, "
+            "SH order 2")
     probe.gs_ibl_probe.local_report = text
     return text
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ..core.probe.grid import GridSpec, bake_grid, monomial_coefficients, pack_grid
+from ..core.probe.grid import POINT_FACE_SIZE, GridSpec, bake_grid, monomial_coefficients, pack_grid
 from . import local_light as ll
 from .object_probes import Progress, _renderer, world_box, world_coefficients
 
@@ -44,7 +44,7 @@ def bake_probe_grid(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
         ll.light_object(obj, float(s.strength))
         obj.update_tag()
     nx, ny, nz = spec.shape
-    text = (f"Probe grid {nx}x{ny}x{nz} ({spec.count} probes, 32x32 faces) over "
+    text = (f"Probe grid {nx}x{ny}x{nz} ({spec.count} probes, {POINT_FACE_SIZE}x{POINT_FACE_SIZE} faces) over "
             f"({', '.join(f'{c:.2f}' for c in lo)}) .. ({', '.join(f'{c:.2f}' for c in hi)}) "
             f"lights {len(objects)} meshes")
     s.local_report = text

@@ -156,15 +156,22 @@ def bake_sh_points(renderer, positions: np.ndarray, face_size: int = POINT_FACE_
     SplatRenderer holding the splats in world space) with ``face_size``^2 faces; ``settings``: further
     ProbeSettings (hole_fill, ...).
 
-    One probe after the other through core.bake.bake_probe; the one place to switch to a batched bake."""
-    from ..bake import ProbeSettings, bake_probe
+    Batched (core.bake_batch.bake_probes: one render and one filter submission per chunk), in chunks as large as
+    the device holds at this face size; each probe is what bake_probe gives at its position."""
+    from ..bake import ProbeSettings
+    from ..bake_batch import bake_probes
+    from ..render.renderer import largest_probe_face
     pts = np.asarray(positions, np.float64).reshape(-1, 3)
     s = ProbeSettings(method="sh", face_size=int(face_size), irradiance_size=4, sh_order=ORDER, **settings)
+    chunk = max(1, len(pts))
+    while chunk > 1 and largest_probe_face(renderer.ctx, chunk) < face_size:
+        chunk = (chunk + 1) // 2
     out = np.empty((len(pts), COEFFS, 3))
-    for i, p in enumerate(pts):
-        out[i] = np.asarray(bake_probe(None, p, s, renderer=renderer).sh_coefficients)[:COEFFS, :3]
+    for start in range(0, len(pts), chunk):
+        part = bake_probes(None, pts[start:start + chunk], s, renderer=renderer, keep_radiance=False)
+        out[start:start + len(part)] = [np.asarray(p.sh_coefficients)[:COEFFS, :3] for p in part]
         if progress is not None:
-            progress(i + 1, len(pts))
+            progress(start + len(part), len(pts))
     return out
 
 
