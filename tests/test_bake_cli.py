@@ -138,7 +138,7 @@ def test_core_refuses_bad_sizes():
     with pytest.raises(ValueError, match="image size"):
         ViewBatch.pinhole([0, 0, 0], [1, 0, 0], 60, 0, 10)
     with pytest.raises(ValueError, match="irradiance size"):
-        bake_probe(shell_scene(SkyGradient(), 500), [0, 0, 0], ProbeSettings(irradiance_size=0))
+        bake_probe(shell_scene(SkyGradient(), 500), [0, 0, 0], ProbeSettings(irradiance_size=-1))
 
 
 def test_bake_from_a_renderer_alone_matches_bake_from_the_scene(sky_shell):
