@@ -157,11 +157,10 @@ class GSIBL_PT_panel(bpy.types.Panel):
         obj = context.active_object
         if is_splat_object(obj):
             box = layout.box()
-            if is_native_splats(obj):
-                box.label(text=f"{splat_count(obj):,} splats (Blender's Gaussian splats)")
-            else:
-                info = obj["gs_ibl"]
-                box.label(text=f"{splat_count(obj):,} splats, SH {info.get('sh_degree', '?')}")
+            info = obj.get("gs_ibl")  # ours (mesh, or native on 5.3+) remember their file; Blender's importers don't
+            text = f"{splat_count(obj):,} splats" + (f", SH {info.get('sh_degree', '?')}" if info else "")
+            box.label(text=text + (" (Blender's Gaussian splats)" if is_native_splats(obj) else ""))
+            if info:
                 source = str(info.get("source", ""))
                 box.label(text=os.path.basename(source) or source)  # the path would be cut; its file name fits
             box.prop(obj.gs_ibl_splats, "colour_space", text="Colours")
