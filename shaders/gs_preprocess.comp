@@ -3,9 +3,11 @@
 // toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin).
 // With a level of detail (p.lod = 1; render/lod.py) the splats are the nodes of its tree and each first decides
 // whether it is in the probe's cut; the drawn ones are flagged in `live` for gs_lod_compact.
-// Several probes in one batch (SplatRenderer.render_probes): workgroup z is the probe, and every output is per
-// (probe, splat) pair at index probe * n + splat, so the later stages, which only ever see pair indices, need no
-// change; a pair's first tile in the batch travels in prepared[.. + 4].y for gs_emit.
+// Several probes in one batch (SplatRenderer.render_probes): workgroup x is the probe and (y, z) the block of 256
+// splats, and every output is per (probe, splat) pair at index probe * n + splat, so the later stages, which only
+// ever see pair indices, need no change; a pair's first tile in the batch travels in prepared[.. + 4].y for
+// gs_emit. x varies fastest in dispatch order, so the probes of one block run side by side and a splat's data
+// (SH: 192 bytes at degree 3) is read from memory about once per group of probes, not once per probe.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 layout(local_size_x = 256) in;
@@ -112,9 +114,9 @@ uint depth_sort_key(float dist, vec3 pos) {
 }
 
 void main() {
-    uint i = linear_group() * 256u + gl_LocalInvocationID.x;  // the splat
+    uint i = (gl_WorkGroupID.z * gl_NumWorkGroups.y + gl_WorkGroupID.y) * 256u + gl_LocalInvocationID.x;  // splat
     if (i >= p.n) return;
-    uint probe = gl_WorkGroupID.z;
+    uint probe = gl_WorkGroupID.x;
     uint q = probe * p.n + i;  // the (probe, splat) pair: index of every per-pair output
     origin = origins[probe].xyz;
     depth_key[q] = 0xFFFFFFFFu;

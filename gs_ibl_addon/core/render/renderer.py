@@ -19,7 +19,7 @@ and ``render(batch, lod_k=k)`` draws the cut of threshold k x pixel angle: prepr
 the drawn ones, a prefix sum and gs_lod_compact pack them in storage order, and the later stages see only those.
 
 Many probes in one submission (``render_probes(origins, face_size)``, a ViewBatch.cubemaps). Every stage above
-works on (probe, splat) pairs instead of splats: gs_preprocess runs once per pair (workgroup z = the probe) and
+works on (probe, splat) pairs instead of splats: gs_preprocess runs once per pair (workgroup x = the probe) and
 writes its outputs at pair index probe * n + splat, with the probe's own distance, colour, cut and first tile id.
 One depth sort of all pairs by their depth key then leaves each probe's pairs in exactly the order its own render
 would give them (a stable sort; equal keys keep pair order, and within a probe that is splat order), the tile ids
@@ -589,7 +589,7 @@ class SplatRenderer:
                       self.depth_key, self.depth_val, self.rects, origins,
                       self.lod_words if tree is not None else self.no_depth,
                       self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
-                     groups(n, 256, c) + (probes,),
+                     (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
                      n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
                      **grid)

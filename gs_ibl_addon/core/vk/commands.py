@@ -137,8 +137,8 @@ class Recorder:
     def dispatch(self, kernel: Kernel, buffers: Sequence[Buffer], group_count: tuple[int, ...] | int,
                  **push) -> None:
         """Run ``kernel`` over ``group_count`` workgroups (x, y[, z]) with ``buffers`` bound in its table order;
-        ``push`` names every push-constant field of the kernel (kernels.py). z is a batch index where a kernel
-        uses one (several probes: render/renderer.py render_probes, probe/gpu_filters.py)."""
+        ``push`` names every push-constant field of the kernel (kernels.py). Kernels that batch several probes
+        read the probe from one workgroup axis (render/renderer.py render_probes, probe/gpu_filters.py)."""
         vk = self.vk
         counts = (group_count,) if isinstance(group_count, int) else tuple(group_count)
         gx, gy, gz = counts + (1,) * (3 - len(counts))
