@@ -51,12 +51,16 @@ def lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, selected=()) -> 
     return out
 
 
-def _renderer(scene, probe):
+def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False):
+    """The GPU renderer holding the probe's splats (splat_cache), after checking the probe, its splats and, with
+    ``need_world``, that it has been baked (local light corrects the light of its World)."""
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
     splats = find_splats(scene, probe)
     if splats is None:
         raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
+    if need_world and probe.gs_ibl_probe.world is None:
+        raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
     return splat_cache.get(splats).renderer
 
 
@@ -66,7 +70,7 @@ def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
     probe's Variation Tolerance; they are also kept in the probe's local report for the panel."""
     if not objects:
         raise ValueError("No mesh to check: select meshes, or put some inside the splats' bounds")
-    r = _renderer(scene, probe)
+    r = probe_renderer(scene, probe)
     boxes = {o.name: world_box(o) for o in objects}
     pts = np.concatenate([box_points(*boxes[n]) for n in boxes])
     sh = bake_sh_points(r, pts, progress=progress)
@@ -79,13 +83,13 @@ def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
     return found, lines
 
 
-def world_coefficients(scene: bpy.types.Scene, probe: bpy.types.Object, renderer) -> np.ndarray:
-    """Monomial coefficients (9, 3) of the World probe's light, baked the way the local probes are (so their
-    difference carries no difference of method)."""
-    if probe.gs_ibl_probe.world is None:
-        raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
+def coefficients_with_world(probe: bpy.types.Object, renderer, points: np.ndarray,
+                            progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Monomial coefficients of the World probe's light (9, 3) and of probes at ``points`` (P, 9, 3), baked in one
+    batch the same way (so their difference carries no difference of method)."""
     pos = np.array(probe.matrix_world.translation, np.float64)
-    return monomial_coefficients(bake_sh_points(renderer, pos[None])[0])
+    d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), progress=progress))
+    return d[0], d[1:]
 
 
 def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],
@@ -93,10 +97,9 @@ def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects:
     """Each mesh its own probe at its bounds centre, through the local-light group; returns the report line."""
     if not objects:
         raise ValueError("No mesh to light: select meshes, or put some inside the splats' bounds")
-    r = _renderer(scene, probe)
-    d_world = world_coefficients(scene, probe, r)
+    r = probe_renderer(scene, probe, need_world=True)
     centres = np.stack([np.mean(world_box(o), axis=0) for o in objects])
-    d = monomial_coefficients(bake_sh_points(r, centres, progress=progress))
+    d_world, d = coefficients_with_world(probe, r, centres, progress)
     strength = float(probe.gs_ibl_probe.strength)
     for obj, di in zip(objects, d):
         ll.set_object_coefficients(obj, di - d_world, grid=False)

@@ -7,9 +7,9 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ..core.probe.grid import POINT_FACE_SIZE, GridSpec, bake_grid, monomial_coefficients, pack_grid
+from ..core.probe.grid import POINT_FACE_SIZE, GridSpec, pack_grid
 from . import local_light as ll
-from .object_probes import Progress, _renderer, world_box, world_coefficients
+from .object_probes import Progress, coefficients_with_world, probe_renderer, world_box
 
 
 def region_box(region: bpy.types.Object | None, objects: list[bpy.types.Object]) -> tuple[np.ndarray, np.ndarray]:
@@ -34,9 +34,9 @@ def bake_probe_grid(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
     s = probe.gs_ibl_probe
     lo, hi = region_box(s.grid_region, objects)
     spec = GridSpec(tuple(float(c) for c in lo), tuple(float(c) for c in hi), tuple(int(n) for n in s.grid_resolution))
-    r = _renderer(scene, probe)  # checks the probe and its splats before any work
-    d_world = world_coefficients(scene, probe, r)
-    delta = monomial_coefficients(bake_grid(r, spec, progress=progress)) - d_world
+    r = probe_renderer(scene, probe, need_world=True)  # checks the probe, its splats and World before any work
+    d_world, d = coefficients_with_world(probe, r, spec.points().reshape(-1, 3), progress)
+    delta = d.reshape(*spec.shape, *d.shape[1:]) - d_world
     image = ll.grid_image(pack_grid(delta))
     ll.local_light_group(spec, image)
     for obj in objects:
