@@ -156,6 +156,13 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     print("\n" + report)
     assert "Sphere: light varies" in report and "use a per-object probe or a grid" in report.split("Sphere:")[1]
     assert "Cube:" in report
+    from types import SimpleNamespace
+
+    from gs_ibl_addon.blender.local_light_ui import GSIBL_PT_local_light
+    from test_blender_native_import import _Layout  # records the labels a panel draws
+    labels: list[str] = []
+    GSIBL_PT_local_light.draw(SimpleNamespace(layout=_Layout(labels)), bpy.context)
+    assert "Sphere: light varies" in " ".join(labels) and "per-object probe" in " ".join(labels)
     assert bpy.ops.gs_ibl.object_probes() == {"FINISHED"}
     r = splat_cache.get(room).renderer
     d = monomial_coefficients(bake_sh_points(r, np.array([[0.0, 0.0, 1.2], [2.2, 0.0, 1.4]])))

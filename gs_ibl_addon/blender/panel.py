@@ -118,7 +118,7 @@ def _chars_per_line(context) -> int:
     labels are cut, not wrapped, by Blender)."""
     region = getattr(context, "region", None)
     width = region.width if region is not None else 300
-    scale = context.preferences.system.ui_scale if context.preferences else 1.0
+    scale = (context.preferences.system.ui_scale if context.preferences else 1.0) or 1.0  # 0 without a window
     return max(20, int((width - 30 * scale) / (7.0 * scale)))
 
 
