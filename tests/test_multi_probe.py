@@ -94,18 +94,21 @@ def test_probe_outside_the_splats():
     assert f.hole_fraction[1] > 0.9 and f.hole_fraction[0] < 0.05 and f.hole_fraction[2] < 0.05
 
 
-@pytest.mark.parametrize("lod", [False, True], ids=["full", "lod"])
-def test_groups_split_to_fit_in_one_submission(monkeypatch, lod):
-    """A device that holds 2 probes' pairs at a time: 7 probes run as groups of 2, 2, 2, 1 in one submission."""
+@pytest.mark.parametrize("lod, group", [(False, 2), (True, 2), (False, 1)], ids=["full-2", "lod-2", "full-1"])
+def test_groups_split_to_fit_in_one_submission(monkeypatch, lod, group):
+    """A device that holds 2 probes' pairs at a time: 7 probes run as groups of 2, 2, 2, 1 in one submission (or
+    7 groups of 1: then one timestamp per group)."""
     scene = _scene(3)
-    monkeypatch.setattr(renderer_module, "probes_per_group", lambda ctx, nodes, n, lod=False: min(n, 2))
+    monkeypatch.setattr(renderer_module, "probes_per_group", lambda ctx, nodes, n, lod=False: min(n, group))
     origins = _origins(7, seed=4)
     lod_k = LOD_K if lod else 0.0
     with SplatRenderer(scene, lod=lod) as r:
         r.render_probes(origins, 64, lod_k=lod_k)  # the first may redraw once with room for more instances
         submits = r.ctx.stats.submits
-        res = r.render_probes(origins, 64, lod_k=lod_k)
-        assert r.ctx.stats.submits - submits == 1 and r.slots == 2
+        res = r.render_probes(origins, 64, lod_k=lod_k, timestamps=True)
+        assert r.ctx.stats.submits - submits == 1 and r.slots == group
+        if r.ctx.timestamps_supported:
+            assert ("probes" in res.timings_ms) == (group == 1) and res.timings_ms["total"] > 0
         batch = res.frame.read_probes()
         singles = _singles(r, origins, 64, lod_k)
     for k in range(7):
