@@ -8,6 +8,7 @@ numpy twin (grid.sample_packed, eval_irradiance) gives each pixel's answer.
 """
 from __future__ import annotations
 
+import json
 import math
 import os
 
@@ -77,8 +78,9 @@ def _sphere_pixels(max_r=0.85):
 
 @pytest.mark.parametrize("engine", ["CYCLES", "BLENDER_EEVEE_NEXT"])
 def test_group_renders_the_numpy_grid(blender, engine, tmp_path):
-    """Per-object coefficients plus a 3 x 2 x 2 grid over the sphere: every pixel within 2% (Cycles) / 4% (EEVEE,
-    half-float textures and its film filter) of the numpy answer, and the user's material intact."""
+    """A 3 x 2 x 2 grid over the sphere (the last tile of the grid atlas, after a wider grid and a per-object probe):
+    every pixel within 2% (Cycles) / 4% (EEVEE, half-float textures and its film filter) of the numpy answer, and
+    the user's material intact."""
     from gs_ibl_addon.blender import local_light as ll
     if engine == "BLENDER_EEVEE_NEXT" and "BLENDER_EEVEE_NEXT" not in \
             bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys():
@@ -90,14 +92,18 @@ def test_group_renders_the_numpy_grid(blender, engine, tmp_path):
     d_obj[0] = (0.35, 0.3, 0.25)
     d_obj[1:4] = rng.uniform(-0.05, 0.05, (3, 3))
     d_grid = rng.uniform(-0.04, 0.04, (*spec.shape, 9, 3))
+    d_grid += d_obj  # a level and a slope, and per-node noise
     d_grid[..., 0, :] += spec.points() @ np.array([[0.1, 0.0, 0.05], [0.0, 0.08, 0.0], [0.05, 0.05, 0.1]]) + 0.2
-    image = ll.grid_image(pg.pack_grid(d_grid))
-    ll.local_light_group(spec, image)
-    ll.set_object_coefficients(sphere, d_obj, grid=True)
+    # the sphere's grid is the atlas's third tile, narrower than the first: its offsets are read per object
+    other = pg.GridSpec((0.0, 0.0, 0.0), (1.0, 1.0, 1.0), (5, 1, 2))
+    ll.set_object_grid(sphere, "sphere")
+    ll.store_grids({"other": (other, rng.uniform(-9, 9, (*other.shape, 9, 3))),
+                    "probe": ll.probe_tile((0, 0, 0), d_obj), "sphere": (spec, d_grid)})
+    assert sphere[ll.GRID_ATTRS["tile"]].to_list() == [1.0, 3.0, 0.0]  # weight, first row
     ll.light_object(sphere)
     px = _render(scene, tmp_path, engine)
     rows, cols, n = _sphere_pixels()
-    c = d_obj[None] + pg.sample_packed(pg.pack_grid(d_grid), spec, n)  # the surface point of a unit sphere is n
+    c = pg.sample_packed(pg.pack_grid(d_grid), spec, n)  # the surface point of a unit sphere is n
     want = pg.eval_irradiance(c, n)
     got = px[rows, cols]
     rel = np.abs(got - want) / np.abs(want).mean()
@@ -166,8 +172,10 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     assert bpy.ops.gs_ibl.object_probes() == {"FINISHED"}
     r = splat_cache.get(room).renderer
     d = monomial_coefficients(bake_sh_points(r, np.array([[0.0, 0.0, 1.2], [2.2, 0.0, 1.4]])))
-    got = np.array([sphere[ll.SH_PROP.format(k)] for k in range(9)])
-    np.testing.assert_allclose(got, d[1] - d[0], atol=1e-4)
+    img, tiles = ll._atlas()
+    got = ll._tile_pixels(img, tiles["probe:Sphere"])  # (1, 9, 3): the sphere's 1 x 1 x 1 tile
+    np.testing.assert_allclose(got[0], d[1] - d[0], atol=1e-4)
+    assert sphere[ll.GRID_KEY] == "probe:Sphere" and sphere[ll.GRID_ATTRS["max"]].to_list() == [0.0, 0.0, 0.0]
     assert ll.has_local_light(sphere) == "probe" and ll.has_local_light(cube) == "probe"
     group_node = bsdf.outputs[0].links[0].to_node
     assert group_node.bl_idname == "ShaderNodeGroup" and out.inputs["Surface"].links[0].from_node == group_node
@@ -176,7 +184,7 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     # a grid instead, kept through save and reload
     s.grid_resolution = (2, 2, 2)
     assert bpy.ops.gs_ibl.probe_grid() == {"FINISHED"}
-    assert ll.has_local_light(sphere) == "grid" and "Probe grid 2x2x2" in s.local_report
+    assert ll.has_local_light(sphere) == "grid" and "Probe grid 2x2x2 over each mesh's own bounds" in s.local_report
     path = str(tmp_path / "local.blend")
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
@@ -186,7 +194,9 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     grid = next(i for i in bpy.data.images if i.get("gs_ibl") == "grid")
     px = np.empty(grid.size[0] * grid.size[1] * 4, np.float32)
     grid.pixels.foreach_get(px)
-    assert grid.size[:] == (18, 4) and np.abs(px).max() > 0
+    # a grid over each mesh's own bounds: two 2 x 2 x 2 tiles; the per-object probes' tiles are gone
+    assert grid.size[:] == (18, 8) and np.abs(px).max() > 0
+    assert sorted(json.loads(grid[ll.TILES])) == ["object:Cube", "object:Sphere"]
     assert bpy.ops.gs_ibl.remove_local_light() == {"FINISHED"}
     assert not ll.in_material(mat) and ll.has_local_light(sphere) is None and len(cube.material_slots) == 0
     nt = mat.node_tree

@@ -101,10 +101,13 @@ def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects:
     centres = np.stack([np.mean(world_box(o), axis=0) for o in objects])
     d_world, d = coefficients_with_world(probe, r, centres, progress)
     strength = float(probe.gs_ibl_probe.strength)
-    for obj, di in zip(objects, d):
-        ll.set_object_coefficients(obj, di - d_world, grid=False)
+    tiles = {}
+    for obj, c, di in zip(objects, centres, d):
+        key = f"probe:{obj.name}"
+        tiles[key] = ll.probe_tile(c, di - d_world)
+        ll.set_object_grid(obj, key)
         ll.light_object(obj, strength)
-        obj.update_tag()
+    ll.store_grids(tiles)
     names = ", ".join(o.name for o in objects[:6]) + (", ..." if len(objects) > 6 else "")
     text = (f"Per-object probes for {len(objects)} meshes ({names}), {POINT_FACE_SIZE}x{POINT_FACE_SIZE} faces, "
             "SH order 2")
