@@ -8,6 +8,7 @@ Run: python benchmarks/stability_bench.py order --save out/order_after.npz [--fa
      python benchmarks/stability_bench.py conv --png docs/img/stability/conv_box.png
      python benchmarks/stability_bench.py highlights --png docs/img/stability/highlights.png
      python benchmarks/stability_bench.py path --png docs/img/stability/path.png
+     python benchmarks/stability_bench.py prune --png docs/img/stability/prune.png
 
 order: a closed shell (synthetic.shell_scene, radiance a + b d_z, exact irradiance known) stored in Morton order and
 shuffled, baked at a fixed face size; prints the per-channel relative RMS error against the exact irradiance and
@@ -399,6 +400,32 @@ def cmd_path(a) -> None:
     _save(fig, a.png)
 
 
+def cmd_prune(a) -> None:
+    """The sample room's probe (0.3, 0, 1.2) with splats pruned 5% at a time in a random order (the room's
+    opacities are all 0.99, so "least opaque first" would be storage order and take whole walls at once)."""
+    from gs_ibl_addon.core.bake import relative_rms
+    env = synthetic.sample_environment()
+    order = np.random.default_rng(0).permutation(env.count)
+    prune = np.arange(0, 0.51, 0.05)
+    kept = []
+    for f in prune:
+        sub = env.subset(np.sort(order[int(round(f * env.count)):]))
+        kept.append(bake_probe(sub, (0.3, 0.0, 1.2), ProbeSettings(face_size=a.face, irradiance_size=IRR)))
+    steps = np.array([relative_rms(q.irradiance, p.irradiance) for p, q in zip(kept, kept[1:])])
+    holes = np.array([k.hole_fraction for k in kept])
+    print("pruned at random, 5% steps: change per step " + ", ".join(f"{100 * v:.2f}%" for v in steps)
+          + "; holes " + ", ".join(f"{100 * h:.1f}%" for h in holes) + "; off the full room "
+          + ", ".join(f"{100 * relative_rms(k.irradiance, kept[0].irradiance):.1f}%" for k in kept))
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6, 3.4), constrained_layout=True)
+    ax.plot(100 * prune[1:], 100 * steps, "o-", label="change from the previous 5% (% RMS)")
+    ax.plot(100 * prune, 100 * holes, "s--", label="holes (% of the sphere, filled with the mean)")
+    ax.set_xlabel("splats pruned at random (%)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    _save(fig, a.png)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -417,7 +444,8 @@ def main() -> None:
     q.add_argument("--png", default="docs/img/stability_holes.png")
     q.set_defaults(fn=cmd_holes)
     for name, fn, extra in (("near", cmd_near, {"face": 64}), ("sh", cmd_sh, {}), ("conv", cmd_conv, {"irr": 16}),
-                            ("highlights", cmd_highlights, {"face": 64, "splats": 20000}), ("path", cmd_path, {})):
+                            ("highlights", cmd_highlights, {"face": 64, "splats": 20000}), ("path", cmd_path, {}),
+                            ("prune", cmd_prune, {"face": 64})):
         q = sub.add_parser(name)
         for opt, default in extra.items():
             q.add_argument(f"--{opt}", type=int, default=default)
