@@ -223,6 +223,14 @@ def test_lights_and_highlights_reach_probe_json_and_the_summary(sun_shells, tmp_
     assert "highlights: 77 splats clipped" in printed and "lights split from the probe (1)" in printed
 
 
+def test_a_weak_auto_gain_says_so():
+    from gs_ibl_addon.core.probe.highlights import gain_clipped_splats, highlight_text
+    clipped = synthetic.shell_scene(lambda d: np.minimum(SUN(d), 1.0), 2000)
+    _, record = gain_clipped_splats(clipped, "auto")
+    assert record["estimated"] and record["gain"] < 2  # the sky's tail says nothing of a sun 60x the clip
+    assert "give the gain" in highlight_text(record)
+
+
 def test_bad_highlight_and_light_settings_are_refused(tmp_path, capsys):
     with pytest.raises(BadSetting, match="highlight gain"):
         check_settings(ProbeSettings(highlight_gain=0.5))

@@ -137,6 +137,9 @@ def highlight_text(record: dict | None) -> str | None:
     if not record:
         return None
     how = "estimated" if record["estimated"] else "given"
+    if record["estimated"] and record["gain"] < 2.0:
+        how = ("estimated; the unclipped light says little about the clipped one: give the gain, the light's real "
+               "brightness over 1.0, if it is known")
     what = (f"{record['splats']:,} splats" if record.get("on") == "splats"
             else f"{100 * record['fraction']:.2f}% of the sphere")
     return (f"highlights: {what} clipped at the top of the range, "
