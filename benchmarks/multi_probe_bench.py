@@ -145,6 +145,9 @@ def main() -> None:
                     full_irr = None
                     for k in ks:
                         r = renderers["lod" if k else 0.0]
+                        # sized for this batch, not the largest before it: a renderer keeps the instance list of its
+                        # largest batch, and the stages dispatched over that capacity would charge it to this one
+                        r.trim()
                         warm_up(lambda: batch_probe(r, pos, face, k), 0.3)
                         gpu, wall, (stages, irr) = median_run(lambda: batch_probe(r, pos, face, k), args.repeats)
                         groups = -(-probes // max(1, r.slots)) if probes > 1 else 1
