@@ -18,6 +18,7 @@ from ..core.tolerance import plan_text
 from ..core.probe.highlights import highlight_text
 from ..core.probe.holes import hole_fill_text, hole_warning
 from ..core.probe.lights import lights_text
+from ..core.probe.near import near_warning
 from ..core.probe.latlong import cube_to_latlong
 from ..core.settings import method_from_blender
 from . import splat_cache
@@ -126,6 +127,9 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     if result.hole_fraction > HOLE_WARNING:
         warning = hole_warning(result.hole_fill) or (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of "
                                                      "directions have no splat")
+    near = near_warning(result.near_splats)  # only where the bake had the splats on the host
+    if near:
+        warning = f"{warning}; {near}" if warning else near
     return lines, warning
 
 

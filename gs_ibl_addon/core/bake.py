@@ -300,8 +300,8 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
                                     prints)
         result.highlights = highlights or result.highlights
         result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
-        if scene is not None:
-            result.near_splats = near_splats(scene, pos)
+        if host is not None:
+            result.near_splats = near_splats(host, pos)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count
