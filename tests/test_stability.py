@@ -371,3 +371,42 @@ def test_blender_highlight_gain_lights_the_clipped_capture_like_the_float_one(bl
     want = cube_to_latlong(sun_float.irradiance, 4 * IRR)
     assert relative_rms(gw.image_latlong_pixels(image), want) < 1e-3
     assert "highlights: 77 splats clipped" in s.last_report
+
+
+def test_cycles_sun_from_the_probe_lights_like_the_light_it_replaces(sun_shells, tmp_path):
+    """A white sphere in the sun shell, rendered by Cycles (bpy, direct light only): lit by the whole probe, then by
+    the probe without the sun plus the Blender sun made from it. Strength = the light's irradiance, so the two
+    agree where the sphere faces the sun; at the terminator the sun's 18 degrees differ from a point's cosine."""
+    bpy = pytest.importorskip("bpy")
+    pytest.importorskip("OpenImageIO")
+    import gs_ibl_addon
+    from test_blender_lighting import _cycles, _diffuse_material, _render, _scene, _sphere_pixels
+
+    from gs_ibl_addon.blender.bake import bake_into_world
+    from gs_ibl_addon.blender.splat_object import create_splat_object
+    renders = {}
+    for lights in (0, 1):
+        scene, sphere = _scene("CYCLES")
+        gs_ibl_addon.register()
+        try:
+            splats = create_splat_object(bpy.context, sun_shells["float"], "shell", proxy=False)
+            probe = bpy.data.objects.new("GS-IBL Probe", None)
+            s = probe.gs_ibl_probe
+            s.is_probe, s.splats, s.face_size, s.keep_background, s.lights = True, splats, 64, False, lights
+            scene.collection.objects.link(probe)
+            bake_into_world(scene, probe)
+        finally:
+            gs_ibl_addon.unregister()
+        assert sum(o.type == "LIGHT" for o in bpy.data.objects) == lights
+        _diffuse_material(sphere, (1.0, 1.0, 1.0))
+        _cycles(scene, samples=128)
+        renders[lights] = _render(scene, tmp_path, f"sun_lights_{lights}")
+    rows, cols, n = _sphere_pixels()
+    whole, split = renders[0][rows, cols], renders[1][rows, cols]
+    sun = np.asarray(SUN.direction) / np.linalg.norm(SUN.direction)
+    facing = n @ sun > 0.3
+    rel = np.abs(split - whole) / whole
+    print(f"sun as a light vs in the World: median {np.median(rel[facing]):.4f}, mean "
+          f"{(split[facing].mean() / whole[facing].mean() - 1):+.4f} where n.sun > 0.3")
+    assert np.median(rel[facing]) < 0.03
+    assert split[facing].mean() == pytest.approx(whole[facing].mean(), rel=0.02)
