@@ -5,8 +5,8 @@ native splats, in the bpy 5.3 root with the built zip installed by Blender's ins
 The sample room (samples/room.ply: a window in the +X wall with bright daylight behind it, a ceiling lamp) and two
 white diffuse spheres (radius 0.3): one 0.5 m from the window, one in the far corner. The World probe sits in the
 middle of the room. Each sphere is rendered by Cycles lit only by the native splats (the reference), then by our
-World alone, our World plus a per-object probe, our World plus a 5 x 4 x 3 probe grid over the room, and (the
-window sphere) our World plus a 3 x 3 x 3 grid over its own bounds. Compared per 2 x 2 screen blocks of the sphere
+World alone, our World plus a per-object probe, our World plus a 5 x 4 x 3 probe grid over the room, and our
+World plus a 3 x 3 x 3 grid over each sphere's own bounds. Compared per 2 x 2 screen blocks of the sphere
 and over the whole sphere (mean, per channel); the picture docs/img/local_light_spheres.png shows them all.
 
 Skipped unless the trixie root is made (`scripts/blender_roots.sh ensure trixie`; scripts/test_real_blender.sh).
@@ -41,7 +41,7 @@ SPHERES = {
 }
 PROBE = [0.0, 0.0, 1.2]
 GRID = {"centre": [0.0, 0.0, 1.4], "half": [2.7, 2.2, 1.1], "shape": [5, 4, 3]}
-FINE_GRID = {"sphere": "window", "shape": [3, 3, 3]}  # over the sphere's own bounds
+FINE_GRID = {"shape": [3, 3, 3]}  # over each sphere's own bounds
 NATIVE_SAMPLES = int(os.environ.get("GS_IBL_CYCLES_SAMPLES", 1024))
 SAMPLES = 128
 METHODS = ("one", "object", "grid", "fine")
@@ -128,7 +128,8 @@ def local_run(tmp_path_factory):
 
 
 def _picture(arrays) -> None:
-    """Rows: the spheres; columns: native Cycles, one probe, per-object probe, room grid, fine grid (one exposure)."""
+    """Rows: the spheres; columns: native Cycles, one probe, per-object probe, room grid, grid over the sphere (one
+    exposure for all)."""
     from gs_ibl_addon.core.image_io import write_png_preview
     rows = []
     for name in SPHERES:
@@ -174,10 +175,10 @@ def test_local_light_matches_native_cycles(local_run):
     # one probe in the middle of the room misleads both spheres, and the check says so
     assert off("window", "one") > 0.4 and off("corner", "one") > 0.4
     assert all(("use a per-object probe" in line) for line in result["variation"] if line.startswith(tuple(SPHERES)))
-    # local light brings both to within 15% (measured 4-16%: the light still varies across each sphere, and in the
+    # local light brings both to within 20% (measured 4-16%: the light still varies across each sphere, and in the
     # corner our splats' light is 7-10% above Cycles' even at the surface: docs/stability.md) ...
     for name in SPHERES:
-        for m in ("object", "grid"):
+        for m in ("object", "grid", "fine"):
             assert off(name, m) < 0.2 and off(name, m) < off(name, "one") / 3, (name, m, means[(name, m)])
     # ... and a 3 x 3 x 3 grid over the window sphere's own bounds to within 3% (measured 0.6-2.8%, worst block 6.8%)
     assert off("window", "fine") < 0.04 and worst[("window", "fine")] < worst[("window", "object")] / 2
