@@ -9,6 +9,7 @@ Run: python benchmarks/stability_bench.py order --save out/order_after.npz [--fa
      python benchmarks/stability_bench.py highlights --png docs/img/stability/highlights.png
      python benchmarks/stability_bench.py path --png docs/img/stability/path.png
      python benchmarks/stability_bench.py prune --png docs/img/stability/prune.png
+     python benchmarks/stability_bench.py shadow --png docs/img/stability/shadow.png   (needs bpy: Cycles renders)
 
 order: a closed shell (synthetic.shell_scene, radiance a + b d_z, exact irradiance known) stored in Morton order and
 shuffled, baked at a fixed face size; prints the per-channel relative RMS error against the exact irradiance and
@@ -426,6 +427,70 @@ def cmd_prune(a) -> None:
     _save(fig, a.png)
 
 
+def cmd_shadow(a) -> None:
+    """Cycles (bpy): a white sphere on a grey floor in the sun shell, lit by the probe alone and by the probe with
+    its sun split off as a Blender sun (shadows)."""
+    import math
+
+    import bpy
+
+    import gs_ibl_addon
+    from gs_ibl_addon.blender.bake import bake_into_world
+    from gs_ibl_addon.blender.splat_object import create_splat_object
+    sun = synthetic.BrightPatch(intensity=120.0, colour=(1.0, 1.0, 1.0))
+    shell = synthetic.shell_scene(sun, 20000)
+    images = []
+    for lights in (0, 1):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        try:
+            scene.render.engine = a.engine
+        except TypeError:  # Blender 4.2-4.x: BLENDER_EEVEE_NEXT
+            scene.render.engine = a.engine + "_NEXT"
+        scene.cycles.samples, scene.cycles.device = a.samples, "CPU"
+        scene.eevee.taa_render_samples = a.samples
+        scene.render.resolution_x, scene.render.resolution_y = 320, 200
+        scene.view_settings.view_transform = "Standard"
+        bpy.ops.mesh.primitive_plane_add(size=6.0, location=(0, 0, -0.5))
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0, 0, 0))
+        bpy.ops.object.shade_smooth()
+        for obj, grey in ((bpy.data.objects["Plane"], 0.5), (bpy.data.objects["Sphere"], 0.8)):
+            mat = bpy.data.materials.new(obj.name)
+            mat.use_nodes = True
+            mat.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (grey, grey, grey, 1)
+            mat.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 1.0
+            obj.data.materials.append(mat)
+        cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+        cam.location = (3.2, 2.4, 1.6)
+        cam.rotation_euler = (math.radians(72), 0, math.radians(127))
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+        gs_ibl_addon.register()
+        try:
+            splats = create_splat_object(bpy.context, shell, "shell", proxy=False)
+            probe = bpy.data.objects.new("GS-IBL Probe", None)
+            s = probe.gs_ibl_probe
+            s.is_probe, s.splats, s.face_size, s.keep_background, s.lights = True, splats, 64, True, lights
+            scene.collection.objects.link(probe)
+            _, text, _ = bake_into_world(scene, probe)
+            print(text)
+        finally:
+            gs_ibl_addon.unregister()
+        path = f"/tmp/stability_shadow_{lights}.png"
+        scene.render.filepath = path
+        scene.render.image_settings.file_format = "PNG"
+        bpy.ops.render.render(write_still=True)
+        images.append(path)
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.4), constrained_layout=True)
+    for ax, path, title in zip(axes, images, (f"{a.engine}: the probe alone (the sun is in the World)",
+                                              f"{a.engine}: Lights 1 (the World keeps the rest, the sun is a light)")):
+        ax.imshow(plt.imread(path))
+        ax.set_title(title, fontsize=9)
+        ax.axis("off")
+    _save(fig, a.png)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -445,10 +510,12 @@ def main() -> None:
     q.set_defaults(fn=cmd_holes)
     for name, fn, extra in (("near", cmd_near, {"face": 64}), ("sh", cmd_sh, {}), ("conv", cmd_conv, {"irr": 16}),
                             ("highlights", cmd_highlights, {"face": 64, "splats": 20000}), ("path", cmd_path, {}),
-                            ("prune", cmd_prune, {"face": 64})):
+                            ("prune", cmd_prune, {"face": 64}), ("shadow", cmd_shadow, {"samples": 64})):
         q = sub.add_parser(name)
         for opt, default in extra.items():
             q.add_argument(f"--{opt}", type=int, default=default)
+        if name == "shadow":
+            q.add_argument("--engine", default="CYCLES", help="CYCLES or BLENDER_EEVEE")
         q.add_argument("--png", default=f"docs/img/stability/{name}.png")
         q.set_defaults(fn=fn)
     a = ap.parse_args()

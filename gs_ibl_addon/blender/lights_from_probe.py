@@ -1,5 +1,6 @@
 """Blender sun lights for the lights a bake split off the probe (core/probe/lights.py): each bright compact region
-(a sun, a lamp, a window) lights meshes as a sun with shadows instead of through the World, which keeps the rest.
+(a sun, a lamp, a window) lights meshes as a sun with shadows of its measured width, and the World (and the
+irradiance node group, which casts no shadows) keeps the rest.
 
 A light's irradiance at normal incidence (RGB) is Blender's sun Strength (W/m^2, the largest channel) times its
 Color (the irradiance over that), scaled by the probe's World strength so both parts of the light move together;

@@ -1,8 +1,8 @@
 """Lights from a probe: the few brightest compact regions of a radiance cube, split off as light descriptions.
 
-A sun, a lamp or a window seen by the probe carries much of its light from a small solid angle. Baked into the
-World it lights meshes without shadows (and SH order 2 rings around it, docs/stability.md); as a Blender light it
-casts them. ``extract_lights`` finds such regions and splits each texel of one into the light's part (what rises
+A sun, a lamp or a window seen by the probe carries much of its light from a small solid angle. Through the
+irradiance node group (and SH) it lights meshes without shadows, and SH order 2 rings around it
+(docs/stability.md); as a Blender light it casts shadows of its measured width in any engine and can be edited. ``extract_lights`` finds such regions and splits each texel of one into the light's part (what rises
 above the region's surroundings) and the rest, which stays in the probe: light + rest = the cube, so no power is
 lost or counted twice.
 
