@@ -2,9 +2,10 @@
 
 A sun, a lamp or a window seen by the probe carries much of its light from a small solid angle. Through the
 irradiance node group (and SH) it lights meshes without shadows, and SH order 2 rings around it
-(docs/stability.md); as a Blender light it casts shadows of its measured width in any engine and can be edited. ``extract_lights`` finds such regions and splits each texel of one into the light's part (what rises
-above the region's surroundings) and the rest, which stays in the probe: light + rest = the cube, so no power is
-lost or counted twice.
+(docs/stability.md); as a Blender light it casts shadows of its measured width in any engine and can be edited.
+``extract_lights`` finds such regions and splits each texel of one into the light's part (what rises above the
+region's surroundings) and the rest, which stays in the probe: light + rest = the cube, so no power is lost or
+counted twice.
 
 Rule: a texel is bright when its luminance is over ``BRIGHT_FACTOR`` times the probe's solid-angle-weighted median
 luminance (the walls, not the lamp); bright texels that touch (across cube edges too) form a region; a region is
