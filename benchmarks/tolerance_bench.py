@@ -204,6 +204,11 @@ def chart(rows: list[dict], path: str, device: str) -> None:
         ax.plot([r["cost_ms"] for r in front], [r["err"] for r in front], "k-", lw=0.8)
         for r in (r for r in rows if r["scene"] == name and r["kind"] == "tolerance"):
             ax.scatter([r["cost_ms"]], [r["err"]], marker="*", s=120, c="gold", edgecolors="k", zorder=5)
+            mine = next((x for x in sweep if x["face"] == r["face"] and x["method"] == r["method"]
+                         and x["lod"] == r["lod"]), None)
+            if mine is not None:  # the chosen setting alone: where it sits against the front
+                ax.scatter([mine["cost_ms"]], [mine["err"]], marker="*", s=120, facecolors="none",
+                           edgecolors="k", zorder=5)
             ax.annotate(f"{r['tolerance']:g}{' lod' if r['lod_error'] is not None else ''}",
                         (r["cost_ms"], r["err"]), fontsize=7, xytext=(4, 4), textcoords="offset points")
             ax.axhline(r["tolerance"], color="gold", lw=0.5, ls=":")
@@ -215,7 +220,8 @@ def chart(rows: list[dict], path: str, device: str) -> None:
     for ax in list(axes.flat)[len(names):]:
         ax.axis("off")
     fig.legend(loc="lower right", fontsize=7)
-    fig.suptitle(f"Tolerance-chosen settings (stars; cost = sum of their steps) against the sweep, {device}", fontsize=10)
+    fig.suptitle(f"Tolerance-chosen settings against the sweep (irradiance 16²), {device}: gold stars = the whole "
+                 "search (sum of its steps), hollow = the chosen setting alone; line = Pareto front", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
@@ -228,7 +234,13 @@ def main() -> None:
     ap.add_argument("--truth-face", type=int, default=1024)
     ap.add_argument("--out", default=os.path.join(ROOT, "out", "bench"), help="folder of the CSV and table")
     ap.add_argument("--chart", default=os.path.join(ROOT, "docs", "tolerance-pareto.png"))
+    ap.add_argument("--replot", metavar="CSV", help="redraw the table and chart from a CSV of this script")
     args = ap.parse_args()
+    if args.replot:
+        rows = read_rows(args.replot)
+        print(summary(rows))
+        chart(rows, args.chart, rows[0]["device"])
+        return
     args.faces = [int(x) for x in args.faces.split(",")]
     args.tolerances = [float(x) for x in args.tolerances.split(",")]
     ctx = get_context()
@@ -245,6 +257,23 @@ def main() -> None:
         rows += run_scene(name, scene, pos, args, ctx, device, date, load)
         write(rows, args, slug, device)
     say("done")
+
+
+def read_rows(path: str) -> list[dict]:
+    """Rows of a CSV written by this script, numbers and flags typed again."""
+    def typed(k: str, v: str):
+        if v == "":
+            return None
+        if v in ("True", "False"):
+            return v == "True"
+        if k in ("face", "irradiance", "splats"):
+            return int(v)
+        try:
+            return float(v)
+        except ValueError:
+            return v
+    with open(path, newline="") as fh:
+        return [{k: typed(k, v) for k, v in r.items()} for r in csv.DictReader(fh)]
 
 
 def write(rows: list[dict], args, slug: str, device: str) -> None:
