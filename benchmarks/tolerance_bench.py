@@ -59,7 +59,8 @@ def say(msg: str) -> None:
 
 
 def scenes() -> list[tuple[str, object, np.ndarray]]:
-    out = [(name, synthetic.shell_scene(fn, 50_000), np.zeros(3)) for name, fn in synthetic.radiance_functions().items()]
+    shells = synthetic.radiance_functions().items()
+    out = [(name, synthetic.shell_scene(fn, 50_000), np.zeros(3)) for name, fn in shells]
     out.append(("room", synthetic.room_scene().scene, np.array([0.0, 0.0, 1.5])))
     out.append(("sample_env", synthetic.sample_environment(), np.array([0.0, 0.0, 1.0])))
     rnd = synthetic.random_scene(20_000, seed=0)
@@ -129,8 +130,8 @@ def run_scene(name, scene, pos, args, ctx, device, date, load) -> list[dict]:
                                  "cost_ms": render_ms + filter_ms, "err": err, "err_pooled": pooled})
                     if method == "exact" and lod == "off":
                         exact_cost[face] = render_ms + filter_ms
-                say(f"  {face}^2 lod {lod}: render {render_ms:.0f} ms, exact "
-                    f"{next(x['err'] for x in rows if x['face'] == face and x['lod'] == lod and x['method'] == 'exact'):.3%}")
+                exact = next(x["err"] for x in rows if (x["face"], x["lod"], x["method"]) == (face, lod, "exact"))
+                say(f"  {face}^2 lod {lod}: render {render_ms:.0f} ms, exact {exact:.3%}")
         pareto([x for x in rows if x["kind"] == "sweep"])
         runs = [(t, "off") for t in args.tolerances] + [(0.01, "auto")]
         for tol, lod in runs:
@@ -190,8 +191,8 @@ def chart(rows: list[dict], path: str, device: str) -> None:
     import matplotlib.pyplot as plt
     names = list(dict.fromkeys(r["scene"] for r in rows))
     cols = 3
-    fig, axes = plt.subplots((len(names) + cols - 1) // cols, cols, figsize=(5 * cols, 3.8 * ((len(names) + 2) // cols)),
-                             squeeze=False)
+    n_rows = (len(names) + cols - 1) // cols
+    fig, axes = plt.subplots(n_rows, cols, figsize=(5 * cols, 3.8 * n_rows), squeeze=False)
     colours = {"exact": "tab:purple", "sh": "tab:blue", "box": "tab:green", "convolve": "tab:red"}
     for ax, name in zip(axes.flat, names):
         sweep = [r for r in rows if r["scene"] == name and r["kind"] == "sweep"]

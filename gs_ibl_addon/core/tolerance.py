@@ -10,12 +10,13 @@ error then falls faster than the change suggests): doubling until the change is 
 The model. Each splat's share of light that the dilation adds, delta^2 / (sigma^2 + delta^2) (sigma^2: the
 splat's angular footprint variance seen from the probe, delta = sqrt(DILATION_PX2) x the pixel angle 2/N), averaged
 with each splat's light as weight, gives a curve S(N) that only needs the splats, not a render. The error at face N
-is taken as C x S(N); C comes from the change between two rendered sizes, C = change / (S(N1) - S(N2)). On every
-synthetic scene, the sample room and the real guitar capture it follows the true error from 64^2 to 512^2 within
-0.8-1.6x (worse only below 0.01%, where the render's own floor takes over); the estimate is SAFETY x C x S(N), and
-never less than the two-size Richardson estimate for second-order convergence (change / 3 after a doubling), which
-catches errors the dilation does not explain. With that model the next face is the smallest whose predicted error meets the tolerance,
-so a bake jumps there instead of doubling through every size.
+is taken as C x S(N); C comes from the change between two rendered sizes, C = change / (S(N1) - S(N2)). The
+estimate is SAFETY x C x S(N), and never less than the two-size Richardson estimate for second-order convergence
+(change / 3 after a doubling), which catches errors the dilation does not explain. Against a 1024^2 truth on every
+synthetic scene, the sample room and the real guitar capture (docs/accuracy.md) it was 1.3-4.8x the true error from
+64^2 to 512^2, and 1.9-7.4x predicted from the first pair (32^2, 64^2); it under-states only below 0.01%, where the
+render's own floor takes over. With that model the next face is the smallest whose predicted error meets the
+tolerance, so a bake jumps there instead of doubling through every size.
 
 Without the splats on the host (a caller that keeps them on the GPU only) the estimate falls back to the geometric
 tail of the changes: change x r / (1 - r), r the ratio of the last two changes per doubling (0.5 until there are
@@ -33,7 +34,7 @@ from .render.splat_math import DILATION_PX2
 from .scene import SplatScene, sh_dc_to_rgb
 from .settings import IRRADIANCE_SIZES, MAX_TOLERANCE, MIN_TOLERANCE
 
-SAFETY = 1.3  # the model's estimate over its calibrated value: its worst ratio to the truth above 0.01% was 0.79
+SAFETY = 1.3  # over the calibrated C x S(N), which came down to 0.99x the true error (sample_env, 256^2)
 TAIL_RATIO_RANGE = (0.35, 0.8)  # the fallback's per-doubling ratio is clamped here (p between 0.3 and 1.5)
 
 
