@@ -67,6 +67,15 @@ def main() -> dict:
             rec["muted"] = [obj.visible_camera, obj.visible_diffuse, obj.visible_glossy]
             gw = importlib.import_module(f"{MODULE}.blender.world")
             rec["restored"] = [gw.restore_world(bpy.context.scene), obj.visible_diffuse, obj.visible_glossy]
+            # Update When Moved with a native object: moving it notes one re-bake (timers do not run in the bpy
+            # module, so the timer's function is called here as Blender's event loop would)
+            s.auto_update = True
+            n0 = gb.auto_bakes
+            obj.location.x += 0.1
+            bpy.context.view_layer.update()
+            noted = len(gb._pending)
+            gb.run_pending()
+            rec["auto"] = [noted, gb.auto_bakes - n0]
             rec["ok"] = True
         except Exception:  # noqa: BLE001 (reported to the test, which fails on it)
             rec.update(ok=False, error=traceback.format_exc())

@@ -88,6 +88,7 @@ def test_bake_from_blenders_native_splats(tmp_path):
             assert rec["colour_space"] == "srgb" and rec["probe_colour_space"] == "srgb" and rec["world_is_ours"]
             assert rec["muted"] == [True, False, False], rec["muted"]  # seen by the camera, not by bounces
             assert rec["restored"] == [True, True, True], rec["restored"]
+            assert rec["auto"] == [1, 1], f"{key}: Update When Moved after moving the native object: {rec['auto']}"
             got = np.load(runner.host / f"{key}.npz")
             ours = read_scene(path)
             assert ours.colour_space == "srgb" and len(got["positions"]) == ours.count
