@@ -16,7 +16,7 @@ from gs_ibl_addon.core.bake_batch import bake_probes
 from gs_ibl_addon.core.probe import filter_probe
 from gs_ibl_addon.core.probe.gpu_filters import filter_probes
 from gs_ibl_addon.core.render import renderer as renderer_module
-from gs_ibl_addon.core.render.renderer import SplatRenderer, probes_per_group
+from gs_ibl_addon.core.render.renderer import CHUNK_BYTES, SplatRenderer, probes_per_group, raster_chunks
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.scene import SplatScene
 
@@ -74,11 +74,17 @@ def test_small_faces_within_rounding_of_single(scene):
     origins = _origins(3, seed=9)
     with SplatRenderer(scene) as r:
         batch = r.render_probes(origins, 32).frame.read_probes()
-        assert r.chunks == 1  # 72 tiles: no chunks, where each single 32^2 probe (24 tiles) is chunked
+        assert r.chunks == raster_chunks(24) > 1  # chunked per probe (24 tiles each) as its single render
         singles = _singles(r, origins, 32)
     for k in range(3):
         scale = max(1.0, float(np.abs(singles[k]).max()))
         assert np.abs(batch[k] - singles[k]).max() <= 2e-4 * scale
+
+
+def test_chunks_follow_the_tiles_per_probe_not_the_batch():
+    # a tile's list is as long in a batch as in a single render: 8 probes of 32^2 (192 tiles) chunk like one
+    assert raster_chunks(24) == 32 and raster_chunks(96) == 1
+    assert raster_chunks(24, CHUNK_BYTES // 4) == 4 and raster_chunks(24, 2 * CHUNK_BYTES) == 1  # partials bounded
 
 
 def test_probe_outside_the_splats():

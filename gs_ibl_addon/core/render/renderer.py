@@ -48,20 +48,30 @@ from .lod import LodTree, build_lod
 from .splat_math import DEFAULT_NEAR
 from .views import ViewBatch
 
-# A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles each tile's list
-# is split into chunks composited in parallel (gs_raster.comp / gs_merge.comp), up to RASTER_TARGET_GROUPS
-# workgroups. Chunks give up the early termination of pixels that turned opaque in an earlier chunk, so they only
-# pay where tiles are very few: on an H200, for 1M splats, 32 chunks took a 32^2 probe's raster from 2.0 to 1.1 ms,
-# while 10 chunks made 64^2 slower than one pass (1.16 vs 0.76 ms) (docs/bench/runs/chunk_experiment.md).
+# A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles per probe each
+# tile's list is split into chunks composited in parallel (gs_raster.comp / gs_merge.comp), up to
+# RASTER_TARGET_GROUPS workgroups per probe. Chunks give up the early termination of pixels that turned opaque in
+# an earlier chunk, so they only pay where a tile's list is long: on an H200, for 1M splats, 32 chunks took a 32^2
+# probe's raster from 2.0 to 1.1 ms, while 10 chunks made 64^2 slower than one pass (1.16 vs 0.76 ms)
+# (docs/bench/runs/chunk_experiment.md). A tile's list length depends on the tiles per probe, not on how many probes
+# a batch holds (each probe's splats spread over its own tiles), so the rule is per probe: 8 probes of 32^2 (192
+# tiles) unchunked took 11.6 ms where 8 single renders took 8 x 1.1 ms. The partial images of the chunks are
+# bounded by CHUNK_BYTES (one storage binding, and memory a large batch would otherwise multiply by 32).
 RASTER_TARGET_GROUPS = 1024
 MAX_RASTER_CHUNKS = 32
 CHUNK_BELOW_TILES = 64
+CHUNK_BYTES = 128 << 20
 
 
-def raster_chunks(total_tiles: int) -> int:
-    if total_tiles >= CHUNK_BELOW_TILES:
+def raster_chunks(tiles_per_probe: int, partial_bytes_per_chunk: int = 0) -> int:
+    """Chunks per tile list for probes of ``tiles_per_probe`` tiles; ``partial_bytes_per_chunk``: one chunk's
+    partial image(s) for the whole group, which CHUNK_BYTES bounds."""
+    if tiles_per_probe >= CHUNK_BELOW_TILES:
         return 1
-    return int(min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, total_tiles))))
+    chunks = min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, tiles_per_probe)))
+    if partial_bytes_per_chunk > 0:
+        chunks = min(chunks, CHUNK_BYTES // partial_bytes_per_chunk)
+    return int(max(1, chunks))
 
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
@@ -535,7 +545,8 @@ class SplatRenderer:
         split = n_groups > 1  # each group rasters into its own image and origins, copied from / to the batch's
         g_image = self._frame_buffer("group_image", group * total_pixels * 16) if split else image
         g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
-        chunks_max = raster_chunks(group * total_tiles)
+        # the same chunks for every group (the last, smaller one included): partial sized for a full group
+        chunks = chunks_max = raster_chunks(total_tiles, group * total_pixels * (16 + (4 if depth else 0)))
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
@@ -551,7 +562,6 @@ class SplatRenderer:
             gp = min(group, probes - k * group)  # probes in this group
             count_index = 0 if gp == group else 1  # n_count: pairs of a full group, of the last one
             tiles, pixels = gp * total_tiles, gp * total_pixels
-            chunks = raster_chunks(tiles)
             if split:
                 rec.copy(origins, g_origin, gp * 16, k * group * 16)
             rec.fill(self.count)
