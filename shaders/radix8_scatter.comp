@@ -14,7 +14,9 @@ layout(std430, binding = 2) writeonly buffer KeysOut { uint keys_out[]; };
 layout(std430, binding = 3) writeonly buffer ValsOut { uint vals_out[]; };
 layout(std430, binding = 4) readonly buffer Hist { uint hist[]; };
 layout(std430, binding = 5) readonly buffer Count { uint count[]; };
-layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; } p;
+// drop = 1: keys equal to drop_key are left out (counted nowhere, written nowhere).
+layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; uint drop; uint drop_key; } p;
+bool dropped(uint key) { return p.drop != 0u && key == p.drop_key; }
 const uint MAX_SG = 16u;            // 128 lanes / 8-lane subgroups
 shared uint sg_count[MAX_SG * 256u]; // [subgroup][digit]: count in this round, then that subgroup's start
 shared uint running[256];            // keys of each digit already placed from earlier rounds of this block
@@ -33,8 +35,8 @@ void main() {
     for (uint round = 0u; round < 32u; ++round) {
         uint idx = base + round * 128u + lid;
         if (base + round * 128u >= n) break;  // uniform: the rest of the block is empty
-        bool valid = idx < n;
-        uint key = valid ? keys_in[idx] : 0u;
+        uint key = idx < n ? keys_in[idx] : 0u;
+        bool valid = idx < n && !dropped(key);
         uint d = (key >> p.shift) & 255u;
         uvec4 match = subgroupBallot(valid);
         for (uint b = 0u; b < 8u; ++b) {

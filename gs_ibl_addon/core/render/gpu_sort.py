@@ -76,22 +76,41 @@ class RadixSorter:
         self.hist = Buffer(ctx, self.bins * self.n_blocks * 4, "sort-hist")
         self.scanner = Scanner(ctx, self.bins * self.n_blocks)
 
-    def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int) -> None:
-        """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy)."""
+    def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int,
+               drop_key: int | None = None, stamps: str | None = None) -> None:
+        """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy).
+
+        ``drop_key``: pairs with exactly this key are left out of the result, which is then packed at the front,
+        and ``count[count_index]`` becomes the number kept (the first pass's histogram total): the later passes,
+        and whoever reads the count, see only those. ``stamps``: a label prefix for a timestamp after each step
+        (``<prefix>.hist``, ``.scan``, ``.scatter``; benchmarks only, they split the sort's time).
+        """
         prefix = "radix8" if self.digit_bits == 8 else "radix"
         hist_k, scat_k = KERNELS[f"{prefix}_hist"], KERNELS[f"{prefix}_scatter"]
         g = groups(self.n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
         passes = max(1, -(-int(bits) // self.digit_bits))
+
+        def stamp(step: str) -> None:
+            if stamps:
+                rec.timestamp(f"{stamps}.{step}")
         for i in range(passes):
-            push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index}
+            drop = i == 0 and drop_key is not None
+            push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index,
+                    "drop": int(drop), "drop_key": int(drop_key or 0)}
             rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
-            self.scanner.record(rec, self.hist, self.bins * self.n_blocks)
+            stamp("hist")
+            total = self.scanner.record(rec, self.hist, self.bins * self.n_blocks)
+            stamp("scan")
             rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g, **push)
+            if drop:  # the scan's grand total is what the first pass kept
+                rec.copy(total, count, 4, dst_offset=4 * count_index)
+            stamp("scatter")
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
         if src_k is not keys:
             rec.copy(src_k, keys, self.capacity * 4)
             rec.copy(src_v, vals, self.capacity * 4)
+            stamp("copy")
 
     def destroy(self) -> None:
         for b in (self.keys_tmp, self.vals_tmp, self.hist):
@@ -99,9 +118,9 @@ class RadixSorter:
         self.scanner.destroy()
 
 
-def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32,
-               digit_bits: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Convenience for tests: sort host arrays on the GPU."""
+def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32, digit_bits: int | None = None,
+               drop_key: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Convenience for tests: sort host arrays on the GPU (pairs with key ``drop_key`` left out)."""
     n = len(keys)
     kb, vb = Buffer(ctx, n * 4, "k"), Buffer(ctx, n * 4, "v")
     cb = Buffer(ctx, 16, "count")
@@ -110,8 +129,9 @@ def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32,
     cb.write(np.array([n, 0, 0, 0], np.uint32))
     sorter = RadixSorter(ctx, n, digit_bits)
     with Recorder(ctx) as rec:
-        sorter.record(rec, kb, vb, cb, 0, bits)
-    out = kb.read(np.uint32, n), vb.read(np.uint32, n)
+        sorter.record(rec, kb, vb, cb, 0, bits, drop_key)
+    kept = int(cb.read(np.uint32, 1)[0])
+    out = kb.read(np.uint32, n)[:kept], vb.read(np.uint32, n)[:kept]
     sorter.destroy()
     for b in (kb, vb, cb):
         b.destroy()

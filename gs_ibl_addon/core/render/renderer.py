@@ -52,6 +52,9 @@ def raster_chunks(total_tiles: int) -> int:
     return int(min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, total_tiles))))
 
 
+# Benchmarks only: a timestamp after each step of both sorts (labels "<stage>.hist", ".scan", ".scatter").
+PROFILE_SORTS = False
+
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
 
@@ -375,7 +378,7 @@ class SplatRenderer:
         tree = self.lod
         n = tree.count if tree is not None else self.scene_count
         chunks = raster_chunks(total_tiles)
-        ranges = self._frame_buffer("ranges", (total_tiles + 1) * 8)  # + the missed-tile key's run
+        ranges = self._frame_buffer("ranges", (total_tiles + 1) * 8)
         image = self._frame_buffer("image", total_pixels * 16)
         depth_buf = self._frame_buffer("depth", total_pixels * 4) if depth else self.no_depth
         if chunks > 1:
@@ -413,7 +416,8 @@ class SplatRenderer:
                 n = self.cut_capacity  # from here on only the cut's entries
             else:
                 keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
-            sorter.record(rec, keys, vals, sort_count, 0, DEPTH_KEY_BITS)
+            sorter.record(rec, keys, vals, sort_count, 0, DEPTH_KEY_BITS,
+                          stamps="sort_depth" if PROFILE_SORTS else None)
             rec.timestamp("sort_depth")
             rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                          groups(n, 256, c), n=n, count_index=0)
@@ -423,9 +427,11 @@ class SplatRenderer:
                           self.inst_val, self.count, self.prepared, self.rects],
                          groups(self.capacity, 256, c), n=n, capacity=self.capacity, n_views=nv, n_tiles=total_tiles)
             rec.timestamp("emit")
-            # tile ids run to total_tiles inclusive: that one is the key of instances whose tile was missed
-            bits = max(1, int(total_tiles).bit_length())
-            self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, bits)
+            # total_tiles is the key of instances whose tile the footprint missed: the sort drops them (count[0]
+            # becomes the pairs kept), so the second pass, ranges and raster never see them
+            bits = max(1, int(total_tiles - 1).bit_length())
+            self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, bits, drop_key=total_tiles,
+                                    stamps="sort_tiles" if PROFILE_SORTS else None)
             rec.timestamp("sort_tiles")
             rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, ranges], groups(self.capacity, 256, c))
             rec.timestamp("ranges")

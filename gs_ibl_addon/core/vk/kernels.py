@@ -44,7 +44,7 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
     return Kernel(name, tuple(buffers.split()), fields, tuple(local) + (1,) * (3 - len(local)))
 
 
-_SORT_PUSH = "n_blocks shift count_index"
+_SORT_PUSH = "n_blocks shift count_index drop drop_key"
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
