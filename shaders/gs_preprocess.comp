@@ -157,11 +157,7 @@ void main() {
     prepared[PREP * i + 1u] = vec4(w1, ol.y);
     prepared[PREP * i + 2u] = vec4(w2, ol.z);
     prepared[PREP * i + 3u] = vec4(sh_color(i, mu / dist), opacity);
-    // The footprint's cone: every ray that meets the cut ellipsoid (semi-axes sqrt(cutoff * s2)) is within
-    // asin(r / dist) of mu's direction; stored as u / sin(angle), so gs_raster can bound the pixels a splat
-    // reaches inside a tile. 0: no cone (the origin is inside or very near the bounding sphere).
-    float sin_cone = sqrt(cutoff * max(s2.x, max(s2.y, s2.z))) / dist;
-    prepared[PREP * i + 4u] = vec4(cutoff, sin_cone < 0.9 ? mu / (dist * sin_cone) : vec3(0.0));
+    prepared[PREP * i + 4u] = vec4(cutoff, 0.0, 0.0, 0.0);
     tile_count[i] = count;
     depth_key[i] = depth_sort_key(dist, po.xyz);
 }
