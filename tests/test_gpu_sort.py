@@ -67,3 +67,21 @@ def test_dropped_keys_leave_the_sort(digit_bits, bits):
     order = kept[np.argsort(keys[kept], kind="stable")]
     np.testing.assert_array_equal(k, keys[order])
     np.testing.assert_array_equal(v, vals[order])
+
+
+def test_long_sorts_scan_their_histogram():
+    # above UNSCANNED_MAX_BLOCKS blocks the histogram goes through the scan; below, each block sums it itself:
+    # both give the same stable order and kept count
+    from gs_ibl_addon.core.render.gpu_sort import UNSCANNED_MAX_BLOCKS
+    from gs_ibl_addon.core.vk.constants import SORT_BLOCK
+    ctx = get_context()
+    n = (UNSCANNED_MAX_BLOCKS + 3) * SORT_BLOCK + 17
+    rng = np.random.default_rng(5)
+    keys = rng.integers(0, 1 << 15, n).astype(np.uint32)
+    keys[rng.random(n) < 0.2] = (1 << 15) - 1
+    vals = np.arange(n, dtype=np.uint32)
+    k, v = sort_pairs(ctx, keys, vals, 15, drop_key=(1 << 15) - 1)
+    kept = np.flatnonzero(keys != (1 << 15) - 1)
+    order = kept[np.argsort(keys[kept], kind="stable")]
+    np.testing.assert_array_equal(v, vals[order])
+    np.testing.assert_array_equal(k, keys[order])

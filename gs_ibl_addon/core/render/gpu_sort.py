@@ -57,6 +57,12 @@ def digit_bits_for(ctx) -> int:
     return 8 if ctx.subgroup_ballot and 8 <= ctx.subgroup_size <= 128 else 4
 
 
+# Sorts of at most this many 4096-key blocks skip the histogram's scan: each scatter block sums the counts before
+# it (radix8_scatter.comp, scanned = 0). A pass is then two dispatches instead of four or five, which is most of a
+# short sort's time (a probe's level-of-detail cut, a 100k-splat scene).
+UNSCANNED_MAX_BLOCKS = 128
+
+
 class RadixSorter:
     """Stable sort of (key, value) uint32 pairs by the low ``bits`` bits of the key, for up to ``capacity`` pairs.
 
@@ -73,7 +79,7 @@ class RadixSorter:
         self.n_blocks = -(-self.capacity // SORT_BLOCK)
         self.keys_tmp = Buffer(ctx, self.capacity * 4, "sort-keys-tmp")
         self.vals_tmp = Buffer(ctx, self.capacity * 4, "sort-vals-tmp")
-        self.hist = Buffer(ctx, self.bins * self.n_blocks * 4, "sort-hist")
+        self.hist = Buffer(ctx, self.bins * self.n_blocks * 4 + 4, "sort-hist")  # + the kept count (unscanned)
         self.scanner = Scanner(ctx, self.bins * self.n_blocks)
 
     def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int,
@@ -90,6 +96,7 @@ class RadixSorter:
         g = groups(self.n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
         passes = max(1, -(-int(bits) // self.digit_bits))
+        scan = self.digit_bits != 8 or self.n_blocks > UNSCANNED_MAX_BLOCKS
 
         def stamp(step: str) -> None:
             if stamps:
@@ -100,11 +107,15 @@ class RadixSorter:
                     "drop": int(drop), "drop_key": int(drop_key or 0)}
             rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
             stamp("hist")
-            total = self.scanner.record(rec, self.hist, self.bins * self.n_blocks)
-            stamp("scan")
-            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g, **push)
-            if drop:  # the scan's grand total is what the first pass kept
-                rec.copy(total, count, 4, dst_offset=4 * count_index)
+            if scan:
+                total, total_at = self.scanner.record(rec, self.hist, self.bins * self.n_blocks), 0
+                stamp("scan")
+            else:
+                total, total_at = self.hist, 4 * self.bins * self.n_blocks
+            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g,
+                         **(push if self.digit_bits != 8 else dict(push, scanned=int(scan))))
+            if drop:  # the histogram's total is what the first pass kept
+                rec.copy(total, count, 4, src_offset=total_at, dst_offset=4 * count_index)
             stamp("scatter")
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
         if src_k is not keys:
