@@ -66,30 +66,18 @@ bool tile_touched(mat3 g, View vw, uint tx, uint ty) {
     return m <= 0.0;
 }
 
-// the owner of slot q: the last splat (in depth order) in [lo, hi] whose first slot is <= q; empty splats share
-// a start with their successor and so are never the last
-uint owner(uint q, uint lo, uint hi) {
+void main() {
+    uint q = linear_group() * 256u + gl_LocalInvocationID.x;
+    uint all_instances = total[0];
+    if (q == 0u) { count[0] = min(all_instances, p.capacity); count[1] = all_instances; }
+    if (q >= min(all_instances, p.capacity)) return;
+    // the owner of slot q: the last splat (in depth order) whose first slot is <= q; empty splats share a start
+    // with their successor and so are never the last
+    uint lo = 0u, hi = p.n - 1u;
     while (lo < hi) {
         uint mid = (lo + hi + 1u) >> 1;
         if (offsets[mid] <= q) lo = mid; else hi = mid - 1u;
     }
-    return lo;
-}
-
-shared uint group_owner[2];
-
-void main() {
-    uint q0 = linear_group() * 256u, lid = gl_LocalInvocationID.x;
-    uint q = q0 + lid;
-    uint all_instances = total[0];
-    uint kept = min(all_instances, p.capacity);
-    if (q == 0u) { count[0] = kept; count[1] = all_instances; }
-    if (q0 >= kept) return;  // uniform: the whole workgroup is past the end
-    // The group's first and last slots bound every owner in it: one full search each, then short ones.
-    if (lid < 2u) group_owner[lid] = owner(lid == 0u ? q0 : min(q0 + 255u, kept - 1u), 0u, p.n - 1u);
-    barrier();
-    if (q >= kept) return;
-    uint lo = owner(q, group_owner[0], group_owner[1]);
     uint i = depth_val[lo];
     uint r = q - offsets[lo];
     for (uint v = 0u; v < p.n_views; ++v) {
