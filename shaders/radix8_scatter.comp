@@ -1,5 +1,5 @@
 #version 450
-// 8-bit radix pass, step 2: stable scatter of a 4096-key block in 32 rounds of 128 keys. Within a round, lanes of a
+// 8-bit radix pass, step 2: stable scatter of a block in block_rounds rounds of 128 keys. Within a round, lanes of a
 // subgroup holding the same digit find each other with 8 ballots (one per digit bit); subgroups are then ordered
 // by a prefix over their per-digit counts, and rounds by a running count, so equal digits keep input order.
 // scanned = 0 (sorts of at most a few hundred blocks): the histogram is not scanned; every block sums the counts
@@ -19,7 +19,10 @@ layout(std430, binding = 3) writeonly buffer ValsOut { uint vals_out[]; };
 layout(std430, binding = 4) buffer Hist { uint hist[]; };
 layout(std430, binding = 5) readonly buffer Count { uint count[]; };
 // drop = 1: keys equal to drop_key are left out (counted nowhere, written nowhere).
-layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; uint drop; uint drop_key; uint scanned; } p;
+layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; uint drop; uint drop_key;
+    uint block_rounds;  // rounds of 128 keys per block: 32 (SORT_BLOCK keys), fewer for short sorts
+    uint scanned;
+} p;
 bool dropped(uint key) { return p.drop != 0u && key == p.drop_key; }
 const uint MAX_SG = 16u;            // 128 lanes / 8-lane subgroups
 shared uint sg_count[MAX_SG * 256u]; // [subgroup][digit]: count in this round, then that subgroup's start
@@ -67,8 +70,8 @@ void main() {
     for (uint s = 0u; s < MAX_SG; ++s) { sg_count[s * 256u + lid] = 0u; sg_count[s * 256u + lid + 128u] = 0u; }
     running[lid] = 0u;
     running[lid + 128u] = 0u;
-    uint base = block * SORT_BLOCK;
-    for (uint round = 0u; round < 32u; ++round) {
+    uint base = block * p.block_rounds * 128u;
+    for (uint round = 0u; round < p.block_rounds; ++round) {
         uint idx = base + round * 128u + lid;
         if (base + round * 128u >= n) break;  // uniform: the rest of the block is empty
         uint key = idx < n ? keys_in[idx] : 0u;

@@ -15,7 +15,7 @@ def test_exclusive_scan(n):
 
 
 @pytest.mark.parametrize("digit_bits", [4, 8])
-@pytest.mark.parametrize("n", [1, 4095, 4096, 4097, 70_000])
+@pytest.mark.parametrize("n", [1, 511, 513, 4095, 4096, 4097, 70_000, 200_000, 700_000])
 def test_radix_sort_is_a_stable_sort(digit_bits, n):
     ctx = get_context()
     if digit_bits == 8 and digit_bits_for(ctx) != 8:
@@ -70,12 +70,13 @@ def test_dropped_keys_leave_the_sort(digit_bits, bits):
 
 
 def test_long_sorts_scan_their_histogram():
-    # above UNSCANNED_MAX_BLOCKS blocks the histogram goes through the scan; below, each block sums it itself:
-    # both give the same stable order and kept count
-    from gs_ibl_addon.core.render.gpu_sort import UNSCANNED_MAX_BLOCKS
+    # long sorts (4096-key blocks, more than UNSCANNED_MAX_BLOCKS of them: the histogram goes through the scan)
+    # give the same stable order and kept count as the short ones the other tests check (512-key blocks, each
+    # summing the histogram itself)
+    from gs_ibl_addon.core.render.gpu_sort import SHORT_SORT_MAX, UNSCANNED_MAX_BLOCKS
     from gs_ibl_addon.core.vk.constants import SORT_BLOCK
     ctx = get_context()
-    n = (UNSCANNED_MAX_BLOCKS + 3) * SORT_BLOCK + 17
+    n = max(SHORT_SORT_MAX + 1, (UNSCANNED_MAX_BLOCKS + 3) * SORT_BLOCK + 17)
     rng = np.random.default_rng(5)
     keys = rng.integers(0, 1 << 15, n).astype(np.uint32)
     keys[rng.random(n) < 0.2] = (1 << 15) - 1

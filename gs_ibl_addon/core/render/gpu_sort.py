@@ -57,10 +57,14 @@ def digit_bits_for(ctx) -> int:
     return 8 if ctx.subgroup_ballot and 8 <= ctx.subgroup_size <= 128 else 4
 
 
-# Sorts of at most this many 4096-key blocks skip the histogram's scan: each scatter block sums the counts before
-# it (radix8_scatter.comp, scanned = 0). A pass is then two dispatches instead of four or five, which is most of a
-# short sort's time (a probe's level-of-detail cut, a 100k-splat scene).
-UNSCANNED_MAX_BLOCKS = 128
+# Sorts of at most this many blocks skip the histogram's scan: each scatter block sums the counts before it
+# (radix8_scatter.comp, scanned = 0). A pass is then two dispatches instead of four or five.
+UNSCANNED_MAX_BLOCKS = 256
+# A block's 128-key rounds run one after another (each a few barriers), so a block's latency is what a short sort
+# costs: sorts of up to SHORT_SORT_MAX keys use blocks of SHORT_BLOCK_ROUNDS rounds (512 keys) instead of 32 (a
+# level-of-detail cut of 13k nodes: 4 busy blocks of 32 rounds took ~35 us a pass on an H200).
+SHORT_SORT_MAX = 1 << 19
+SHORT_BLOCK_ROUNDS = 4
 
 
 class RadixSorter:
@@ -76,7 +80,9 @@ class RadixSorter:
             raise ValueError(f"radix digits are 4 or 8 bits, not {self.digit_bits}")
         self.bins = 1 << self.digit_bits
         self.capacity = max(1, int(capacity))
-        self.n_blocks = -(-self.capacity // SORT_BLOCK)
+        self.block_rounds = SHORT_BLOCK_ROUNDS if self.digit_bits == 8 and self.capacity <= SHORT_SORT_MAX else 32
+        self.block_keys = SORT_BLOCK if self.digit_bits != 8 else 128 * self.block_rounds
+        self.n_blocks = -(-self.capacity // self.block_keys)
         self.keys_tmp = Buffer(ctx, self.capacity * 4, "sort-keys-tmp")
         self.vals_tmp = Buffer(ctx, self.capacity * 4, "sort-vals-tmp")
         self.hist = Buffer(ctx, self.bins * self.n_blocks * 4 + 4, "sort-hist")  # + the kept count (unscanned)
@@ -105,7 +111,8 @@ class RadixSorter:
             drop = i == 0 and drop_key is not None
             push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index,
                     "drop": int(drop), "drop_key": int(drop_key or 0)}
-            rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
+            rec.dispatch(hist_k, [src_k, self.hist, count], g,
+                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds)))
             stamp("hist")
             if scan:
                 total, total_at = self.scanner.record(rec, self.hist, self.bins * self.n_blocks), 0
@@ -113,7 +120,7 @@ class RadixSorter:
             else:
                 total, total_at = self.hist, 4 * self.bins * self.n_blocks
             rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g,
-                         **(push if self.digit_bits != 8 else dict(push, scanned=int(scan))))
+                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds, scanned=int(scan))))
             if drop:  # the histogram's total is what the first pass kept
                 rec.copy(total, count, 4, src_offset=total_at, dst_offset=4 * count_index)
             stamp("scatter")
