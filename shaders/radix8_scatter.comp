@@ -32,10 +32,12 @@ shared uint part[128];
 
 // first[] from the unscanned histogram: lane t owns digits 2t and 2t + 1; all blocks' counts give each digit's
 // start (a scan over digits), the blocks before this one its place within the digit.
-void offsets_from_counts(uint lid, uint block) {
+// Only blocks that hold keys are summed (the others' counts are 0): a short list in a large sorter reads little.
+void offsets_from_counts(uint lid, uint block, uint n) {
     uint tot0 = 0u, tot1 = 0u, before0 = 0u, before1 = 0u;
     uint r0 = (2u * lid) * p.n_blocks, r1 = r0 + p.n_blocks;
-    for (uint b = 0u; b < p.n_blocks; ++b) {
+    uint used = min(p.n_blocks, (n + p.block_rounds * 128u - 1u) / (p.block_rounds * 128u));
+    for (uint b = 0u; b < used; ++b) {
         uint h0 = hist[r0 + b], h1 = hist[r1 + b];
         tot0 += h0; tot1 += h1;
         if (b < block) { before0 += h0; before1 += h1; }
@@ -63,7 +65,7 @@ void main() {
         first[lid] = hist[lid * p.n_blocks + block];
         first[lid + 128u] = hist[(lid + 128u) * p.n_blocks + block];
     } else {
-        offsets_from_counts(lid, block);
+        offsets_from_counts(lid, block, n);
     }
     uint n_sg = gl_NumSubgroups;
     uint sg = gl_SubgroupID;

@@ -86,3 +86,26 @@ def test_long_sorts_scan_their_histogram():
     order = kept[np.argsort(keys[kept], kind="stable")]
     np.testing.assert_array_equal(v, vals[order])
     np.testing.assert_array_equal(k, keys[order])
+
+
+def test_a_short_list_in_a_large_sorter():
+    # a level-of-detail cut: the sorter is sized for the whole tree, the count (on the GPU) is a small part of it
+    from gs_ibl_addon.core.render.gpu_sort import RadixSorter
+    from gs_ibl_addon.core.vk import Buffer, Recorder
+    ctx = get_context()
+    cap, n = 120_000, 13_001
+    rng = np.random.default_rng(9)
+    keys = rng.integers(0, 2 ** 32, cap, dtype=np.uint64).astype(np.uint32)
+    kb, vb, cb = Buffer(ctx, cap * 4, "k"), Buffer(ctx, cap * 4, "v"), Buffer(ctx, 16, "c")
+    kb.write(keys)
+    vb.write(np.arange(cap, dtype=np.uint32))
+    cb.write(np.array([0, n, 0, 0], np.uint32))
+    sorter = RadixSorter(ctx, cap)
+    with Recorder(ctx) as rec:
+        sorter.record(rec, kb, vb, cb, 1, 32)
+    order = np.argsort(keys[:n], kind="stable")
+    np.testing.assert_array_equal(vb.read(np.uint32, n), order)
+    np.testing.assert_array_equal(kb.read(np.uint32, n), keys[:n][order])
+    sorter.destroy()
+    for b in (kb, vb, cb):
+        b.destroy()

@@ -58,8 +58,11 @@ def digit_bits_for(ctx) -> int:
 
 
 # Sorts of at most this many blocks skip the histogram's scan: each scatter block sums the counts before it
-# (radix8_scatter.comp, scanned = 0). A pass is then two dispatches instead of four or five.
-UNSCANNED_MAX_BLOCKS = 256
+# (radix8_scatter.comp, scanned = 0), and a pass is two dispatches instead of four or five. Measured on an H200
+# (docs/benchmarks.md): a 100k-key depth sort (25 blocks of 4096) 0.19 -> 0.15 ms; at 245 blocks of 4096 (1M keys)
+# summing cost more than the scan saved (0.22 -> 0.28 ms), so long blocks go unscanned only up to 128 of them.
+UNSCANNED_MAX_BLOCKS = 128
+UNSCANNED_MAX_SHORT_BLOCKS = 256  # 512-key blocks: each block sums only the blocks that hold keys
 # A block's 128-key rounds run one after another (each a few barriers), so a block's latency is what a short sort
 # costs: sorts of up to SHORT_SORT_MAX keys use blocks of SHORT_BLOCK_ROUNDS rounds (512 keys) instead of 32 (a
 # level-of-detail cut of 13k nodes: 4 busy blocks of 32 rounds took ~35 us a pass on an H200).
@@ -102,7 +105,8 @@ class RadixSorter:
         g = groups(self.n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
         passes = max(1, -(-int(bits) // self.digit_bits))
-        scan = self.digit_bits != 8 or self.n_blocks > UNSCANNED_MAX_BLOCKS
+        short = self.digit_bits == 8 and self.block_rounds == SHORT_BLOCK_ROUNDS
+        scan = self.digit_bits != 8 or self.n_blocks > (UNSCANNED_MAX_SHORT_BLOCKS if short else UNSCANNED_MAX_BLOCKS)
 
         def stamp(step: str) -> None:
             if stamps:
