@@ -111,6 +111,14 @@ def test_srgb_scenes_merge_their_light():
         assert np.allclose(got, light, rtol=1e-4, atol=1e-6)
 
 
+def test_srgb_light_conversion_round_trips():
+    # higher bands go through the curve's slope at the DC colour; a single splat's node would come back unchanged
+    from gs_ibl_addon.core.render.lod import _sh_from_linear, _sh_to_linear
+    sh = np.random.default_rng(2).normal(0, 0.3, (500, 16, 3))
+    sh[:, 0] = np.random.default_rng(3).uniform(-1.5, 2.5, (500, 3))  # encoded colour ~0.08 .. 1.2
+    assert np.allclose(_sh_from_linear(_sh_to_linear(sh)), sh, rtol=1e-9, atol=1e-9)
+
+
 def test_opacity_model():
     t = np.array([1e-3, 0.3, 1.0, 4.0, 11.99, 12.01, 60.0])
     x = np.linspace(1e-9, 1, 400001)[:, None] * t[None, :]
