@@ -1,8 +1,13 @@
-"""Numbers and pictures of docs/stability.md: storage-order bias and holes (issue 17).
+"""Numbers and pictures of docs/stability.md: the failure catalogue (issue 17).
 
 Run: python benchmarks/stability_bench.py order --save out/order_after.npz [--face 64] [--splats 20000]
      python benchmarks/stability_bench.py plot-order BEFORE.npz AFTER.npz --png docs/img/stability_order.png
      python benchmarks/stability_bench.py holes --png docs/img/stability_holes.png
+     python benchmarks/stability_bench.py near --png docs/img/stability/near.png
+     python benchmarks/stability_bench.py sh --png docs/img/stability/sh_ringing.png
+     python benchmarks/stability_bench.py conv --png docs/img/stability/conv_box.png
+     python benchmarks/stability_bench.py highlights --png docs/img/stability/highlights.png
+     python benchmarks/stability_bench.py path --png docs/img/stability/path.png
 
 order: a closed shell (synthetic.shell_scene, radiance a + b d_z, exact irradiance known) stored in Morton order and
 shuffled, baked at a fixed face size; prints the per-channel relative RMS error against the exact irradiance and
@@ -142,6 +147,258 @@ def cmd_holes(a) -> None:
     print(f"wrote {a.png}")
 
 
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def _save(fig, png: str) -> None:
+    os.makedirs(os.path.dirname(os.path.abspath(png)), exist_ok=True)
+    fig.savefig(png, dpi=100)
+    print(f"wrote {png}")
+
+
+def _wall_truth(room, p):
+    """The closed room's radiance from p as flat walls of their colour (no splat blur): the probe's ground truth."""
+    from gs_ibl_addon.core.probe.reference import cube_from_function, exact_irradiance_cube
+
+    def radiance(d):
+        ax, side, _ = room._hits(p, d)
+        return np.array([synthetic.WALL_COLOURS[(a, s)] for a, s in zip(ax, side)])
+    return exact_irradiance_cube(cube_from_function(radiance, 128), IRR, 32)
+
+
+def cmd_near(a) -> None:
+    """A probe moved toward the -X wall of a closed room: thin wall splats (the room's, 5 mm thick) and thick ones
+    (isotropic, sigma = the 10 cm spacing, like a trained capture's fuzz); error against flat walls."""
+    import dataclasses
+
+    from gs_ibl_addon.core.bake import relative_rms
+    from gs_ibl_addon.core.probe.near import near_splats
+    from gs_ibl_addon.core.render.renderer import SplatRenderer
+    room = synthetic.room_scene(window=None, skylight=None)
+    thick = dataclasses.replace(room.scene, scales=np.full_like(room.scene.scales, float(room.scene.scales.max())))
+    dist = np.array([1.5, 1.0, 0.6, 0.4, 0.3, 0.2, 0.15, 0.1, 0.05, 0.02, 0.0])
+    rows = {}
+    for name, scene in (("thin", room.scene), ("thick", thick)):
+        errs, sig = [], []
+        with SplatRenderer(scene) as r:
+            for d in dist:
+                p = np.array([room.lo[0] + d, 0.3, 1.4])
+                res = bake_probe(None, p, ProbeSettings(face_size=a.face, irradiance_size=IRR, hole_fill="black"),
+                                 renderer=r)
+                errs.append(channel_rms(res.irradiance, _wall_truth(room, p)).max())
+                sig.append(near_splats(scene, p)["nearest_sigmas"])
+                print(f"{name} wall, {d:.2f} m: {100 * errs[-1]:.1f}% RMS off flat walls, nearest splat "
+                      f"{sig[-1]:.2f} sigma, holes {100 * res.hole_fraction:.1f}%", flush=True)
+        rows[name] = (np.array(errs), np.array(sig))
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), constrained_layout=True)
+    for name, (errs, sig) in rows.items():
+        axes[0].plot(dist, 100 * errs, "o-", label=f"{name} wall splats")
+        axes[1].semilogx(np.maximum(sig, 1e-2), 100 * errs, "o", label=f"{name} wall splats")
+    axes[0].set_xlabel("probe's distance from the wall's splat centres (m)")
+    axes[0].set_ylabel("irradiance RMS off flat walls (%)")
+    axes[1].axvline(3.0, color="grey", ls="--", label="warning: within 3 sigma")
+    axes[1].set_xlabel("distance to the nearest splat in its sigmas (Mahalanobis)")
+    for ax in axes:
+        ax.legend(fontsize=8)
+        ax.grid(alpha=0.3)
+    fig.suptitle(f"probe approaching a wall (closed room, {a.face}^2 faces)", fontsize=10)
+    _save(fig, a.png)
+
+
+def _sun_cube(ratio: float, size: int = 256):
+    from gs_ibl_addon.core.probe.reference import cube_from_function
+    omega = 2 * np.pi * (1 - np.cos(np.radians(2.0)))
+    sun = synthetic.BrightPatch(radius_deg=2.0, intensity=ratio * np.pi / omega, colour=(1.0, 1.0, 1.0))
+    return cube_from_function(sun, size), sun
+
+
+def cmd_sh(a) -> None:
+    """SH order 2 next to a 2-degree sun whose irradiance is 1-100x the sky's: unclamped minimum, error, windows,
+    and SH of the rest with the sun split off as a light."""
+    from gs_ibl_addon.core.bake import relative_rms
+    from gs_ibl_addon.core.probe.lights import extract_lights, lights_irradiance
+    from gs_ibl_addon.core.probe.reference import exact_irradiance, exact_irradiance_cube
+    from gs_ibl_addon.core.probe.sh_project import project_cube, sh_irradiance
+    variants = (("none", None), ("hanning", 5), ("lanczos", 6))
+    normals = cubemap.face_directions(IRR)
+    for ratio in (1, 3, 10, 30, 100):
+        cube, _ = _sun_cube(ratio)
+        exact = exact_irradiance_cube(cube, IRR, 64)
+        c = project_cube(cube, 2)
+        out = [f"sun/sky {ratio:>3}:"]
+        for w, width in variants:
+            e = sh_irradiance(c, normals, w, width, clamp=False)
+            out.append(f"{w} min {e.min():+.2f} rms {100 * relative_rms(np.maximum(e, 0), exact):.1f}%")
+        rest, lights = extract_lights(cube, 1)
+        e = sh_irradiance(project_cube(rest, 2), normals) + lights_irradiance(lights, normals)
+        out.append(f"split: rms {100 * relative_rms(e, exact):.2f}% (exact {exact.min():.2f}..{exact.max():.1f})")
+        print("; ".join(out), flush=True)
+    cube, sun = _sun_cube(30)
+    sd = np.asarray(sun.direction) / np.linalg.norm(sun.direction)
+    perp = np.cross(sd, [0, 0, 1.0])
+    perp /= np.linalg.norm(perp)
+    ang = np.linspace(0, 180, 181)
+    nrm = np.cos(np.radians(ang))[:, None] * sd + np.sin(np.radians(ang))[:, None] * perp
+    exact = exact_irradiance(cube, nrm)[:, 1]
+    c = project_cube(cube, 2)
+    rest, lights = extract_lights(cube, 1)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7.5, 4), constrained_layout=True)
+    ax.plot(ang, exact, "k", lw=2, label="exact")
+    for w, width in variants:
+        ax.plot(ang, sh_irradiance(c, nrm, w, width, clamp=False)[:, 1], label=f"SH 2, window {w}"
+                + (f" (width {width})" if width else ""))
+    split = sh_irradiance(project_cube(rest, 2), nrm, clamp=False) + lights_irradiance(lights, nrm)
+    ax.plot(ang, split[:, 1], "--", label="SH 2 of the rest + the sun as a light")
+    ax.axhline(0, color="grey", lw=0.5)
+    ax.set_xlabel("angle of the normal from the sun (deg)")
+    ax.set_ylabel("E/pi (unclamped)")
+    ax.set_ylim(-0.5, 3)
+    ax.legend(fontsize=8)
+    ax.set_title("2-degree sun, irradiance 30x the sky's: SH order 2 rings negative behind it", fontsize=10)
+    _save(fig, a.png)
+
+
+def cmd_conv(a) -> None:
+    """conv's arcs (reading the full cube vs the copy matched to the grid) and box's error, 7-degree sun."""
+    from gs_ibl_addon.core.bake import relative_rms
+    from gs_ibl_addon.core.probe.box import box_irradiance
+    from gs_ibl_addon.core.probe.convolve import cosine_convolve, hemisphere_grid
+    from gs_ibl_addon.core.probe.reference import (cube_from_function, exact_irradiance_cube, tangent_frames,
+                                                   to_world)
+    from gs_ibl_addon.core.probe.sampling import sample_cube_bilinear
+    size = a.irr
+    maps = {}
+    for label, fn in (("sun", synthetic.BrightPatch()), ("sky", synthetic.SkyGradient()),
+                      ("walls", synthetic.ColouredWalls())):
+        cube = cube_from_function(fn, 128)
+        exact = exact_irradiance_cube(cube, size)
+        local, w = hemisphere_grid(64, 16)
+        normals = cubemap.face_directions(size).reshape(-1, 3)
+        t, b = tangent_frames(normals)
+        full = np.concatenate([np.einsum("s,msc->mc", w, sample_cube_bilinear(cube, to_world(local, t[k:k + 64],
+                               b[k:k + 64], normals[k:k + 64]))) for k in range(0, len(normals), 64)])
+        full = full.reshape(exact.shape)
+        matched = cosine_convolve(cube, size, 64, 16)
+        row = {"conv 64x16, full cube": full, "conv 64x16, matched copy": matched}
+        for level in (1, size):
+            row[f"box, level {level}"] = box_irradiance(cube, size, level)
+        print(label + ": " + ", ".join(f"{k} {100 * relative_rms(v, exact):.2f}% (max "
+                                        f"{100 * np.abs((v - exact) / exact).max():.1f}%)" for k, v in row.items()),
+              flush=True)
+        if label == "sun":
+            maps = {k: (v - exact) / exact for k, v in row.items() if k.startswith("conv")}
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3), constrained_layout=True)
+    lim = max(float(np.abs(m[..., 1]).max()) for m in maps.values())
+    for ax, (k, m) in zip(axes, maps.items()):
+        im = ax.imshow(100 * cube_to_latlong(m, 4 * size, 2 * size)[..., 1], cmap="RdBu_r", vmin=-100 * lim,
+                       vmax=100 * lim, extent=(180, -180, -90, 90))
+        ax.set_title(f"{k}: error vs exact (green, %)", fontsize=9)
+    fig.colorbar(im, ax=axes, shrink=0.8)
+    _save(fig, a.png)
+
+
+def cmd_highlights(a) -> None:
+    """A shell with a sun of radiance 60 stored clipped at 1.0: irradiance of the float shell, the clipped one, the
+    clipped one with the gain on the splats and on the cube, auto; the sun split off as a light."""
+    from gs_ibl_addon.core.bake import relative_rms
+    from gs_ibl_addon.core.probe.lights import lights_irradiance
+    from gs_ibl_addon.core.render.renderer import SplatRenderer
+    sun = synthetic.BrightPatch(intensity=120.0, colour=(1.0, 1.0, 1.0))
+    flt = synthetic.shell_scene(sun, a.splats)
+    clp = synthetic.shell_scene(lambda d: np.minimum(sun(d), 1.0), a.splats)
+    s = dict(face_size=a.face, irradiance_size=IRR)
+    ref = bake_probe(flt, (0, 0, 0), ProbeSettings(**s))
+    runs = {"clipped": bake_probe(clp, (0, 0, 0), ProbeSettings(**s)),
+            "gain 60 on the splats": bake_probe(clp, (0, 0, 0), ProbeSettings(highlight_gain=60.0, **s)),
+            "gain auto": bake_probe(clp, (0, 0, 0), ProbeSettings(highlight_gain="auto", **s))}
+    with SplatRenderer(clp) as r:
+        runs["gain 60 on the cube"] = bake_probe(None, (0, 0, 0), ProbeSettings(highlight_gain=60.0, **s), renderer=r)
+    for k, v in runs.items():
+        print(f"{k}: {100 * relative_rms(v.irradiance, ref.irradiance):.2f}% RMS off the float shell; {v.highlights}")
+    split = bake_probe(flt, (0, 0, 0), ProbeSettings(lights=1, **s))
+    normals = cubemap.face_directions(IRR)
+    total = split.irradiance + lights_irradiance(split.lights, normals)
+    print(f"lights: {split.lights}; rest + light {100 * relative_rms(total, ref.irradiance):.2f}% off the whole")
+    plt = _plt()
+    fig, axes = plt.subplots(2, 3, figsize=(12, 4.6), constrained_layout=True)
+    top = float(ref.irradiance.max())
+
+    def show(ax, cube, title, scale):
+        ll = cube_to_latlong(np.asarray(cube)[..., :3], LL[0] * 2, LL[1] * 2)
+        ax.imshow(np.clip(ll / scale, 0, 1) ** (1 / 2.2), extent=(180, -180, -90, 90))
+        ax.set_title(title, fontsize=9)
+        ax.set_xticks([])
+        ax.set_yticks([])
+    show(axes[0, 0], runs["clipped"].radiance, "radiance stored clipped at 1.0 (exposure x1)", 1.0)
+    show(axes[0, 1], ref.irradiance, "irradiance: float capture (sun 60)", top)
+    off = 100 * relative_rms(runs["clipped"].irradiance, ref.irradiance)
+    show(axes[0, 2], runs["clipped"].irradiance, f"clipped: {off:.0f}% off", top)
+    for ax, k in zip(axes[1], ("gain 60 on the splats", "gain 60 on the cube")):
+        show(ax, runs[k].irradiance, f"{k}: {100 * relative_rms(runs[k].irradiance, ref.irradiance):.2g}% off",
+             top)
+    show(axes[1, 2], split.irradiance, f"the World's part with the sun split off as a light\n"
+                                       f"({100 * split.lights[0]['share']:.0f}% of the light, "
+                                       f"{split.lights[0]['angle']:.0f} deg across)", top)
+    _save(fig, a.png)
+
+
+def cmd_path(a) -> None:
+    """The probe moved in 10 cm steps along y through the sample room (x 0.3, z 1.2), fixed faces and the search;
+    then splats pruned 5% at a time, least opaque first."""
+    from gs_ibl_addon.core.bake import relative_rms
+    from gs_ibl_addon.core.render.renderer import SplatRenderer
+    env = synthetic.sample_environment()
+    ys = np.linspace(-2.0, 2.0, 41)
+    curves = {}
+    with SplatRenderer(env) as r:
+        for name, st in (("64^2", dict(face_size=64)), ("128^2", dict(face_size=128)),
+                         ("auto (1%)", dict(face_size=0))):
+            irr, faces = [], []
+            t = time.perf_counter()
+            for y in ys:
+                res = bake_probe(None, (0.3, y, 1.2), ProbeSettings(irradiance_size=IRR, **st), renderer=r)
+                irr.append(res.irradiance)
+                faces.append(res.settings["face_size"])
+            steps = np.array([relative_rms(q, p) for p, q in zip(irr, irr[1:])])
+            span = relative_rms(irr[-1], irr[0])
+            print(f"{name}: step-to-step change max {100 * steps.max():.2f}%, median {100 * np.median(steps):.2f}% "
+                  f"(max/median {steps.max() / np.median(steps):.2f}); end to end {100 * span:.1f}%; faces "
+                  f"{sorted(set(faces))}; {time.perf_counter() - t:.0f} s", flush=True)
+            curves[name] = (steps, np.array([x.mean((0, 1, 2)) for x in irr]))
+    order = np.argsort(env.opacities)
+    kept, prune = [], np.arange(0, 0.51, 0.05)
+    for f in prune:
+        sub = env.subset(np.sort(order[int(f * env.count):]))
+        kept.append(bake_probe(sub, (0.3, 0.0, 1.2), ProbeSettings(face_size=64, irradiance_size=IRR)))
+    psteps = np.array([relative_rms(q.irradiance, p.irradiance) for p, q in zip(kept, kept[1:])])
+    print("pruned (least opaque first), 5% steps: change per step " + ", ".join(f"{100 * v:.2f}%" for v in psteps)
+          + "; holes " + ", ".join(f"{100 * k.hole_fraction:.1f}%" for k in kept))
+    plt = _plt()
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
+    for name, (steps, mean) in curves.items():
+        axes[0].plot(ys, mean[:, 0], label=f"{name} (red)")
+        axes[1].plot((ys[1:] + ys[:-1]) / 2, 100 * steps, label=name)
+    axes[0].set_xlabel("probe y (m)")
+    axes[0].set_ylabel("mean E/pi")
+    axes[1].set_xlabel("probe y (m)")
+    axes[1].set_ylabel("change from the previous 10 cm step (% RMS)")
+    axes[2].plot(100 * prune[1:], 100 * psteps, "o-")
+    axes[2].set_xlabel("splats pruned, least opaque first (%)")
+    axes[2].set_ylabel("change from the previous 5% (% RMS)")
+    for ax in axes[:2]:
+        ax.legend(fontsize=8)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    _save(fig, a.png)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -159,6 +416,13 @@ def main() -> None:
     q.add_argument("--face", type=int, default=64)
     q.add_argument("--png", default="docs/img/stability_holes.png")
     q.set_defaults(fn=cmd_holes)
+    for name, fn, extra in (("near", cmd_near, {"face": 64}), ("sh", cmd_sh, {}), ("conv", cmd_conv, {"irr": 16}),
+                            ("highlights", cmd_highlights, {"face": 64, "splats": 20000}), ("path", cmd_path, {})):
+        q = sub.add_parser(name)
+        for opt, default in extra.items():
+            q.add_argument(f"--{opt}", type=int, default=default)
+        q.add_argument("--png", default=f"docs/img/stability/{name}.png")
+        q.set_defaults(fn=fn)
     a = ap.parse_args()
     a.fn(a)
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from .core.settings import (COLOUR_SPACE_CHOICES, COLOUR_SPACE_HELP, DEFAULT_COLOUR_SPACE_CHOICE, DEFAULT_HOLE_FILL,
                             DEFAULT_LOD, DEFAULT_LOD_K, DEFAULT_METHOD, HOLE_FILL_HELP, LOD_HELP, LOD_MODES,
-                            METHOD_NAMES)
+                            DEFAULT_TOLERANCE, METHOD_NAMES, TOLERANCE_HELP)
 
 DESCRIPTION = __doc__
 SCENE_HELP = "splat file (.ply, .spz, .splat, .ksplat, .sog, .glb/.gltf) or SOG folder"
@@ -63,6 +63,17 @@ def finite_float(text: str) -> float:
     return value
 
 
+def highlight_gain(text: str) -> float | str:
+    """--highlight-gain: 'auto' or a number of at least 1."""
+    if text.strip().lower() == "auto":
+        return "auto"
+    value = finite_float(text)
+    if value < 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: the gain is the highlights' real brightness over 1.0, so 1 "
+                                         "(off) or more, or auto")
+    return value
+
+
 def positive_float(text: str) -> float:
     """argparse type: a finite number > 0."""
     value = finite_float(text)
@@ -82,17 +93,18 @@ def positive_int(text: str) -> int:
     return value
 
 
-def face_size(text: str) -> int:
-    """argparse type for --face-size of bake: 0 (search) or a size >= 1."""
+def tolerance(text: str) -> float:
+    """argparse type for --tolerance: a fraction in the range core/tolerance.py validates."""
+    from .core.tolerance import check_tolerance
+    try:
+        return check_tolerance(finite_float(text))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
+def size_or_zero(text: str) -> int:
+    """argparse type for --face-size and --irradiance-size of bake: 0 (from the tolerance) or a size >= 1."""
     return 0 if text.strip() == "0" else positive_int(text)
-
-
-def fraction(text: str) -> float:
-    """argparse type for --tolerance: a number strictly between 0 and 1."""
-    value = finite_float(text)
-    if not 0 < value < 1:
-        raise argparse.ArgumentTypeError(f"{value} must lie strictly between 0 and 1 (0.01 = 1%)")
-    return value
 
 
 def field_of_view(text: str) -> float:
@@ -243,7 +255,8 @@ def cmd_bake(a) -> int:
     check_input(a.scene)
     settings = ProbeSettings(method=a.method, face_size=a.face_size, irradiance_size=a.irradiance_size,
                              tolerance=a.tolerance, glossy=a.glossy, lod=a.lod, lod_k=a.lod_k, hole_fill=fill,
-                             hole_colour=tuple(a.hole_colour or (0.0, 0.0, 0.0)))
+                             hole_colour=tuple(a.hole_colour or (0.0, 0.0, 0.0)), highlight_gain=a.highlight_gain,
+                             lights=a.lights)
     check_settings(settings)
     probe = None if a.probe is None else check_probe_position(a.probe)
     ctx = _context()
@@ -272,12 +285,22 @@ def cmd_bake(a) -> int:
     from .core.probe.holes import hole_fill_text, hole_warning
     t = result.timings_ms
     print(f"method {result.settings['method']} (asked: {a.method}), faces {result.settings['face_size']}^2, "
-          f"cubemap GPU {t.get('render_total', 0):.2f} ms, filter {t.get('irradiance', 0):.2f} ms, "
-          f"device {result.device}")
+          f"irradiance {result.settings['irradiance_size']}^2, cubemap GPU {t.get('render_total', 0):.2f} ms, "
+          f"filter {t.get('irradiance', 0):.2f} ms, device {result.device}")
+    from .core.tolerance import plan_text
+    line = plan_text(result.settings)
+    if line:
+        print(line)
+    from .core.probe.highlights import highlight_text
+    from .core.probe.lights import lights_text
+    from .core.probe.near import near_warning
     print(hole_fill_text(result.hole_fill))
-    warning = hole_warning(result.hole_fill)
-    if warning:
-        print(f"warning: {warning}", file=sys.stderr)
+    for line in (highlight_text(result.highlights), lights_text(result.lights)):
+        if line:
+            print(line)
+    for warning in (hole_warning(result.hole_fill), near_warning(result.near_splats)):
+        if warning:
+            print(f"warning: {warning}", file=sys.stderr)
     print("wrote " + ", ".join(sorted(written)) + (f" and {a.preview}" if a.preview else "") + f" in {a.out}")
     return 0
 
@@ -366,11 +389,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "texel integrated with its exact solid angle), sh (9 SH coefficients: rings near small "
                         "bright sources), conv (cosine convolution, the thesis's method), box (box-filtered "
                         "mips, fast and rough); docs/accuracy.md compares them")
-    q.add_argument("--face-size", type=face_size, default=0,
-                   help="radiance face size (default 0: start at 32 and double until the irradiance changes by "
-                        "less than --tolerance)")
-    q.add_argument("--irradiance-size", type=positive_int, default=16, help="irradiance cube face size (default 16)")
-    q.add_argument("--tolerance", type=fraction, default=0.01, help="relative RMS irradiance change that ends the face-size search (default 0.01)")
+    q.add_argument("--face-size", type=size_or_zero, default=0,
+                   help="radiance face size (default 0: the smallest estimated to meet --tolerance)")
+    q.add_argument("--irradiance-size", type=size_or_zero, default=0,
+                   help="irradiance cube face size (default 0: 8, 16 or 32, the smallest whose reads between texels "
+                        "meet --tolerance)")
+    q.add_argument("--tolerance", type=tolerance, default=DEFAULT_TOLERANCE, help=TOLERANCE_HELP)
     q.add_argument("--glossy", action="store_true", help="also write GGX prefiltered radiance (ggx_*.exr)")
     q.add_argument("--lod", default=DEFAULT_LOD, choices=LOD_MODES, help=LOD_HELP)
     q.add_argument("--lod-k", type=positive_float, default=DEFAULT_LOD_K,
@@ -379,6 +403,13 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--hole-fill", choices=("mean", "constant", "black"), help=HOLE_FILL_HELP)
     q.add_argument("--hole-colour", nargs=3, type=finite_float, metavar=("R", "G", "B"),
                    help="linear radiance of the holes (implies --hole-fill constant)")
+    q.add_argument("--highlight-gain", type=highlight_gain, default=1.0, metavar="GAIN",
+                   help="clipped highlights (colours at the top of the range, as 8-bit photos leave windows and "
+                        "lamps) times GAIN, the light's real brightness over 1.0 (2^stops); auto: estimated from the "
+                        "brightest unclipped directions (a guess, often low); default 1 (off)")
+    q.add_argument("--lights", type=int, default=0, choices=range(0, 9), metavar="N",
+                   help="split up to N (0-8) bright compact regions (sun, lamp, window) off the probe as lights, "
+                        "listed in probe.json for Blender sun lights with shadows; default 0")
     q.add_argument("--faces", action="store_true", help="also write every cube face as its own EXR")
     q.add_argument("--half", action="store_true", help="write half-float EXRs (smaller; max 65504)")
     q.add_argument("--out", required=True, help="output folder")

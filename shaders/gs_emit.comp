@@ -87,7 +87,8 @@ void main() {
             uint tx = x0 + r % w, ty = y0 + r / w;
             mat3 g;
             bool hit = !footprint_quadric(i, g) || tile_touched(g, views[v], tx, ty);
-            inst_key[q] = hit ? views[v].dims.w + ty * views[v].dims.z + tx : p.n_tiles;
+            uint probe_base = uint(prepared[PREP * i + 4u].y);  // the pair's probe's first tile
+            inst_key[q] = hit ? probe_base + views[v].dims.w + ty * views[v].dims.z + tx : p.n_tiles;
             inst_val[q] = i;
             return;
         }

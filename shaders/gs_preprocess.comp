@@ -3,6 +3,11 @@
 // toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin).
 // With a level of detail (p.lod = 1; render/lod.py) the splats are the nodes of its tree and each first decides
 // whether it is in the probe's cut; the drawn ones are flagged in `live` for gs_lod_compact.
+// Several probes in one batch (SplatRenderer.render_probes): workgroup x is the probe and (y, z) the block of 256
+// splats, and every output is per (probe, splat) pair at index probe * n + splat, so the later stages, which only
+// ever see pair indices, need no change; a pair's first tile in the batch travels in prepared[.. + 4].y for
+// gs_emit. x varies fastest in dispatch order, so the probes of one block run side by side and a splat's data
+// (SH: 192 bytes at degree 3) is read from memory about once per group of probes, not once per probe.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 layout(local_size_x = 256) in;
@@ -17,7 +22,7 @@ layout(std430, binding = 7) writeonly buffer DepthKey { uint depth_key[]; };
 layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
 layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // per splat and view, for gs_emit
 // The origin travels in a buffer, not a push constant, so a recorded command buffer serves any probe position.
-layout(std430, binding = 10) readonly buffer Origin { vec4 origin; };
+layout(std430, binding = 10) readonly buffer Origin { vec4 origins[]; };  // one per probe (workgroup z)
 // Per node: x = cell x | cell y << 16, y = cell z | level << 16 | parent level << 24 (LodTree.words()).
 layout(std430, binding = 11) readonly buffer Lod { uvec2 lod[]; };
 layout(std430, binding = 12) writeonly buffer Live { uint live[]; };
@@ -32,10 +37,12 @@ layout(push_constant) uniform P {
 const uint LOD_NO_PARENT = 255u;  // render/lod.py NO_PARENT: no stored ancestor, its error is infinite
 
 // size <= tau * distance(origin, cell box): the cell (level >= 1) is fine enough for this probe.
+vec3 origin;  // this invocation's probe
+
 bool fine_enough(uint level, uvec3 c) {
     float size = p.lod_cell * exp2(float(level) - 1.0);
     vec3 lo = vec3(p.lod_ox, p.lod_oy, p.lod_oz) + vec3(c) * size;
-    vec3 d = max(max(lo - origin.xyz, origin.xyz - (lo + size)), vec3(0.0));
+    vec3 d = max(max(lo - origin, origin - (lo + size)), vec3(0.0));
     return size <= p.lod_tau * length(d);
 }
 
@@ -107,19 +114,22 @@ uint depth_sort_key(float dist, vec3 pos) {
 }
 
 void main() {
-    uint i = linear_group() * 256u + gl_LocalInvocationID.x;
+    uint i = (gl_WorkGroupID.z * gl_NumWorkGroups.y + gl_WorkGroupID.y) * 256u + gl_LocalInvocationID.x;  // splat
     if (i >= p.n) return;
-    depth_key[i] = 0xFFFFFFFFu;
+    uint probe = gl_WorkGroupID.x;
+    uint q = probe * p.n + i;  // the (probe, splat) pair: index of every per-pair output
+    origin = origins[probe].xyz;
+    depth_key[q] = 0xFFFFFFFFu;
     if (p.lod != 0u) {
         // nodes out of the cut read nothing more: most of a big scene's nodes end here
-        live[i] = 0u;
+        live[q] = 0u;
         if (!in_cut(lod[i])) return;
     } else {
-        depth_val[i] = i;
-        tile_count[i] = 0u;
+        depth_val[q] = q;
+        tile_count[q] = 0u;
     }
     vec4 po = pos_op[i];
-    vec3 mu = po.xyz - origin.xyz;
+    vec3 mu = po.xyz - origin;
     float dist = length(mu);
     vec3 sc = scale[i].xyz;
     vec3 s2 = dilated_scale2(sc, dist, p.pixel_angle);
@@ -146,18 +156,21 @@ void main() {
         uvec4 rc;
         bool hit = view_rect(views[v], mu, cov, rc);
         if (hit) count += (rc.z - rc.x) * (rc.w - rc.y);
-        rects[i * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
+        rects[q * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
     }
     if (count == 0u) return;
-    if (p.lod != 0u) live[i] = 1u;
+    if (p.lod != 0u) live[q] = 1u;
     vec3 inv = inversesqrt(s2);
     vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
     vec3 ol = -vec3(dot(w0, mu), dot(w1, mu), dot(w2, mu));
-    prepared[PREP * i + 0u] = vec4(w0, ol.x);
-    prepared[PREP * i + 1u] = vec4(w1, ol.y);
-    prepared[PREP * i + 2u] = vec4(w2, ol.z);
-    prepared[PREP * i + 3u] = vec4(sh_color(i, mu / dist), opacity);
-    prepared[PREP * i + 4u] = vec4(cutoff, 0.0, 0.0, 0.0);
-    tile_count[i] = count;
-    depth_key[i] = depth_sort_key(dist, po.xyz);
+    // tiles of one probe: the last view's first tile + its tiles (views are numbered the same for every probe)
+    View last = views[p.n_views - 1u];
+    uint probe_tiles = last.dims.w + last.dims.z * last.extra.y;
+    prepared[PREP * q + 0u] = vec4(w0, ol.x);
+    prepared[PREP * q + 1u] = vec4(w1, ol.y);
+    prepared[PREP * q + 2u] = vec4(w2, ol.z);
+    prepared[PREP * q + 3u] = vec4(sh_color(i, mu / dist), opacity);
+    prepared[PREP * q + 4u] = vec4(cutoff, float(probe * probe_tiles), 0.0, 0.0);  // exact below 2^24 (renderer.py)
+    tile_count[q] = count;
+    depth_key[q] = depth_sort_key(dist, po.xyz);
 }

@@ -4,6 +4,8 @@
 // Small images have few tiles, too few to fill a GPU: then each tile's list is cut into `chunks` consecutive
 // pieces composited by separate workgroups into (colour, transmittance) partials, which gs_merge.comp joins in
 // order (front-to-back compositing is associative).
+// Several probes (SplatRenderer.render_probes): workgroup z is the probe; total_tiles counts one probe's tiles and
+// total_pixels every probe's pixels; probe k's tiles and pixels follow probe k-1's.
 #extension GL_GOOGLE_include_directive : require
 #include "splat_common.glsl"
 layout(local_size_x = 16, local_size_y = 16) in;
@@ -27,9 +29,12 @@ void main() {
     uint wg = linear_group();
     if (wg >= p.total_tiles * p.chunks) return;  // uniform per workgroup
     uint g = wg % p.total_tiles, chunk = wg / p.total_tiles;
+    uint probe = gl_WorkGroupID.z;
     uint v = 0u;
     for (uint k = 1u; k < p.n_views; ++k) if (g >= views[k].dims.w) v = k;
     View vw = views[v];
+    View last = views[p.n_views - 1u];
+    uint probe_pixels = last.extra.x + last.dims.x * last.dims.y;
     uint local_tile = g - vw.dims.w;
     uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
     uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
@@ -38,7 +43,7 @@ void main() {
     float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
     vec3 d = vw.fwd.xyz + s * vw.right_tanx.xyz + t * vw.down_tany.xyz;
 
-    uvec2 whole = ranges[g];
+    uvec2 whole = ranges[probe * p.total_tiles + g];
     uint len = whole.y - whole.x;
     uint q = len / p.chunks, rem = len % p.chunks;  // chunk c starts at c*q + min(c, rem): no overflow
     uvec2 range = whole.x + uvec2(chunk * q + min(chunk, rem), (chunk + 1u) * q + min(chunk + 1u, rem));
@@ -77,7 +82,7 @@ void main() {
             if (T < T_MIN) { done = true; break; }
         }
     }
-    uint pixel = vw.extra.x + py * vw.dims.x + px;
+    uint pixel = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;
     if (inside) {
         if (p.chunks == 1u) {
             image[pixel] = vec4(color, 1.0 - T);

@@ -4,6 +4,7 @@
 // The host uploads each texel's unit direction and dOmega/pi (core.cubemap, float64 -> float32), so no cube
 // geometry is recomputed here. One workgroup per output texel: its 128 threads stride over the texels, then a
 // shared-memory tree adds their partial sums (float32 over <= 6*64^2 terms: ~1e-6 relative).
+// Several probes' cubes one after another (a batch, gpu_filters.FilterPlan): workgroup z is the probe.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "probe_cube.glsl"
@@ -20,12 +21,12 @@ void main() {
     uint face = o / (p.m * p.m), rem = o % (p.m * p.m);
     vec3 nrm = texel_dir(face, rem % p.m, rem / p.m, p.m);
     uint lid = gl_LocalInvocationID.x;
-    uint total = 6u * p.n * p.n;
+    uint total = 6u * p.n * p.n, base = gl_WorkGroupID.z * total;
     vec3 acc = vec3(0.0);
     for (uint t = lid; t < total; t += 128u) {
         vec4 w = texel[t];
         float c = dot(nrm, w.xyz);
-        if (c > 0.0) acc += (c * w.w) * vec3(cube[t * 3u], cube[t * 3u + 1u], cube[t * 3u + 2u]);
+        if (c > 0.0) acc += (c * w.w) * vec3(cube[(base + t) * 3u], cube[(base + t) * 3u + 1u], cube[(base + t) * 3u + 2u]);
     }
     red[lid] = acc;
     barrier();
@@ -35,6 +36,7 @@ void main() {
     }
     if (lid == 0u) {
         vec3 e = red[0];
-        outp[o * 3u] = e.r; outp[o * 3u + 1u] = e.g; outp[o * 3u + 2u] = e.b;
+        uint w = (gl_WorkGroupID.z * 6u * p.m * p.m + o) * 3u;
+        outp[w] = e.r; outp[w + 1u] = e.g; outp[w + 2u] = e.b;
     }
 }

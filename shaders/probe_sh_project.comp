@@ -3,6 +3,7 @@
 // L * Y_k * dOmega over a strided share of the texels and writes its 27 partial sums (9 coeffs x RGB) to
 // partial[group * 27 + k * 3 + c]; the host adds the few group partials in float64 (probe/gpu_filters.py).
 // Basis: core/sh.py (3DGS signs, l <= 2); solid angles: core/cubemap.texel_solid_angles, uploaded.
+// Several probes' cubes one after another (a batch, gpu_filters.FilterPlan): workgroup z is the probe.
 #extension GL_GOOGLE_include_directive : require
 #include "common.glsl"
 #include "probe_cube.glsl"
@@ -18,11 +19,12 @@ void main() {
     uint g = linear_group();
     float acc[27];
     for (int k = 0; k < 27; ++k) acc[k] = 0.0;
-    uint total = 6u * p.n * p.n;
+    uint total = 6u * p.n * p.n, base = gl_WorkGroupID.z * total;
     for (uint idx = g * 256u + lid; idx < total; idx += p.n_groups * 256u) {
         uint face = idx / (p.n * p.n), rem = idx % (p.n * p.n), j = rem / p.n, i = rem % p.n;
         vec3 d = texel_dir(face, i, j, p.n);
-        vec3 L = vec3(cube[idx * 3u], cube[idx * 3u + 1u], cube[idx * 3u + 2u]) * omega[rem];
+        uint o = (base + idx) * 3u;
+        vec3 L = vec3(cube[o], cube[o + 1u], cube[o + 2u]) * omega[rem];
         float b[9];
         b[0] = 0.28209479177387814;
         b[1] = -0.4886025119029199 * d.y; b[2] = 0.4886025119029199 * d.z; b[3] = -0.4886025119029199 * d.x;
@@ -40,5 +42,5 @@ void main() {
             for (uint k = 0u; k < 27u; ++k) red[lid * 27u + k] += red[(lid + stride) * 27u + k];
         barrier();
     }
-    if (lid < 27u) partial[g * 27u + lid] = red[lid];
+    if (lid < 27u) partial[(gl_WorkGroupID.z * p.n_groups + g) * 27u + lid] = red[lid];
 }

@@ -223,7 +223,7 @@ def command_cases(folder: str) -> list[tuple[str, list[str]]]:
         ("bake --face-size -1", bake + ["--face-size", "-1"]),
         ("bake --face-size abc", bake + ["--face-size", "abc"]),
         ("bake --face-size 2.5", bake + ["--face-size", "2.5"]),
-        ("bake --irradiance-size 0", bake + ["--irradiance-size", "0"]),
+        ("bake --irradiance-size -1", bake + ["--irradiance-size", "-1"]),
         ("bake --tolerance 0", bake + ["--tolerance", "0"]),
         ("bake --tolerance 2", bake + ["--tolerance", "2"]),
         ("bake --tolerance nan", bake + ["--tolerance", "nan"]),

@@ -317,10 +317,12 @@ def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch
     probe.gs_ibl_probe.splats = shell  # the stand-in is only to be muted, not baked from
     assert probe.gs_ibl_probe.mute_native_splats
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
-    assert not native.visible_diffuse and not native.visible_glossy and native.visible_camera
+    assert not native.visible_diffuse and not native.visible_glossy and not native.visible_shadow
+    assert native.visible_camera
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}  # a re-bake keeps the first saved state
     assert bpy.ops.gs_ibl.restore_world() == {"FINISHED"}
-    assert native.visible_diffuse and not native.visible_glossy and "gs_ibl_ray_visibility" not in native.keys()
+    assert native.visible_diffuse and not native.visible_glossy and native.visible_shadow
+    assert "gs_ibl_ray_visibility" not in native.keys()
     probe.gs_ibl_probe.mute_native_splats = False
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert native.visible_diffuse

@@ -82,11 +82,12 @@ def test_convolution_converges_to_exact(smooth_cube):
 
 def test_convolution_noise_at_low_sample_counts(patch_cube):
     # Known weak spot: the regular (phi, theta) grid either misses or hits the 5-degree bright disc.
-    # Measured rel RMS vs exact (M=8): 8x2: 3.01, 16x4: 1.50, 64x16: 0.15; error falls ~2-3x per doubling of both
-    # step counts (M=16: 4x1: 9.4, 8x2: 3.1, 16x4: 1.5, 32x8: 0.50, 64x16: 0.17, 128x32: 0.031).
+    # Measured rel RMS vs exact (M=8), reading the cube at 64^2: 8x2: 3.01, 16x4: 1.50, 64x16: 0.15; since the
+    # convolution reads a copy downsampled to two texels per theta step (convolve.source_sizes, docs/stability.md):
+    # 0.75, 0.71, 0.10.
     ref = exact_irradiance_cube(patch_cube, 8)
     errs = {s: relative_rms(cosine_convolve(patch_cube, 8, *s), ref) for s in ((8, 2), (16, 4), (64, 16))}
-    assert errs[(8, 2)] > 1.0  # wrong by more than the signal: unusable
+    assert errs[(8, 2)] > 0.5  # wrong by more than half the signal: unusable
     assert errs[(16, 4)] > 0.5
     assert errs[(64, 16)] < 0.3
     assert errs[(8, 2)] > errs[(16, 4)] > errs[(64, 16)]

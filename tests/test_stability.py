@@ -19,6 +19,7 @@ from gs_ibl_addon.core.bake import BadSetting, ProbeSettings, bake_probe, check_
 from gs_ibl_addon.core.formats.compressed_ply import morton_order
 from gs_ibl_addon.core.formats.ply import write_ply
 from gs_ibl_addon.core.image_io import read_exr
+from gs_ibl_addon.core.probe.latlong import cube_to_latlong
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.splat_math import depth_keys, tie_hash
@@ -158,3 +159,207 @@ def test_bad_hole_settings_are_refused_before_work(tmp_path, capsys):
                    ProbeSettings(face_size=32, hole_fill="environment"))
     assert main(["bake", str(tmp_path / "missing.ply"), "--hole-fill", "constant", "--out", str(tmp_path / "o")]) != 0
     assert "--hole-colour" in capsys.readouterr().err
+
+
+# Clipped highlights and lights: a shell whose sun (radiance 60) an 8-bit capture stored as 1.0.
+
+SUN = synthetic.BrightPatch(intensity=120.0, colour=(1.0, 1.0, 1.0))  # disc radiance 60, 7 degrees across
+
+
+@pytest.fixture(scope="module")
+def sun_shells():
+    return {"float": synthetic.shell_scene(SUN, 20000),
+            "clipped": synthetic.shell_scene(lambda d: np.minimum(SUN(d), 1.0), 20000)}
+
+
+@pytest.fixture(scope="module")
+def sun_float(sun_shells):
+    return bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(face_size=64, irradiance_size=IRR))
+
+
+def test_clipped_highlights_with_their_gain_light_like_the_float_capture(sun_shells, sun_float):
+    settings = dict(face_size=64, irradiance_size=IRR)
+    clipped = bake_probe(sun_shells["clipped"], (0, 0, 0), ProbeSettings(**settings))
+    gained = bake_probe(sun_shells["clipped"], (0, 0, 0), ProbeSettings(highlight_gain=60.0, **settings))
+    assert relative_rms(clipped.irradiance, sun_float.irradiance) > 0.4  # what clipping costs: 44%
+    assert relative_rms(gained.irradiance, sun_float.irradiance) < 1e-4
+    h = gained.highlights
+    assert h["on"] == "splats" and h["splats"] == 77 and h["gain"] == 60.0
+    assert h["share_before"] < 0.01 < 0.3 < h["share_after"]
+    # Without the splats (a renderer holding them), the cube's clipped texels: the blurred edge of a 7-degree disc
+    # falls below the clip and keeps its value, so it gets part of the light back only.
+    with SplatRenderer(sun_shells["clipped"]) as r:
+        on_cube = bake_probe(None, (0, 0, 0), ProbeSettings(highlight_gain=60.0, **settings), renderer=r)
+    assert on_cube.highlights["on"] == "cube"
+    assert 0.05 < relative_rms(on_cube.irradiance, sun_float.irradiance) < 0.4
+
+
+def test_a_sun_split_off_as_a_light_keeps_the_light_and_stops_sh_ringing(sun_shells, sun_float):
+    from gs_ibl_addon.core.probe.lights import lights_irradiance
+    normals = cubemap.face_directions(IRR)
+    settings = dict(face_size=64, irradiance_size=IRR)
+    split = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(lights=2, **settings))
+    (light,) = split.lights  # one compact bright region: the sky's gradient is no light
+    assert np.dot(light["direction"], np.asarray(SUN.direction) / np.linalg.norm(SUN.direction)) > 0.999
+    assert 0.2 < light["share"] < 0.4 and 10 < light["angle"] < 25
+    assert relative_rms(split.irradiance + lights_irradiance(split.lights, normals), sun_float.irradiance) < 0.01
+    sh = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(method="sh", **settings))
+    sh_split = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(method="sh", lights=1, **settings))
+    assert relative_rms(sh.irradiance, sun_float.irradiance) > 0.03
+    assert relative_rms(sh_split.irradiance + lights_irradiance(sh_split.lights, normals), sun_float.irradiance) < 0.006
+
+
+def test_lights_and_highlights_reach_probe_json_and_the_summary(sun_shells, tmp_path, capsys):
+    path = tmp_path / "clipped.ply"
+    write_ply(str(path), sun_shells["clipped"])
+    out = tmp_path / "probe"
+    assert main(["bake", str(path), "--probe", "0", "0", "0", "--face-size", "32", "--highlight-gain", "60",
+                 "--lights", "1", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    meta = json.loads((out / "probe.json").read_text())
+    assert meta["highlights"]["gain"] == 60.0 and meta["highlights"]["splats"] == 77
+    (light,) = meta["lights"]
+    assert set(light) == {"direction", "solid_angle", "angle", "irradiance", "share"}
+    assert "highlights: 77 splats clipped" in printed and "lights split from the probe (1)" in printed
+
+
+def test_bad_highlight_and_light_settings_are_refused(tmp_path, capsys):
+    with pytest.raises(BadSetting, match="highlight gain"):
+        check_settings(ProbeSettings(highlight_gain=0.5))
+    with pytest.raises(BadSetting, match="lights"):
+        check_settings(ProbeSettings(lights=20))
+    with pytest.raises(SystemExit):
+        main(["bake", str(tmp_path / "x.ply"), "--highlight-gain", "0.3", "--out", str(tmp_path / "o")])
+    assert "--highlight-gain" in capsys.readouterr().err
+
+
+# SH ringing next to a small bright source, and the convolution's arcs: filters of an analytic cube (no render).
+
+def sun_cube(sun_over_sky: float, size: int = 128) -> tuple[np.ndarray, "synthetic.BrightPatch"]:
+    """A 2-degree sun whose irradiance (facing it) is ``sun_over_sky`` times the sky's, on BrightPatch's sky."""
+    from gs_ibl_addon.core.probe.reference import cube_from_function
+    omega = 2 * np.pi * (1 - np.cos(np.radians(2.0)))
+    sun = synthetic.BrightPatch(radius_deg=2.0, intensity=sun_over_sky * np.pi / omega, colour=(1.0, 1.0, 1.0))
+    return cube_from_function(sun, size), sun
+
+
+@pytest.mark.parametrize("ratio, rings_negative", [(10, False), (30, True), (100, True)])
+def test_sh2_rings_negative_behind_a_bright_sun_and_windows_do_not_fix_it(ratio, rings_negative):
+    from gs_ibl_addon.core.probe.lights import extract_lights, lights_irradiance
+    from gs_ibl_addon.core.probe.reference import exact_irradiance_cube
+    from gs_ibl_addon.core.probe.sh_project import sh_irradiance_cube
+    cube, _ = sun_cube(ratio)
+    exact = exact_irradiance_cube(cube, IRR, 64)
+    raw, _ = sh_irradiance_cube(cube, IRR, 2, clamp=False)
+    assert (raw.min() < 0) == rings_negative  # the exact answer is >= 0.38 everywhere (the sky)
+    assert exact.min() > 0.35
+    errors = {}
+    for window, width in (("none", None), ("hanning", 5), ("lanczos", 6)):
+        e, _ = sh_irradiance_cube(cube, IRR, 2, window, width)
+        errors[window] = relative_rms(e, exact)
+    assert errors["none"] == min(errors.values())  # every window costs more than it saves
+    rest, lights = extract_lights(cube, 1)
+    split, _ = sh_irradiance_cube(rest, IRR, 2)
+    split = split + lights_irradiance(lights, cubemap.face_directions(IRR))
+    assert relative_rms(split, exact) < 0.005 < errors["none"] and split.min() > 0.35
+
+
+def test_convolution_arcs_are_aliasing_that_a_prefiltered_source_removes():
+    """conv samples a regular (phi, theta) grid with bilinear reads: a small bright disc is hit by more or fewer
+    samples as the normal turns, in rings about the disc. cosine_convolve now reads a copy box-filtered to two
+    texels per theta step (convolve.source_sizes); read from the full cube (as before) the error is twice as
+    large."""
+    from gs_ibl_addon.core.probe.convolve import cosine_convolve, hemisphere_grid
+    from gs_ibl_addon.core.probe.reference import cube_from_function, exact_irradiance_cube, tangent_frames, to_world
+    from gs_ibl_addon.core.probe.sampling import sample_cube_bilinear
+    cube = cube_from_function(synthetic.BrightPatch(), 128)
+    exact = exact_irradiance_cube(cube, 8)
+    local, w = hemisphere_grid(32, 8)
+    normals = cubemap.face_directions(8).reshape(-1, 3)
+    t, b = tangent_frames(normals)
+    unfiltered = np.einsum("s,msc->mc", w, sample_cube_bilinear(cube, to_world(local, t, b, normals)))
+    before = relative_rms(unfiltered.reshape(exact.shape), exact)
+    after = relative_rms(cosine_convolve(cube, 8, 32, 8), exact)
+    assert before > 0.02 and after < before / 2, (before, after)
+
+
+# A probe close to or inside splats.
+
+def test_a_probe_inside_splats_is_measured_in_sigmas_and_warned(room, tmp_path, capsys):
+    from gs_ibl_addon.core.probe.near import NEAR_SIGMAS, near_splats, near_warning
+    x0 = room.lo[0]
+    far, at_wall = near_splats(room.scene, (x0 + 1.0, 0.3, 1.4)), near_splats(room.scene, (x0, 0.3, 1.4))
+    assert far["nearest_sigmas"] > 100 and near_warning(far) is None
+    assert at_wall["nearest_sigmas"] < 1 and at_wall["splats_within"] >= 1
+    assert "inside splats" in near_warning(at_wall)
+    # The advice is right: moved by it, the probe is NEAR_SIGMAS from that splat.
+    close = (x0 + 0.01, 0.3, 1.4)  # wall splats are 5 mm thick: 2 sigma
+    rec = near_splats(room.scene, close)
+    moved = near_splats(room.scene, (x0 + 0.01 + rec["move"] + 1e-6, 0.3, 1.4))
+    assert rec["nearest_sigmas"] < NEAR_SIGMAS <= moved["nearest_sigmas"] + 1e-6
+    path = tmp_path / "room.ply"
+    write_ply(str(path), room.scene)
+    assert main(["bake", str(path), "--probe", str(x0), "0.3", "1.4", "--face-size", "32",
+                 "--out", str(tmp_path / "p")]) == 0
+    assert "the probe is inside splats" in capsys.readouterr().err
+    meta = json.loads((tmp_path / "p" / "probe.json").read_text())
+    assert meta["near_splats"]["nearest_sigmas"] < 1
+
+
+# Temporal stability: a probe moved along a path through the sample room.
+
+def test_irradiance_changes_smoothly_along_a_path():
+    env = synthetic.sample_environment()
+    ys = np.linspace(-1.0, -0.6, 9)  # 5 cm steps
+    with SplatRenderer(env) as r:
+        irr = [bake_probe(None, (0.3, y, 1.2), ProbeSettings(face_size=32, irradiance_size=IRR), renderer=r).irradiance
+               for y in ys]
+    steps = np.array([relative_rms(b, a) for a, b in zip(irr, irr[1:])])
+    assert steps.max() < 1.5 * np.median(steps), np.round(100 * steps, 2)  # no pop (measured 1.3x over 4 m)
+
+
+def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_shells, sun_float, tmp_path,
+                                                                    write_3dgs_ply):
+    """In a real bpy: a probe with Lights 1 over the sun shell gets one sun (the core's direction, irradiance and
+    angle; shadows on) in "GS-IBL Lights"; a re-bake replaces it, Lights 0 removes it."""
+    from gs_ibl_addon.blender.lights_from_probe import COLLECTION, lights_of
+    path = tmp_path / "sun.ply"
+    write_3dgs_ply(path, sun_shells["float"])
+    assert blender.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    blender.context.active_object.gs_ibl_splats.colour_space = "LINEAR"
+    blender.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = blender.context.active_object
+    s = probe.gs_ibl_probe
+    s.face_size, s.irradiance_size, s.lights = 64, IRR, 1
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}  # again: replaced, not added
+    (sun,) = lights_of(probe)
+    core = bake_probe(sun_shells["float"], (0, 0, 0), ProbeSettings(face_size=64, irradiance_size=IRR, lights=1))
+    (want,) = core.lights
+    axis = np.array(sun.matrix_world.to_3x3().col[2])  # a sun shines along -Z: +Z points at the light
+    assert np.dot(axis, want["direction"]) > 0.9999
+    assert sun.data.type == "SUN" and sun.data.use_shadow
+    assert sun.data.energy == pytest.approx(max(want["irradiance"]), rel=1e-4)
+    assert np.degrees(sun.data.angle) == pytest.approx(want["angle"], rel=1e-4)
+    assert sun.users_collection[0].name == COLLECTION
+    assert "lights split from the probe (1)" in s.last_report
+    s.lights = 0
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert not lights_of(probe) and not any(o.type == "LIGHT" for o in blender.data.objects)
+
+
+def test_blender_highlight_gain_lights_the_clipped_capture_like_the_float_one(blender, sun_shells, sun_float,
+                                                                             tmp_path, write_3dgs_ply):
+    from gs_ibl_addon.blender import world as gw
+    path = tmp_path / "clipped.ply"
+    write_3dgs_ply(path, sun_shells["clipped"])
+    assert blender.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    blender.context.active_object.gs_ibl_splats.colour_space = "LINEAR"
+    blender.ops.gs_ibl.add_probe(place="CURSOR")
+    s = blender.context.active_object.gs_ibl_probe
+    s.face_size, s.irradiance_size, s.highlight_gain = 64, IRR, 60.0
+    assert blender.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    image = blender.data.node_groups["GS-IBL Irradiance"].nodes["GS-IBL Irradiance Image"].image
+    want = cube_to_latlong(sun_float.irradiance, 4 * IRR)
+    assert relative_rms(gw.image_latlong_pixels(image), want) < 1e-3
+    assert "highlights: 77 splats clipped" in s.last_report

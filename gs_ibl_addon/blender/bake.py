@@ -14,11 +14,15 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ..core.bake import ProbeSettings, bake_probe, check_fits_device
+from ..core.tolerance import plan_text
+from ..core.probe.highlights import highlight_text
 from ..core.probe.holes import hole_fill_text, hole_warning
+from ..core.probe.lights import lights_text
 from ..core.probe.latlong import cube_to_latlong
 from ..core.settings import method_from_blender
 from . import splat_cache
 from . import world as gw
+from .lights_from_probe import sync_lights
 from .properties import is_probe
 from .splat_object import is_splat_object
 
@@ -28,7 +32,8 @@ HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
 def probe_settings(props) -> ProbeSettings:
     """The core's settings from a probe's properties (Object.gs_ibl_probe)."""
     return ProbeSettings(method=method_from_blender(props.method), face_size=int(props.face_size),
-                         irradiance_size=int(props.irradiance_size), tolerance=float(props.tolerance))
+                         irradiance_size=int(props.irradiance_size), tolerance=float(props.tolerance),
+                         highlight_gain=float(props.highlight_gain), lights=int(props.lights))
 
 
 def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,
@@ -114,6 +119,9 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
              f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
     lines.append(hole_fill_text(result.hole_fill))
+    if plan_text(st):  # what the tolerance chose and the estimated error (core/tolerance.py)
+        lines.append(plan_text(st))
+    lines += [line for line in (highlight_text(result.highlights), lights_text(result.lights)) if line]
     warning = None
     if result.hole_fraction > HOLE_WARNING:
         warning = hole_warning(result.hole_fill) or (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of "
@@ -138,14 +146,19 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
     cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
     check_fits_device(settings, cached.renderer.ctx, cached.renderer.scene_count)
-    result = bake_probe(None, np.array(probe.matrix_world.translation, np.float64), settings,
-                        renderer=cached.renderer, progress=progress)
+    where = np.array(probe.matrix_world.translation, np.float64)
+    if settings.highlight_gain != 1:  # the gain goes on the splats (exact), so this bake uploads its own copy
+        from .splat_object import scene_from_object
+        result = bake_probe(scene_from_object(splats), where, settings, progress=progress)
+    else:
+        result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress)
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]
     # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
     radiance = result_latlong(result, "radiance", max(2 * face, 32))
     irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
     apply_probe_images(scene, probe, radiance, irradiance)
+    sync_lights(scene, probe, result.lights, probe.gs_ibl_probe.strength)
     _baked[(scene.name, probe.name)] = bake_state(probe, splats)
     lines, warning = summary(result, time.perf_counter() - t0)
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([warning] if warning else []))

@@ -11,7 +11,7 @@ from bpy_extras.io_utils import ImportHelper, axis_conversion
 from ..core.formats import EXTENSIONS, SplatFormatError, read_scene
 from ..core.formats.axes import declared_axes
 from ..core.formats.spz import read_spz
-from .splat_object import create_splat_object
+from .splat_object import create_splat_object, native_splats_supported
 
 _AXES = [(a, a, "") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
 
@@ -81,8 +81,14 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
                 "z forward (SuperSplat, splat-transform, Niantic's ply_to_spz); use when an .spz comes in upside "
                 "down")],
         default="RUB")
+    native: BoolProperty(
+        name="Blender Splats", default=True,
+        description="Blender 5.3 and later: make a Gaussian-splat Point Cloud that Blender draws in the viewport and "
+                    "renders in EEVEE and Cycles itself; off: a mesh shown by the GS-IBL overlay and never rendered "
+                    "(what older Blenders always get)")
     show_proxy: BoolProperty(name="Point Proxy", default=True,
-                             description="Show a random subset of the splats as coloured points in the viewport")
+                             description="Show a random subset of the splats as coloured points in the viewport "
+                                         "(mesh objects only)")
 
     def draw(self, context):
         layout = self.layout
@@ -94,7 +100,13 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         layout.prop(self, "global_scale")
         if any(_is_spz(p) for p in self._paths()):
             layout.prop(self, "spz_axes")
-        layout.prop(self, "show_proxy")
+        if native_splats_supported():
+            layout.prop(self, "native")
+        if not self._native():
+            layout.prop(self, "show_proxy")
+
+    def _native(self) -> bool:
+        return self.native and native_splats_supported()
 
     def _paths(self) -> list[str]:
         names = [f.name for f in self.files if f.name]
@@ -127,10 +139,12 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         for path, scene in scenes:
             name = os.path.splitext(os.path.basename(path))[0] or "Splats"
             matrix = import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale, path)
-            obj = create_splat_object(context, scene, name, matrix, proxy=self.show_proxy)
+            native = self._native()
+            obj = create_splat_object(context, scene, name, matrix, proxy=self.show_proxy, native=native)
             repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
-            self.report({"INFO"}, f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r}"
-                        + (f"; repaired {repaired}" if repaired else ""))
+            kind = "Blender splats" if native else "a mesh for the GS-IBL overlay"
+            self.report({"INFO"}, f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r} "
+                        f"({kind})" + (f"; repaired {repaired}" if repaired else ""))
         return {"FINISHED"}
 
     def invoke(self, context, event):

@@ -118,7 +118,7 @@ def _chars_per_line(context) -> int:
     labels are cut, not wrapped, by Blender)."""
     region = getattr(context, "region", None)
     width = region.width if region is not None else 300
-    scale = context.preferences.system.ui_scale if context.preferences else 1.0
+    scale = (context.preferences.system.ui_scale if context.preferences else 1.0) or 1.0  # 0 without a window
     return max(20, int((width - 30 * scale) / (7.0 * scale)))
 
 
@@ -157,11 +157,10 @@ class GSIBL_PT_panel(bpy.types.Panel):
         obj = context.active_object
         if is_splat_object(obj):
             box = layout.box()
-            if is_native_splats(obj):
-                box.label(text=f"{splat_count(obj):,} splats (Blender's Gaussian splats)")
-            else:
-                info = obj["gs_ibl"]
-                box.label(text=f"{splat_count(obj):,} splats, SH {info.get('sh_degree', '?')}")
+            info = obj.get("gs_ibl")  # ours (mesh, or native on 5.3+) remember their file; Blender's importers don't
+            text = f"{splat_count(obj):,} splats" + (f", SH {info.get('sh_degree', '?')}" if info else "")
+            box.label(text=text + (" (Blender's Gaussian splats)" if is_native_splats(obj) else ""))
+            if info:
                 source = str(info.get("source", ""))
                 box.label(text=os.path.basename(source) or source)  # the path would be cut; its file name fits
             box.prop(obj.gs_ibl_splats, "colour_space", text="Colours")
@@ -188,6 +187,8 @@ class GSIBL_PT_panel(bpy.types.Panel):
         col.prop(s, "face_size")
         col.prop(s, "irradiance_size")
         col.prop(s, "tolerance")
+        col.prop(s, "highlight_gain")
+        col.prop(s, "lights")
         col.prop(s, "strength")
         col.prop(s, "keep_background")
         col.prop(s, "assign_world")

@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
+                       StringProperty)
 
 from ..core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
-                             MAX_IRRADIANCE_SIZE, blender_colour_space_items, blender_method_items)
+                             MAX_IRRADIANCE_SIZE, MAX_TOLERANCE, MIN_TOLERANCE, blender_colour_space_items,
+                             blender_method_items)
 from .splat_object import is_splat_object
 
 PROBE_NAME = "GS-IBL Probe"
@@ -38,13 +40,22 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
         default=DEFAULT_METHOD.upper())
     face_size: IntProperty(name="Face Size", default=0, min=0, max=MAX_FACE_SIZE,
                            description="Resolution of each of the six radiance faces rendered from the probe "
-                                       "(0: doubled from 32 until the irradiance changes by less than the tolerance)")
+                                       "(0: the smallest estimated to meet the tolerance)")
     irradiance_size: IntProperty(name="Irradiance Size", default=DEFAULT_IRRADIANCE_SIZE, min=4,
                                  max=MAX_IRRADIANCE_SIZE,
                                  description="Face size of the irradiance cube; its lat-long image is 4x as wide "
                                              "and 2x as high")
-    tolerance: FloatProperty(name="Tolerance", default=DEFAULT_TOLERANCE, min=1e-4, max=0.5, precision=3,
-                             description="Relative irradiance change that ends the face-size search (Face Size 0)")
+    tolerance: FloatProperty(name="Tolerance", default=DEFAULT_TOLERANCE, min=MIN_TOLERANCE, max=MAX_TOLERANCE,
+                             precision=3,
+                             description="Relative RMS irradiance error allowed: with Face Size 0 the face size is "
+                                         "chosen from an error estimate to meet it (the report gives the estimate)")
+    lights: IntProperty(name="Lights", default=0, min=0, max=8,
+                        description="Split up to this many bright compact regions (sun, lamp, window) off the probe "
+                                    "as sun lights with shadows; the World keeps the rest")
+    highlight_gain: FloatProperty(name="Highlight Gain", default=1.0, min=1.0, soft_max=100.0,
+                                  description="Directions clipped at the top of the range (windows and lamps in a "
+                                              "capture trained on 8-bit photos) times this: the light's real "
+                                              "brightness over 1.0")
     strength: FloatProperty(name="Strength", default=1.0, min=0.0, soft_max=10.0, update=_strength_changed,
                             description="Multiplier of the probe's light in the World")
     keep_background: BoolProperty(name="Keep Background", default=True,
@@ -54,9 +65,9 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                            "is remembered and can be restored)")
     mute_native_splats: BoolProperty(
         name="Native Splats Light Once", default=True,
-        description="Blender 5.3's native splats stop lighting meshes through Cycles' bounces while the baked World "
-                    "carries their light (it would count twice); the camera still sees them. Restore Previous World "
-                    "gives the bounces back")
+        description="Blender 5.3's native splats stop lighting meshes through Cycles' bounces and casting shadows "
+                    "while the baked World carries their light (it would count twice, and their shadows would darken "
+                    "it); the camera still sees them. Restore Previous World gives them back")
     pack_images: BoolProperty(name="Pack Images", default=True,
                               description="Keep baked images inside the .blend; off: save EXR files next to it")
     auto_update: BoolProperty(name="Update When Moved", default=False,
@@ -64,6 +75,17 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     update_interval: FloatProperty(name="Update Delay", default=0.5, min=0.0, soft_max=10.0, unit="TIME_ABSOLUTE",
                                    description="Seconds the probe and its splats must stay still before the "
                                                "automatic re-bake (a drag bakes once, at its end)")
+    # More than one probe (blender/object_probes.py, probe_grid.py)
+    variation_tolerance: FloatProperty(name="Variation Tolerance", default=0.05, min=0.005, max=1.0, precision=3,
+                                       subtype="FACTOR",
+                                       description="Check Light Variation warns about a mesh whose irradiance at "
+                                                   "its bounding-box corners differs more than this from its centre")
+    grid_region: PointerProperty(name="Grid Region", type=bpy.types.Object,
+                                 description="An Empty whose box (Cube display, its size and scale) the probe grid "
+                                             "spans; none: the lit meshes' bounds")
+    grid_resolution: IntVectorProperty(name="Grid", size=3, default=(3, 3, 2), min=1, max=16,
+                                       description="Probes along X, Y and Z of the probe grid")
+    local_report: StringProperty(name="Local Light", default="", options={"HIDDEN"})
     # Shown after a bake (read-only in the panel): what the last bake did.
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"})
     # What the last bake of this probe wrote: re-bakes update these in place, Strength edits this World only.

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake, importer, overlay, panel, properties, splat_cache, webp_decoder
+from . import bake, importer, local_light_ui, overlay, panel, properties, splat_cache, webp_decoder
 
-_CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES)
+_CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES, *local_light_ui.CLASSES)
 _MENUS = (*importer.MENUS, *panel.MENUS)
 
 

@@ -2,11 +2,13 @@
 
 * Ours: a mesh of loose vertices that carries every splat, saved inside the .blend (below).
 * Blender 5.3+'s native splats: a Point Cloud with ``type == 'GAUSSIAN_SPLAT'`` (made by Blender's PLY, SPZ and glTF
-  importers), whose point attributes are ``radiance:base`` (FLOAT4: f_dc RGB as stored, then opacity after the
-  sigmoid), ``scale`` (after exp), ``rotation`` (QUATERNION, w x y z) and ``radiance:sh_0`` .. ``radiance:sh_14``
-  (one RGB per higher SH coefficient, 3DGS order). Read with foreach_get straight into numpy.
-Either kind carries a colour space (Object.gs_ibl_splats.colour_space, core/colour.py): ours takes the file's
-declaration at import, a native one defaults to sRGB, Blender's own rule.
+  importers, and by ours on 5.3+ unless asked for a mesh), whose point attributes are ``radiance:base`` (FLOAT4:
+  f_dc RGB as stored, then opacity after the sigmoid), ``scale`` (after exp), ``rotation`` (QUATERNION, w x y z)
+  and ``radiance:sh_0`` .. ``radiance:sh_14`` (one RGB per higher SH coefficient, 3DGS order). Read with
+  foreach_get straight into numpy.
+Either kind carries a colour space (Object.gs_ibl_splats.colour_space, core/colour.py): our mesh takes the file's
+declaration at import; a native one defaults to sRGB, Blender's own rule, and ours stores a linear file's colours
+re-encoded for that rule (_fill_pointcloud), so Blender's renders and our bakes read them alike.
 
 Our mesh:
 
@@ -26,8 +28,10 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
+from ..core.colour import linear_sh_for_srgb_rule
 from ..core.scene import SplatScene, sh_dc_to_rgb
 from ..core.sh import degree_of
+from ..core.sh_rotation import rotate_sh
 from .compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
 from .datablocks import MARKER, find_ours
 
@@ -150,31 +154,74 @@ def _add_proxy(obj: bpy.types.Object, scene: SplatScene) -> None:
         obj.display_type = "BOUNDS"
 
 
+def native_splats_supported() -> bool:
+    """Blender 5.3+: a Point Cloud can be Gaussian splats, which Blender draws and renders itself."""
+    cloud_type = getattr(bpy.types, "PointCloud", None)
+    prop = cloud_type.bl_rna.properties.get("type") if cloud_type is not None else None
+    return prop is not None and "GAUSSIAN_SPLAT" in prop.enum_items.keys()
+
+
+def _fill_pointcloud(cloud, scene: SplatScene) -> str:
+    """Blender's own splat attributes from ``scene``; returns the colour space the stored colours are in.
+
+    Blender reads every splat's colour as sRGB (radiance = srgb_to_linear(SH + 0.5)). A linear scene is stored
+    re-encoded (core/colour.py linear_sh_for_srgb_rule: the DC colour exact, view dependence to first order), so that
+    Blender's renders show the radiance the file meant, and the object's colour space is then sRGB: our bake reads
+    the stored colours as Blender does."""
+    n = scene.count
+    cloud.type = "GAUSSIAN_SPLAT"
+    cloud.resize(n)
+    cloud.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(scene.positions, np.float32).ravel())
+    sh = scene.sh if scene.colour_space == "srgb" else linear_sh_for_srgb_rule(scene.sh)
+    base = np.empty((n, 4), np.float32)
+    base[:, :3] = sh[:, 0]
+    base[:, 3] = scene.opacities
+    _new_attr(cloud, "radiance:base", "FLOAT4", "vector", base)
+    _new_attr(cloud, "scale", "FLOAT_VECTOR", "vector", scene.scales)
+    _new_attr(cloud, "rotation", "QUATERNION", "value", scene.rotations)
+    for k in range(1, sh.shape[1]):
+        _new_attr(cloud, _NATIVE_SH.format(k - 1), "FLOAT_VECTOR", "vector", sh[:, k])
+    return "srgb"
+
+
 def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str,
-                        matrix: np.ndarray | None = None, proxy: bool = True) -> bpy.types.Object:
+                        matrix: np.ndarray | None = None, proxy: bool = True,
+                        native: bool = False) -> bpy.types.Object:
     """A new splat object holding ``scene``, linked to the active collection, selected and active.
 
+    native=True (Blender 5.3+, native_splats_supported()): a Gaussian-splat Point Cloud that Blender draws and
+    renders itself (viewport, EEVEE, Cycles), with no proxy or overlay of ours; otherwise our mesh of loose vertices
+    (never rendered: its light reaches meshes through a baked probe) with a point proxy if ``proxy``.
     On any failure every datablock made here is removed again, so the file is as it was.
     """
-    mesh = bpy.data.meshes.new(name)
+    if native and not native_splats_supported():
+        raise ValueError(f"Blender {bpy.app.version_string} has no native Gaussian splats (5.3 and later do): "
+                         "import as a mesh with the GS-IBL overlay")
+    data = bpy.data.pointclouds.new(name) if native else bpy.data.meshes.new(name)
     obj = None
     try:
-        _fill_mesh(mesh, scene)
-        obj = bpy.data.objects.new(name, mesh)
-        obj[MARKER] = {"source": scene.source, "sh_degree": scene.sh_degree, "version": 1}
+        if native:
+            space = _fill_pointcloud(data, scene)
+        else:
+            _fill_mesh(data, scene)
+            space = scene.colour_space
+        obj = bpy.data.objects.new(name, data)
+        obj[MARKER] = {"source": scene.source, "sh_degree": scene.sh_degree, "version": 1,
+                       "declared_colour_space": scene.colour_space}
         if hasattr(obj, "gs_ibl_splats"):  # registered (not in a bare bpy that only builds objects)
-            obj.gs_ibl_splats.colour_space = scene.colour_space.upper()  # the file's declaration (else sRGB)
+            obj.gs_ibl_splats.colour_space = space.upper()  # the file's declaration (else sRGB), as stored
         if matrix is not None:
             # a Matrix, not nested lists: RNA would read nested lists column-major (transposed)
             obj.matrix_world = Matrix([list(r) for r in np.asarray(matrix, np.float64)])
-        obj.hide_render = True
-        if proxy:
-            _add_proxy(obj, scene)
+        if not native:
+            obj.hide_render = True
+            if proxy:
+                _add_proxy(obj, scene)
         context.collection.objects.link(obj)
     except BaseException:
         if obj is not None:
             bpy.data.objects.remove(obj)
-        bpy.data.meshes.remove(mesh)
+        (bpy.data.pointclouds if native else bpy.data.meshes).remove(data)
         raise
     for o in context.view_layer.objects.selected:
         o.select_set(False)
@@ -241,12 +288,15 @@ def scene_from_pointcloud(cloud, source: str = "<blender>") -> SplatScene:
 
 def scene_from_object(obj: bpy.types.Object) -> SplatScene:
     """Either kind of splat object's splats in Blender world space (its matrix_world applied), with its colour
-    space: what a probe bake needs. SH view dependence stays in the object's frame (core SplatScene.transformed).
+    space: what a probe bake needs. View-dependent colour (SH degree >= 1) turns with the object, as Blender's own
+    splats do (it evaluates them in the object's frame): the SH are rotated by the matrix's rotation.
 
     Raises ValueError naming the object when its transform cannot move splats (non-uniform or mirrored scale).
     """
     if is_native_splats(obj):
-        local = scene_from_pointcloud(obj.data, obj.name)
+        info = obj.get(MARKER)  # one of ours remembers its file; Blender's own importers' know none
+        local = scene_from_pointcloud(obj.data, str(info.get("source", obj.name)) if hasattr(info, "get")
+                                      else obj.name)
     elif is_mesh_splats(obj):
         info = obj[MARKER]
         local = scene_from_mesh(obj.data, str(info.get("source", obj.name)) if hasattr(info, "get") else obj.name)
@@ -254,8 +304,13 @@ def scene_from_object(obj: bpy.types.Object) -> SplatScene:
         raise ValueError(f"{obj.name if obj else None!r} is not a splat object (import a splat file first, or pick "
                          "a Gaussian-splat Point Cloud)")
     local.colour_space = colour_space_of(obj)
+    matrix = np.array(obj.matrix_world, np.float64)
     try:
-        return local.transformed(np.array(obj.matrix_world, np.float64))
+        world = local.transformed(matrix)
     except ValueError as e:
         # The core's message says what is wrong with the matrix; the user needs to know which object has it.
         raise ValueError(f"{obj.name}: {e}") from e
+    if world.sh.shape[1] > 1:
+        u, _, vt = np.linalg.svd(matrix[:3, :3])  # the rotation nearest the (uniformly scaled) matrix
+        world.sh = rotate_sh(world.sh, u @ vt)
+    return world

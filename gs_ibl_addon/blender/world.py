@@ -241,13 +241,15 @@ def native_splats_in(scene: bpy.types.Scene) -> list[bpy.types.Object]:
 
 def mute_native_splats(scene: bpy.types.Scene) -> list[str]:
     """Blender 5.3's native splats stop lighting meshes through Cycles' diffuse and glossy bounces while our World
-    carries their light (it would count twice); camera rays still see them. Each object keeps what it had
-    (RAY_VISIBILITY) for unmute_native_splats. Returns the names of the objects changed now."""
+    carries their light (it would count twice), and stop casting shadows: our World already stands for the light
+    they let through, and shadow rays blocked by them took 20-35% of it in Cycles (tests/real_blender/
+    test_cycles_reference.py). Camera rays still see them. Each object keeps what it had (RAY_VISIBILITY) for
+    unmute_native_splats. Returns the names of the objects changed now."""
     changed = []
     for obj in native_splats_in(scene):
         if RAY_VISIBILITY not in obj.keys():
-            obj[RAY_VISIBILITY] = [int(obj.visible_diffuse), int(obj.visible_glossy)]
-            obj.visible_diffuse = obj.visible_glossy = False
+            obj[RAY_VISIBILITY] = [int(obj.visible_diffuse), int(obj.visible_glossy), int(obj.visible_shadow)]
+            obj.visible_diffuse = obj.visible_glossy = obj.visible_shadow = False
             changed.append(obj.name)
     return changed
 
@@ -259,6 +261,8 @@ def unmute_native_splats(scene: bpy.types.Scene) -> list[str]:
         saved = obj.get(RAY_VISIBILITY)
         if saved is not None:
             obj.visible_diffuse, obj.visible_glossy = bool(saved[0]), bool(saved[1])
+            if len(saved) > 2:  # files saved before shadows were muted kept two
+                obj.visible_shadow = bool(saved[2])
             del obj[RAY_VISIBILITY]
             changed.append(obj.name)
     return changed

@@ -1,9 +1,11 @@
 """Bake a light probe: splats -> radiance cubemap (GPU) -> irradiance (GPU filter) -> ProbeResult.
 
-``auto`` models no more than the probe needs, measured on the probe itself. Irradiance is a low-pass of the
-radiance, so its error at face size N is about how much it still changes when the faces are doubled: starting at
-32^2 faces, the cube is re-rendered at twice the size until the irradiance moves by less than the tolerance
-(relative RMS), and the finer of the last two is kept. The filter is the exact texel integral on the GPU
+``auto`` models no more than the probe needs, measured on the probe itself: with face size 0 the cube is rendered
+at 32^2 and 64^2, an error model (core/tolerance.py: the dilation's share of each splat's footprint, calibrated on
+the change between the two) predicts the face size that meets the tolerance (relative RMS irradiance error), and
+the bake renders that size next, until the estimate at the size rendered meets it. With irradiance size 0 the
+irradiance faces are chosen too, by the error of reading between texels. The filter is the exact texel integral on
+the GPU
 (docs/accuracy.md: it costs about what SH projection costs and has neither SH's ringing nor the cosine
 convolution's sampling noise); the 9 SH coefficients are still computed and stored in probe.json.
 """
@@ -18,13 +20,17 @@ import numpy as np
 from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import gpu_ggx_prefilter
+from .probe.highlights import gain_clipped_splats, recover_highlights
 from .probe.holes import fill_holes
+from .probe.lights import extract_lights
+from .probe.near import near_splats
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
+from .tolerance import ErrorModel, check_tolerance, choose_irradiance_size, footprints, relative_rms, search_face
 from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_HOLE_FILL, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD,
                        DEFAULT_LOD_K, DEFAULT_METHOD, DEFAULT_TOLERANCE, HOLE_FILLS, LOD_MODES, MAX_IRRADIANCE_SIZE,
-                       METHOD_ALIASES, METHOD_NAMES)
+                       IRRADIANCE_SIZES, METHOD_ALIASES, METHOD_NAMES)
 
 # From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
 # face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
@@ -42,9 +48,9 @@ class BadSetting(ValueError):
 @dataclass
 class ProbeSettings:
     method: str = DEFAULT_METHOD  # one of settings.METHOD_NAMES
-    face_size: int = 0  # radiance face size; 0 = the smallest whose irradiance has converged to the tolerance
-    irradiance_size: int = DEFAULT_IRRADIANCE_SIZE  # irradiance cube face size (lat-long output is 4x as wide)
-    tolerance: float = DEFAULT_TOLERANCE  # relative RMS irradiance change that ends the face-size search
+    face_size: int = 0  # radiance face size; 0 = the smallest estimated to meet the tolerance (core/tolerance.py)
+    irradiance_size: int = DEFAULT_IRRADIANCE_SIZE  # irradiance cube face (lat-long 4x as wide); 0 = from tolerance
+    tolerance: float = DEFAULT_TOLERANCE  # relative RMS irradiance error the face size (and size 0s) are chosen for
     sh_order: int = 2
     glossy: bool = False  # also GGX prefiltered radiance for glossy surfaces (slower)
     max_face_size: int = AUTO_MAX_FACE
@@ -52,6 +58,8 @@ class ProbeSettings:
     lod_k: float = DEFAULT_LOD_K  # with lod "auto": a merged node is drawn once its cell spans <= lod_k pixels
     hole_fill: str = DEFAULT_HOLE_FILL  # one of settings.HOLE_FILLS: the light of directions with no splat
     hole_colour: tuple[float, float, float] = (0.0, 0.0, 0.0)  # the fill's radiance with hole_fill "constant"
+    highlight_gain: float | str = 1.0  # clipped splats' light times this, or "auto" (core/probe/highlights.py)
+    lights: int = 0  # split up to this many bright compact regions off as lights (core/probe/lights.py)
     extra: dict = field(default_factory=dict)  # passed through to filter_probe (sample counts, windows...)
 
 
@@ -62,11 +70,11 @@ def check_settings(s: ProbeSettings) -> str:
     if method is None:
         raise BadSetting("method", s.method, f"unknown irradiance method {s.method!r}: use one of "
                                              f"{', '.join(METHOD_NAMES)}")
-    for name, value, low in (("face_size", s.face_size, 0), ("irradiance_size", s.irradiance_size, 1),
+    for name, value, low in (("face_size", s.face_size, 0), ("irradiance_size", s.irradiance_size, 0),
                              ("max_face_size", s.max_face_size, 1)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise BadSetting(name, value, f"{name.replace('_', ' ')} {value!r} must be a whole number, "
-                                          f"{low} or more" + (" (0: search)" if name == "face_size" else ""))
+                                          f"{low} or more" + (" (0: from the tolerance)" if low == 0 else ""))
     if s.irradiance_size > MAX_IRRADIANCE_SIZE:
         raise BadSetting("irradiance_size", s.irradiance_size,
                          f"irradiance size {s.irradiance_size} is more than {MAX_IRRADIANCE_SIZE}; irradiance is "
@@ -85,9 +93,16 @@ def check_settings(s: ProbeSettings) -> str:
     if colour is None or not np.all(np.isfinite(colour)) or np.any(colour < 0):
         raise BadSetting("hole_colour", s.hole_colour, f"hole colour {s.hole_colour!r} must be three numbers "
                                                        "R G B, 0 or more (linear radiance)")
-    if not (isinstance(s.tolerance, (int, float)) and 0 < s.tolerance < 1):
-        raise BadSetting("tolerance", s.tolerance, f"tolerance {s.tolerance} must be a fraction between 0 and 1 "
-                                                   "(0.01 = 1%)")
+    if s.highlight_gain != "auto" and (isinstance(s.highlight_gain, bool) or not isinstance(
+            s.highlight_gain, (int, float)) or not 1 <= s.highlight_gain <= 1e6):
+        raise BadSetting("highlight_gain", s.highlight_gain, f"highlight gain {s.highlight_gain!r} must be a number "
+                                                             "from 1 (off) up, or auto")
+    if isinstance(s.lights, bool) or not isinstance(s.lights, (int, np.integer)) or not 0 <= s.lights <= 8:
+        raise BadSetting("lights", s.lights, f"lights {s.lights!r} must be a whole number from 0 (none) to 8")
+    try:
+        check_tolerance(s.tolerance)
+    except ValueError as e:
+        raise BadSetting("tolerance", s.tolerance, str(e)) from None
     return method
 
 
@@ -108,10 +123,16 @@ def largest_face(s: ProbeSettings) -> int:
     return int(s.face_size) or int(s.max_face_size)
 
 
+def largest_irradiance(s: ProbeSettings) -> int:
+    """The largest irradiance face the bake can make: the fixed size, or the largest size 0 may choose."""
+    return int(s.irradiance_size) or IRRADIANCE_SIZES[-1]
+
+
 def check_fits_device(s: ProbeSettings, ctx=None, splats: int = 0, sh_coeffs: int = 16) -> None:
     """Refuse face or irradiance sizes the device or host memory cannot hold (limits.TooBig names the option)."""
     from .limits import check_fits, cube_bytes
     face = largest_face(s)
+    s = replace(s, irradiance_size=largest_irradiance(s))
     check_fits("face_size" if s.face_size else "max_face_size", face,
                cube_bytes(face, s.irradiance_size, splats, sh_coeffs, s.glossy),
                lambda v: cube_bytes(v, s.irradiance_size, splats, sh_coeffs, s.glossy), ctx,
@@ -124,6 +145,7 @@ def estimate_output_bytes(s: ProbeSettings, half: bool = False, cube_faces: bool
     """Upper bound of the bytes write_probe (plus a preview PNG) writes for these settings."""
     from .limits import exr_bytes
     face = largest_face(s)
+    s = replace(s, irradiance_size=largest_irradiance(s))
     total = exr_bytes(4 * face, 2 * face, 3, half) + exr_bytes(max(64, 4 * s.irradiance_size),
                                                                  max(32, 2 * s.irradiance_size), 3, half)
     levels = [max(4, face >> k) for k in range(5)] if s.glossy else []
@@ -142,18 +164,16 @@ def default_probe_position(scene: SplatScene) -> np.ndarray:
     return (scene.positions.astype(np.float64) * w[:, None]).sum(0) / max(w.sum(), 1e-12)
 
 
-def relative_rms(a: np.ndarray, b: np.ndarray) -> float:
-    """RMS of a - b over the RMS of b (all channels pooled)."""
-    return float(np.sqrt(np.mean((a - b) ** 2)) / max(np.sqrt(np.mean(b ** 2)), 1e-12))
-
-
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
                        say: Callable[[str, float], None],
-                       hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None) -> ProbeResult:
-    """Render (and, with face size 0, search the face size), fill the holes, filter, and add the glossy maps when
-    asked."""
+                       hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
+                       highlights_done: bool = False, prints=None) -> ProbeResult:
+    """Render (and, with face size 0, choose the face size), fill the holes, filter, and add the glossy maps when
+    asked. ``prints``: the splats' tolerance.Footprints from the probe (None: the error model falls back to the
+    changes' tail)."""
     # a renderer holding a level of detail draws from it when asked (one built without renders every splat)
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
+    m_search = int(s.irradiance_size) or DEFAULT_IRRADIANCE_SIZE  # the size 0 chooses from is picked at the end
 
     def probe_at(face: int) -> ProbeResult:
         cube = ViewBatch.cubemap(pos, face)
@@ -162,7 +182,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             # for the face size kept (below).
             # wait=False: the filter is queued behind the render and the host waits once for both.
             res = r.render(cube, timestamps=True, wait=False, lod_k=lod_k)
-            probe = filter_probe(res.frame, irradiance_size=s.irradiance_size, method=method, sh_order=s.sh_order,
+            probe = filter_probe(res.frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
                                  roughness=None, read_radiance=False, splat_count=splat_count,
                                  device=r.ctx.device_name, **s.extra)
             probe.timings_ms.update({f"render_{k}": v for k, v in res.timings_ms.items()})
@@ -175,30 +195,25 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                 images += res.images
                 for k, v in res.timings_ms.items():
                     timings[f"render_{k}"] = timings.get(f"render_{k}", 0.0) + v
-        return filter_probe(np.stack(images), irradiance_size=s.irradiance_size, method=method,
+        return filter_probe(np.stack(images), irradiance_size=m_search, method=method,
                             sh_order=s.sh_order, roughness=None, timings_ms=timings, use_gpu=True, vk_context=r.ctx,
                             splat_count=splat_count, device=r.ctx.device_name, **s.extra)
 
     trials: list[dict] = []
+    plan: dict = {}
     if s.face_size:
         face = int(s.face_size)
         say(f"rendering a {face}x{face} cubemap", 0.2)
         result = probe_at(face)
     else:
-        face = AUTO_FIRST_FACE
-        say(f"rendering a {face}x{face} cubemap", 0.1)
-        result = probe_at(face)
-        trials.append({"face_size": face, "change": None})
-        while face < s.max_face_size:
-            face *= 2
-            finer = probe_at(face)
-            change = relative_rms(result.irradiance, finer.irradiance)
-            trials.append({"face_size": face, "change": change})
-            say(f"{face}x{face}: irradiance moved {100 * change:.2f}% from {face // 2}x{face // 2}",
-                min(0.8, 0.1 + 0.1 * len(trials)))
-            result = finer
-            if change <= s.tolerance:
-                break
+        if lod_k > 0:  # the level of detail is kept only where its own error is within half the tolerance
+            merged, lod_k = probe_at(AUTO_FIRST_FACE).irradiance, 0.0
+            plan["lod_error"] = relative_rms(merged, probe_at(AUTO_FIRST_FACE).irradiance)
+            lod_k = float(s.lod_k) if plan["lod_error"] <= s.tolerance / 2 else 0.0
+        model = ErrorModel(prints)
+        result, face, trials, est = search_face(probe_at, model, s.tolerance, AUTO_FIRST_FACE,
+                                                int(s.max_face_size), say)
+        plan.update(model=model.kind, estimated_error=est, met=est <= s.tolerance)
     frame = None
     if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
         frame = r.last_frame
@@ -206,22 +221,40 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     # Holes are filled on the radiance read back (the search above compared the unfilled probes: a fill moves
     # every size alike) and the kept size is filtered again from it; a probe without holes pays nothing.
     result.radiance, result.hole_fill = fill_holes(result.radiance, s.hole_fill, s.hole_colour, hole_radiance)
-    if result.hole_fill["fraction"] > 0 and s.hole_fill != "black":
+    if s.highlight_gain != 1 and not highlights_done:  # no scene to gain the splats of: the cube's clipped texels
+        result.radiance, result.highlights = recover_highlights(result.radiance, s.highlight_gain, r.colour_space)
+    result.radiance, result.lights = extract_lights(result.radiance, s.lights)
+    if (result.hole_fill["fraction"] > 0 and s.hole_fill != "black") or result.highlights or result.lights:
         t0 = time.perf_counter()
-        filled = filter_probe(result.radiance[..., :3], irradiance_size=s.irradiance_size, method=method,
+        filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
                               sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
         result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
         result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
         frame = None  # the glossy maps take the filled radiance
+    m = m_search
+    if not s.irradiance_size:
+        m, result.irradiance, between = choose_irradiance_size(
+            lambda size: filter_probe(result.radiance[..., :3], irradiance_size=size, method=method, sh_order=2,
+                                      roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra).irradiance,
+            s.tolerance)
+        plan["irradiance_between_texels"] = {str(k): v for k, v in between.items()}
+    if trials and result.sh_coefficients is not None:  # what 9 SH coefficients alone would give (probe.json has them)
+        from .cubemap import face_directions
+        from .probe.sh_project import sh_irradiance
+        plan["sh_error"] = relative_rms(sh_irradiance(np.asarray(result.sh_coefficients, np.float64),
+                                                      face_directions(m)), result.irradiance)
     if s.glossy:
         say("prefiltering glossy maps", 0.85)
         result.prefiltered, ggx_ms = gpu_ggx_prefilter(frame if frame is not None else np.asarray(result.radiance),
                                                        GLOSSY_ROUGHNESS, ctx=r.ctx)
         result.roughness = list(GLOSSY_ROUGHNESS)
         result.timings_ms["ggx"] = ggx_ms.get("total", 0.0)
+    if trials:
+        plan.update(face_size=face, irradiance_size=m, method=method, sh_order=s.sh_order,
+                    lod="auto" if lod_k > 0 else "off")
     result.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
-                            "face_size_trials": trials, "converged": (not trials) or
-                            (trials[-1]["change"] is not None and trials[-1]["change"] <= s.tolerance),
+                            "irradiance_size": m, "face_size_trials": trials,
+                            "converged": (not trials) or bool(plan.get("met")), "tolerance_plan": plan,
                             "probe_position": [float(x) for x in pos]})
     return result
 
@@ -229,8 +262,12 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
 def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSettings | dict | None = None,
                renderer: SplatRenderer | None = None,
                progress: Callable[[str, float], None] | None = None,
-               hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None) -> ProbeResult:
+               hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
+               estimate_from: SplatScene | None = None) -> ProbeResult:
     """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX).
+
+    ``estimate_from``: the splats on the host for the face-size error model when ``scene`` is None (without them the
+    model falls back to the changes' tail, core/tolerance.py).
 
     Directions that meet no splat are filled by ``settings.hole_fill`` (core/probe/holes.py); ``hole_radiance``,
     a function of (M, 3) unit directions returning (M, 3) linear RGB, is the light of hole fill "environment"
@@ -250,12 +287,21 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     say = progress or (lambda _msg, _frac: None)
     t0 = time.perf_counter()
     r = renderer
+    highlights = None
+    if scene is not None and renderer is None:  # clipped splats gained before upload (core/probe/highlights.py)
+        scene, highlights = gain_clipped_splats(scene, s.highlight_gain)
     try:
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance)
+        host = scene if scene is not None else estimate_from
+        prints = footprints(host, pos) if host is not None and not s.face_size else None
+        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None,
+                                    prints)
+        result.highlights = highlights or result.highlights
         result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
+        if scene is not None:
+            result.near_splats = near_splats(scene, pos)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .sh import C0
+
 COLOUR_SPACES: tuple[str, ...] = ("srgb", "linear")  # core/settings.py has the labels and the "auto" choice
 
 
@@ -29,6 +31,40 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     c = np.asarray(c, np.float64)
     return np.where(c < 0.04045, np.maximum(c, 0.0) / 12.92,
                     np.power((np.maximum(c, 0.04045) + 0.055) / 1.055, 2.4))
+
+
+_TOE = 0.04045 / 12.92
+
+
+def linear_to_srgb_extended(x: np.ndarray) -> np.ndarray:
+    """The exact inverse of srgb_to_linear on x >= 0, unclamped above 1 (linear 5.0 -> sRGB 2.0); negatives -> 0.
+
+    What a splat must store for Blender's sRGB decoding to give linear radiance x (linear scenes as native splats).
+    """
+    x = np.maximum(np.asarray(x, np.float64), 0.0)
+    # the toe ends where srgb_to_linear's does (0.04045 / 12.92), not at the rounded 0.0031308: exact both sides
+    return np.where(x < _TOE, 12.92 * x, 1.055 * np.power(np.maximum(x, _TOE), 1.0 / 2.4) - 0.055)
+
+
+def linear_sh_for_srgb_rule(sh: np.ndarray) -> np.ndarray:
+    """SH (N, K, 3) of a linear scene re-encoded so that Blender's rule, radiance = srgb_to_linear(SH(d) + 0.5),
+    gives the radiance the linear rule gave, max(SH(d) + 0.5, 0).
+
+    The DC colour, which carries nearly all of a probe's light, is exact (linear_to_srgb_extended); the curve is not
+    linear, so view-dependent bands (K > 1) are scaled by its slope at the DC colour: exact to first order in their
+    size. Where the DC colour is 0 or below (no light) the bands are kept as they are.
+    """
+    sh = np.asarray(sh, np.float64)
+    out = np.array(sh, copy=True)
+    c = C0 * sh[:, 0] + 0.5
+    enc = linear_to_srgb_extended(c)
+    out[:, 0] = (enc - 0.5) / C0
+    if sh.shape[1] > 1:
+        # d enc / d c: 12.92 in the linear toe, (1.055 / 2.4) c^(1/2.4 - 1) above it
+        slope = np.where(c < _TOE, 12.92, (1.055 / 2.4) * np.power(np.maximum(c, _TOE), 1.0 / 2.4 - 1.0))
+        slope = np.where(c > 0.0, slope, 1.0)
+        out[:, 1:] = sh[:, 1:] * slope[:, None, :]
+    return out.astype(np.float32)
 
 
 def check_colour_space(space: str, who: str = "colour space") -> str:

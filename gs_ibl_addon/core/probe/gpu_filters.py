@@ -21,10 +21,16 @@ context's pool. Each function returns (result, timings_ms) with GPU timestamps p
 ``FilterPlan`` is what filter_probe uses: [split] -> SH projection -> irradiance, recorded once per source and
 settings and submitted again for each probe; it reads back the SH partials, the hole partials and the small
 irradiance cube only.
+
+Many probes (a frame of SplatRenderer.render_probes): ``filter_probes`` runs the same plan over all P cubes of
+the frame at once, workgroup z being the probe in split, SH projection, downsampling and the exact integral (the
+shaders offset their cube by z; z = 0 is the single probe), so P probes cost one submission and one read-back.
 """
 from __future__ import annotations
 
 import math
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -33,12 +39,13 @@ from ..vk import Buffer, Recorder, get_context
 from ..vk import Program, groups, scratch
 from ..vk.kernels import KERNELS
 from .box import box_level_size, halving_sizes
-from .convolve import check_steps
+from .convolve import check_steps, source_sizes
 from .ggx import DEFAULT_ROUGHNESS, ggx_samples, level_sizes
 from .reference import integration_size
 from .sampling import split_alpha
 from .sh_project import cosine_lobe_coefficients, window_factors
 
+BATCH_METHODS = ("exact", "sh")  # irradiance methods filter_probes runs over many probes at once
 SH_GROUPS_MAX = 64  # workgroups of the SH and hole reductions: enough to fill a GPU, few enough to sum on the host
 PLANS_KEPT = 16  # recorded filter plans per context
 
@@ -121,11 +128,13 @@ class _Scratch:
         return self.upload(rgb, "probe-radiance"), int(rgb.shape[1])
 
 
-def record_split(rec: Recorder, frame_image: Buffer, rgb: Buffer, hole_partial: Buffer, n: int) -> None:
-    """Record frame RGBA -> packed RGB cube, and the hole partials (sum them, / 4pi: the hole fraction)."""
+def record_split(rec: Recorder, frame_image: Buffer, rgb: Buffer, hole_partial: Buffer, n: int,
+                 probes: int = 1) -> None:
+    """Record frame RGBA -> packed RGB cube(s), and the hole partials (sum them, / 4pi: the hole fraction), for
+    ``probes`` cubes one after another (partials: _reduction_groups(n) per probe)."""
     ctx = rec.ctx
     g = _reduction_groups(n)
-    rec.dispatch(KERNELS["probe_split_alpha"], [frame_image, omega_table(ctx, n), rgb, hole_partial], g,
+    rec.dispatch(KERNELS["probe_split_alpha"], [frame_image, omega_table(ctx, n), rgb, hole_partial], (g, 1, probes),
                  n=n, n_groups=g)
     rec.timestamp("split")
 
@@ -189,15 +198,16 @@ def _face_size(cube) -> int:
     return int(np.shape(cube)[1])
 
 
-def _downsample(rec: Recorder, scratch: _Scratch, sizes: list[int], src: Buffer) -> list[Buffer]:
+def _downsample(rec: Recorder, scratch: _Scratch, sizes: list[int], src: Buffer, probes: int = 1) -> list[Buffer]:
     """Record 2x2 solid-angle downsampling (box.downsample_cube) along ``sizes`` (box.halving_sizes, starting at
-    src's face size): one buffer per size, src first, each later one made from the one before."""
+    src's face size): one buffer per size, src first, each later one made from the one before (``probes`` cubes
+    each)."""
     ctx = scratch.ctx
     levels = [src]
     for child, parent in zip(sizes, sizes[1:]):
-        dst = scratch.empty(6 * parent * parent * 3 * 4, f"probe-mip-{parent}")
+        dst = scratch.empty(probes * 6 * parent * parent * 3 * 4, f"probe-mip-{parent}")
         rec.dispatch(KERNELS["probe_downsample"], [levels[-1], omega_table(ctx, child), dst],
-                     groups(6 * parent * parent, 64, ctx), n=child)
+                     groups(6 * parent * parent, 64, ctx) + (probes,), n=child)
         levels.append(dst)
     return levels
 
@@ -210,9 +220,10 @@ def _sh_partials(partial: Buffer, n_groups: int) -> np.ndarray:
     return partial.read(np.float32, n_groups * 27).reshape(n_groups, 9, 3).astype(np.float64).sum(axis=0)
 
 
-def _record_sh_project(rec: Recorder, src: Buffer, n: int, part: Buffer) -> int:
+def _record_sh_project(rec: Recorder, src: Buffer, n: int, part: Buffer, probes: int = 1) -> int:
+    """Record the SH partials of ``probes`` cubes (27 floats per group, _reduction_groups(n) groups per probe)."""
     g = _reduction_groups(n)
-    rec.dispatch(KERNELS["probe_sh_project"], [src, omega_table(rec.ctx, n), part], g, n=n, n_groups=g)
+    rec.dispatch(KERNELS["probe_sh_project"], [src, omega_table(rec.ctx, n), part], (g, 1, probes), n=n, n_groups=g)
     return g
 
 
@@ -252,10 +263,12 @@ def gpu_sh_irradiance(coeffs: np.ndarray, size: int, window: str = "none", windo
     return irr, rec.timings_ms
 
 
-def _record_convolve(rec: Recorder, src: Buffer, n: int, out: Buffer, size: int, phi_steps: int,
+def _record_convolve(rec: Recorder, scratch: _Scratch, src: Buffer, n: int, out: Buffer, size: int, phi_steps: int,
                      theta_steps: int) -> None:
+    sizes = source_sizes(n, theta_steps)  # the grid reads a cube matched to its spacing
+    src = _downsample(rec, scratch, sizes, src)[-1]
     rec.dispatch(KERNELS["probe_convolve"], [src, out], groups(6 * size * size, 64, rec.ctx),
-                 n=n, m=size, phi_steps=phi_steps, theta_steps=theta_steps)
+                 n=sizes[-1], m=size, phi_steps=phi_steps, theta_steps=theta_steps)
     rec.timestamp("convolve")
 
 
@@ -268,7 +281,7 @@ def gpu_cosine_convolve(cube, size: int, phi_steps: int = 64, theta_steps: int =
         out = scratch.empty(6 * size * size * 3 * 4, "probe-irradiance")
         with Recorder(ctx, timestamps=True) as rec:
             src, n = scratch.source(rec, cube)
-            _record_convolve(rec, src, n, out, size, phi_steps, theta_steps)
+            _record_convolve(rec, scratch, src, n, out, size, phi_steps, theta_steps)
         irr = _read_cube(out, size)
     return irr, rec.timings_ms
 
@@ -294,11 +307,12 @@ def gpu_box_irradiance(cube, size: int, level_size: int | None = None,
     return irr, rec.timings_ms
 
 
-def _record_exact(rec: Recorder, scratch: _Scratch, src: Buffer, n: int, out: Buffer, size: int, k: int) -> None:
-    small = _downsample(rec, scratch, halving_sizes(n, k), src)[-1]
+def _record_exact(rec: Recorder, scratch: _Scratch, src: Buffer, n: int, out: Buffer, size: int, k: int,
+                  probes: int = 1) -> None:
+    small = _downsample(rec, scratch, halving_sizes(n, k), src, probes)[-1]
     rec.timestamp("downsample")
-    rec.dispatch(KERNELS["probe_integrate"], [small, texel_table(rec.ctx, k), out], groups(6 * size * size, 1, rec.ctx),
-                 n=k, m=size)
+    rec.dispatch(KERNELS["probe_integrate"], [small, texel_table(rec.ctx, k), out],
+                 groups(6 * size * size, 1, rec.ctx) + (probes,), n=k, m=size)
     rec.timestamp("integrate")
 
 
@@ -407,34 +421,39 @@ class FilterPlan:
     and the settings are the key, so a bake's probes and a benchmark's repeats record once.
     """
 
-    def __init__(self, ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, params: dict) -> None:
+    def __init__(self, ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, params: dict,
+                 probes: int = 1) -> None:
+        if probes > 1 and method not in BATCH_METHODS:
+            raise ValueError(f"irradiance method {method!r} filters one probe at a time; several probes at once "
+                             f"take {' or '.join(BATCH_METHODS)}")
         self.ctx, self.n, self.size, self.method, self.params = ctx, n, size, method, params
-        self.is_frame = is_frame
+        self.is_frame, self.probes = is_frame, probes
         self._scratch = _Scratch(ctx)
         s = self._scratch
-        self.sh_partial = s.empty(SH_GROUPS_MAX * 27 * 4, "probe-sh-partial")
-        self.hole_partial = s.empty(SH_GROUPS_MAX * 4, "probe-hole-partial") if is_frame else None
-        self.out = s.empty(6 * size * size * 12, "probe-irradiance") if method != "sh" else None
+        g = _reduction_groups(n)
+        self.sh_partial = s.empty(probes * g * 27 * 4, "probe-sh-partial")
+        self.hole_partial = s.empty(probes * g * 4, "probe-hole-partial") if is_frame else None
+        self.out = s.empty(probes * 6 * size * size * 12, "probe-irradiance") if method != "sh" else None
         rec = Recorder(ctx, timestamps=True, reusable=True)
         if is_frame:
-            rgb = s.empty(6 * n * n * 12, "probe-radiance")
-            record_split(rec, src, rgb, self.hole_partial, n)
+            rgb = s.empty(probes * 6 * n * n * 12, "probe-radiance")
+            record_split(rec, src, rgb, self.hole_partial, n, probes)
         else:
             rgb = src
-        self.sh_groups = _record_sh_project(rec, rgb, n, self.sh_partial)
+        self.sh_groups = _record_sh_project(rec, rgb, n, self.sh_partial, probes)
         rec.timestamp("sh_project")
         if method == "convolve":
             check_steps(params["phi_steps"], params["theta_steps"])
-            _record_convolve(rec, rgb, n, self.out, size, params["phi_steps"], params["theta_steps"])
+            _record_convolve(rec, s, rgb, n, self.out, size, params["phi_steps"], params["theta_steps"])
         elif method == "box":
             _record_box(rec, s, rgb, n, self.out, size, box_level_size(n, size, params["box_level_size"]))
         elif method == "exact":
-            _record_exact(rec, s, rgb, n, self.out, size, integration_size(n, params["downsample_to"]))
+            _record_exact(rec, s, rgb, n, self.out, size, integration_size(n, params["downsample_to"]), probes)
         # The results end in one host-readable buffer, copied there by the program itself: reading them back is a
         # memcpy from mapped memory, not one more submission per result (on a discrete GPU a read of device
         # memory goes through a staging copy).
-        parts = [(self.sh_partial, self.sh_groups * 27 * 4), (self.hole_partial, SH_GROUPS_MAX * 4),
-                 (self.out, 6 * size * size * 12)]
+        parts = [(self.sh_partial, probes * g * 27 * 4), (self.hole_partial, probes * g * 4),
+                 (self.out, probes * 6 * size * size * 12)]
         self.offsets, total = [], 0
         for buf, nbytes in parts:
             self.offsets.append(total)
@@ -459,19 +478,24 @@ class FilterPlan:
 
     def finish(self) -> tuple[np.ndarray, np.ndarray | None, float, dict[str, float]]:
         """Wait for the program (started by run() or program.start()) and read its results; one that is not
-        running is run now."""
+        running is run now. A plan of several probes: finish_all()."""
+        coeffs, irr, hole, timings = self.finish_all()
+        return coeffs[0], None if irr is None else irr[0], float(hole[0]), timings
+
+    def finish_all(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, dict[str, float]]:
+        """As finish(), with a leading probe axis: SH (P, 9, 3), irradiance (P, 6, m, m, 3) or None, holes (P,)."""
         if not self.program.running:
             self.program.start()
         timings = self.program.wait()
-        res, (o_sh, o_hole, o_irr) = self.results, self.offsets
-        coeffs = res.read(np.float32, self.sh_groups * 27, o_sh).reshape(-1, 9, 3).astype(np.float64).sum(axis=0)
-        hole = 0.0
+        res, (o_sh, o_hole, o_irr), p, g = self.results, self.offsets, self.probes, self.sh_groups
+        coeffs = res.read(np.float32, p * g * 27, o_sh).reshape(p, g, 9, 3).astype(np.float64).sum(axis=1)
+        hole = np.zeros(p)
         if self.hole_partial is not None:
-            hole = float(res.read(np.float32, _reduction_groups(self.n), o_hole).astype(np.float64).sum() / (4 * np.pi))
+            hole = res.read(np.float32, p * g, o_hole).reshape(p, g).astype(np.float64).sum(axis=1) / (4 * np.pi)
         irr = None
         if self.out is not None:
             m = self.size
-            irr = res.read(np.float32, 6 * m * m * 3, o_irr).reshape(6, m, m, 3).astype(np.float64)
+            irr = res.read(np.float32, p * 6 * m * m * 3, o_irr).reshape(p, 6, m, m, 3).astype(np.float64)
         return coeffs, irr, hole, timings
 
     def close(self) -> None:
@@ -480,9 +504,10 @@ class FilterPlan:
         self.results.destroy()
 
 
-def plan_for(ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, **params) -> FilterPlan:
+def plan_for(ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, probes: int = 1,
+             **params) -> FilterPlan:
     """The cached FilterPlan for this source buffer and these settings (recorded on first use or when stale)."""
-    key = ("filter-plan", src.serial, is_frame, n, method, size, tuple(sorted(params.items())))
+    key = ("filter-plan", src.serial, is_frame, n, method, size, probes, tuple(sorted(params.items())))
     plan = ctx.cache.pop(key, None)
     if plan is not None and not plan.valid:
         plan.close()
@@ -492,9 +517,62 @@ def plan_for(ctx, src: Buffer, is_frame: bool, n: int, method: str, size: int, *
         # recently used go beyond PLANS_KEPT.
         for old in [k for k, v in ctx.cache.items() if k[0] == "filter-plan" and not v.valid]:
             ctx.cache.pop(old).close()
-        plan = FilterPlan(ctx, src, is_frame, n, method, size, params)
+        plan = FilterPlan(ctx, src, is_frame, n, method, size, params, probes)
         plans = [k for k in ctx.cache if k[0] == "filter-plan"]
         for old in plans[:max(0, len(plans) - PLANS_KEPT + 1)]:
             ctx.cache.pop(old).close()
     ctx.cache[key] = plan
     return plan
+
+
+@dataclass
+class ProbesFiltered:
+    """What filter_probes gives, one row per probe of the frame: order-2 radiance SH (P, 9, 3), irradiance E/pi
+    (P, 6, size, size, 3), hole fractions (P,), and the GPU time of the whole filter (ms, per stage)."""
+    sh_coefficients: np.ndarray
+    irradiance: np.ndarray
+    hole_fraction: np.ndarray
+    timings_ms: dict[str, float]
+
+
+def filter_probes(frame, irradiance_size: int = 16, method: str = "exact", downsample_to: int | None = 32,
+                  sh_window: str = "none", ctx=None) -> ProbesFiltered:
+    """Irradiance of every probe of a frame of SplatRenderer.render_probes (or of a numpy stack of cubes
+    (P, 6, n, n, 3|4), uploaded once), in one submission over all 6P faces: split -> SH projection -> exact
+    integral (method "exact", probe.reference.exact_irradiance of the cube box-downsampled to ``downsample_to``),
+    or the order-2 SH evaluated per probe on the host (method "sh": 9 coefficients, nothing to batch). The
+    render may still be in flight (render_probes(wait=False)): the filter is queued behind it and the host waits
+    once for both. Each probe's result is what filter_probe gives for that probe's cube alone."""
+    from .sh_project import sh_irradiance
+    if method not in BATCH_METHODS:
+        raise ValueError(f"filter_probes takes method {' or '.join(BATCH_METHODS)}, not {method!r}")
+    params = dict(phi_steps=64, theta_steps=16, box_level_size=1, downsample_to=downsample_to)
+    upload = None
+    if _is_frame(frame):
+        frame.check()
+        n, probes, ctx = frame.cube_face_size, frame.probes, frame.ctx
+        plan = plan_for(ctx, frame.image, True, n, method, int(irradiance_size), probes, **params)
+        plan.program.start()
+        if frame.wait():  # the render was drawn again after this filter was queued: filter it again
+            plan.program.wait()
+    else:
+        cubes = np.asarray(frame)
+        if cubes.ndim != 5 or cubes.shape[1] != 6 or cubes.shape[2] != cubes.shape[3] or cubes.shape[4] not in (3, 4):
+            raise ValueError(f"filter_probes takes a GpuFrame or cubes (P, 6, n, n, 3|4), got shape {cubes.shape}")
+        rgb = np.ascontiguousarray(cubes[..., :3], np.float32)  # premultiplied: holes are black, as split_alpha
+        probes, n, ctx = len(rgb), rgb.shape[2], ctx or get_context()
+        upload = scratch(ctx, rgb.nbytes, "probe-radiance")
+        upload.write(rgb)
+        plan = plan_for(ctx, upload, False, n, method, int(irradiance_size), probes, **params)
+        plan.program.start()
+    try:
+        coeffs, irr, holes, timings = plan.finish_all()
+    finally:
+        if upload is not None:
+            upload.close()
+    if irr is None:
+        t0 = time.perf_counter()
+        dirs = cubemap.face_directions(int(irradiance_size))
+        irr = np.stack([sh_irradiance(c, dirs, sh_window) for c in coeffs])
+        timings = {**timings, "sh_irradiance_host": (time.perf_counter() - t0) * 1e3}
+    return ProbesFiltered(coeffs, irr, holes, timings)

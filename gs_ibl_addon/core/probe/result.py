@@ -37,6 +37,9 @@ CONVENTIONS = {
     "holes": "directions without splats: alpha < 1 in the radiance cube; hole_fraction = share of the sphere; "
              "hole_fill = how their light was filled before filtering (method mean|constant|environment|black, "
              "value = the fill's mean RGB over the holes, fraction = hole_fraction)",
+    "lights": "bright compact regions split off the radiance (their light is not in the EXRs): direction (unit, "
+              "toward the light), solid_angle (sr), angle (deg, disc diameter), irradiance (RGB, at normal "
+              "incidence = a Blender sun's Strength x Color), share (of the probe's power)",
 }
 
 
@@ -53,6 +56,9 @@ class ProbeResult:
     device: str = ""
     hole_fraction: float = 0.0
     hole_fill: dict[str, Any] | None = None  # {"method", "value", "fraction"} (probe.holes.fill_holes); None: unfilled
+    highlights: dict[str, Any] | None = None  # clipped highlights' gain (probe.highlights); None: none applied
+    lights: list[dict[str, Any]] = dataclasses.field(default_factory=list)  # split off (probe.lights)
+    near_splats: dict[str, Any] | None = None  # the probe's distance from splats in sigmas (probe.near)
 
 
 def _jsonable(v: Any) -> Any:
@@ -185,6 +191,9 @@ def _write_all(result: ProbeResult, out_dir: str, half: bool, cube_faces: bool, 
         "hole_fraction": float(result.hole_fraction),
         "hole_fill": result.hole_fill or {"method": "black", "value": [0.0, 0.0, 0.0],
                                           "fraction": float(result.hole_fraction)},
+        "highlights": result.highlights,
+        "lights": list(result.lights),
+        "near_splats": result.near_splats,
         "files": sorted(written),
     }
     with open(os.path.join(out_dir, PROBE_JSON), "w", encoding="utf-8") as f:

@@ -17,6 +17,18 @@ The instance list is sized from the previous frame; if a frame needs more, it is
 With a level of detail (``SplatRenderer(scene, lod=True)``, render/lod.py) the GPU holds every node of the tree
 and ``render(batch, lod_k=k)`` draws the cut of threshold k x pixel angle: preprocess decides per node and flags
 the drawn ones, a prefix sum and gs_lod_compact pack them in storage order, and the later stages see only those.
+
+Many probes in one submission (``render_probes(origins, face_size)``, a ViewBatch.cubemaps). Every stage above
+works on (probe, splat) pairs instead of splats: gs_preprocess runs once per pair (workgroup x = the probe) and
+writes its outputs at pair index probe * n + splat, with the probe's own distance, colour, cut and first tile id.
+One depth sort of all pairs by their depth key then leaves each probe's pairs in exactly the order its own render
+would give them (a stable sort; equal keys keep pair order, and within a probe that is splat order), the tile ids
+of emit span the 6N faces, and the stable tile sort, ranges and raster (workgroup z = the probe) need nothing
+more. So each probe of a batch is the single-probe render of its position, up to the raster's chunking (a 32^2
+probe alone is split into chunks, a batch of them is not): float rounding, <= 2e-4 (tests/test_multi_probe.py).
+Memory grows with probes x splats (PAIR_BYTES a pair); ``probes_per_group`` sizes a group of probes to the
+device (largest storage binding, a share of the device heap) and a batch of more probes is recorded as several
+groups one after another in the same submission, reusing the pair buffers.
 """
 from __future__ import annotations
 
@@ -57,6 +69,64 @@ PROFILE_SORTS = False
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
+# GPU bytes per (probe, splat) pair: prepared (PREP vec4), tile rectangles (MAX_VIEWS uvec2), tile count, depth
+# key and value, the counts' prefix sum, the depth sort's scratch key and value; with a level of detail also the
+# compacted keys and values.
+PAIR_BYTES = PREP * 16 + MAX_VIEWS * 8 + 4 * 4 + 8
+PAIR_BYTES_LOD = PAIR_BYTES + 8
+INSTANCE_BYTES = 16  # key, value and the tile sort's scratch copies
+INSTANCES_PER_PAIR = 2  # planning figure for sizing (a 32^2 probe of bench_scene: ~1.5); overflow redraws
+GROUP_HEAP_SHARE = 0.5  # of the device's largest heap, for the pair and instance buffers of one group
+
+
+# A pair's first tile travels as a float in its prepared record (gs_preprocess -> gs_emit): exact below 2^24, so a
+# group's tiles stay below it (a thousand 256^2 probes are 1.5M tiles).
+MAX_GROUP_TILES = 1 << 24
+
+# Frame bytes per cube pixel of a batch: the RGBA float image, and the filter's packed RGB copy (gpu_filters).
+FRAME_BYTES_PER_PIXEL = 16 + 12
+
+
+def _binding_limit(ctx) -> int:
+    return int(ctx.vk.vkGetPhysicalDeviceProperties(ctx.physical_device).limits.maxStorageBufferRange)
+
+
+def largest_probe_face(ctx, n_probes: int) -> int:
+    """The largest power-of-two face size whose frame of ``n_probes`` cubemaps fits one storage binding and
+    GROUP_HEAP_SHARE of the device's largest heap (the frame is one buffer; the pair buffers split into groups,
+    the frame does not)."""
+    from ..limits import device_local_bytes
+    room = min(_binding_limit(ctx) // 16, int(GROUP_HEAP_SHARE * device_local_bytes(ctx)) // FRAME_BYTES_PER_PIXEL)
+    face = 1
+    while 6 * n_probes * (2 * face) ** 2 <= room:
+        face *= 2
+    return face
+
+
+def check_probes_fit(ctx, n_probes: int, face_size: int) -> None:
+    """A ValueError naming what fits when the frame of ``n_probes`` cubemaps of ``face_size``^2 does not."""
+    if n_probes > 1 and face_size > largest_probe_face(ctx, n_probes):
+        mib = n_probes * 6 * face_size ** 2 * FRAME_BYTES_PER_PIXEL / 2 ** 20
+        raise ValueError(f"{n_probes} probes of {face_size}^2 faces need a {mib:,.0f} MiB frame, more than "
+                         f"{ctx.device_name} holds in one buffer: use faces of {largest_probe_face(ctx, n_probes)}^2 "
+                         "or less, or fewer probes per batch")
+
+
+def probes_per_group(ctx, nodes: int, n_probes: int, lod: bool = False) -> int:
+    """How many probes of ``nodes`` splats (or level-of-detail nodes) one group renders at once: every per-pair
+    buffer within the device's largest storage binding, pairs and instances within GROUP_HEAP_SHARE of its
+    largest heap, and the probe count within the dispatch's z limit. At least 1 (a single probe is what the
+    renderer always needed)."""
+    from ..limits import device_local_bytes
+    nodes = max(1, int(nodes))
+    binding = _binding_limit(ctx)
+    per_probe = nodes * ((PAIR_BYTES_LOD if lod else PAIR_BYTES) + INSTANCES_PER_PAIR * INSTANCE_BYTES)
+    g = min(int(n_probes), int(ctx.max_workgroups[2]),
+            binding // (nodes * PREP * 16),  # the largest per-pair buffer
+            binding // (nodes * INSTANCES_PER_PAIR * 4),
+            int(GROUP_HEAP_SHARE * device_local_bytes(ctx)) // per_probe)
+    return max(1, g)
+
 
 class StaleFrame(RuntimeError):
     """A GpuFrame read after its renderer rendered again (the frame's buffers now hold the newer image)."""
@@ -83,11 +153,25 @@ class GpuFrame:
 
     @property
     def pixels(self) -> int:
-        return sum(v.width * v.height for v in self.batch.views)
+        return self.batch.n_probes * sum(v.width * v.height for v in self.batch.views)
+
+    @property
+    def probes(self) -> int:
+        """Probes in the frame (render_probes); 1 for a single batch."""
+        return self.batch.n_probes
 
     @property
     def face_size(self) -> int:
-        """The face size of a cubemap frame (six square views)."""
+        """The face size of a one-probe cubemap frame (six square views). A frame of several probes refuses, so
+        that a single-probe filter never reads only its first probe: see cube_face_size."""
+        if self.probes != 1:
+            raise ValueError(f"this frame holds {self.probes} probes: filter them with probe.gpu_filters."
+                             "filter_probes, or read them with read_probes()")
+        return self.cube_face_size
+
+    @property
+    def cube_face_size(self) -> int:
+        """The face size of each cubemap of the frame (render_probes: every probe's)."""
         v = self.batch.views
         if len(v) != 6 or any(x.width != v[0].width or x.height != v[0].width for x in v):
             raise ValueError("this frame is not a cubemap (six square faces)")
@@ -107,22 +191,28 @@ class GpuFrame:
 
     def _split(self, flat: np.ndarray, channels: int) -> list[np.ndarray]:
         out, off = [], 0
-        for v in self.batch.views:
+        for v in self.batch.views * self.batch.n_probes:
             npx = v.width * v.height
             out.append(flat[off * channels:(off + npx) * channels].reshape((v.height, v.width, channels)[:2 + (channels > 1)]))
             off += npx
         return out
 
     def read_images(self) -> list[np.ndarray]:
-        """Per view (H, W, 4) float32, read back from the GPU."""
+        """Per view (H, W, 4) float32, read back from the GPU (every probe's views, probe after probe)."""
         self.wait()
         return self._split(self.image.read(np.float32, self.pixels * 4), 4)
 
     def read_cube(self) -> np.ndarray:
         """A cubemap frame as one (6, N, N, 4) float32 array, read back from the GPU (no per-face copies)."""
-        n = self.face_size
+        if self.probes != 1:
+            raise ValueError(f"this frame holds {self.probes} probes: read_probes() reads them all")
+        return self.read_probes()[0]
+
+    def read_probes(self) -> np.ndarray:
+        """A frame of P cubemaps (render_probes) as one (P, 6, N, N, 4) float32 array read back from the GPU."""
+        n = self.cube_face_size
         self.wait()
-        return self.image.read(np.float32, 6 * n * n * 4).reshape(6, n, n, 4)
+        return self.image.read(np.float32, self.probes * 6 * n * n * 4).reshape(self.probes, 6, n, n, 4)
 
     def read_depths(self) -> list[np.ndarray]:
         """Per view (H, W) float32, read back from the GPU; the render must have been asked for depth."""
@@ -230,29 +320,20 @@ class SplatRenderer:
                 self.rot.write(scene.rotations.astype(np.float32))
                 # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
                 self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
-            self.prepared = buf(n * PREP * 16, "prepared")
-            self.tile_count = buf(n * 4, "tile_count")
-            self.depth_key, self.depth_val = buf(n * 4, "depth_key"), buf(n * 4, "depth_val")
-            self.rects = buf(n * MAX_VIEWS * 8, "rects")  # tile rectangle per splat and view
-            self.offsets = buf(n * 4, "offsets")
             self.count = buf(16, "count")
-            self.n_count = buf(16, "n_count")
-            self.n_count.write(np.array([scene.count, 0, 0, 0], np.uint32))
-            self.origin = buf(16, "origin")
+            self.n_count = buf(16, "n_count")  # pairs of a full group, of the last group
+            self._n_count = None  # (probes of a full group, of the last) it holds
             self.views = buf(MAX_VIEWS * 80, "views")
             self.no_depth = buf(16, "no-depth")  # bound where depth is not written
             if self.lod is not None:
                 self.lod_words = buf(n * 8, "lod")
                 self.lod_words.write(self.lod.words())
-                self.sort_key, self.sort_val = buf(n * 4, "lod-sort-key"), buf(n * 4, "lod-sort-val")
-                self.lod_scanner = self._own(Scanner(self.ctx, n))
-                # A probe's cut is a small part of the tree: the stages after the compaction (depth sort, counts, emit)
-                # are sized for the cut, from the previous frame, and a frame whose cut outgrew them is drawn again.
                 self.cut_sorter = None
-                self._grow_cut(max(1 << 16, self.scene_count // 8))
-            self.drawn = self.scene_count  # splats (or nodes of the cut) the last render drew
-            self.depth_sorter = self._own(RadixSorter(self.ctx, n)) if self.lod is None else None
-            self.scanner = self._own(Scanner(self.ctx, n))
+            self.nodes = n  # splats, or every node of the level of detail: what one probe's pairs run over
+            self.slots = 0  # probes the pair buffers hold (a group)
+            self.cut_capacity = 0
+            self._ensure_slots(1)
+            self.drawn = self.scene_count  # splats (or nodes of the cut) the last render drew (per group, at most)
             self.capacity = 0
             self.tile_sorter = None
             self._ensure_capacity(max(1 << 16, 4 * (self.cut_capacity if self.lod is not None else n)))
@@ -272,6 +353,47 @@ class SplatRenderer:
             obj.destroy()
             self._owned.remove(obj)
 
+    _PAIR_BUFFERS = ("prepared", "tile_count", "depth_key", "depth_val", "rects", "offsets", "scanner",
+                     "depth_sorter", "sort_key", "sort_val", "lod_scanner")
+
+    def _ensure_slots(self, slots: int) -> None:
+        """Per-pair buffers for ``slots`` probes of a group (recordings that used smaller ones become invalid)."""
+        if slots <= self.slots:
+            return
+        for name in self._PAIR_BUFFERS:
+            self._drop(getattr(self, name, None))
+            setattr(self, name, None)
+        old_slots, self.slots = self.slots, int(slots)
+        m, buf = self.nodes * self.slots, self._buffer
+        self.prepared = buf(m * PREP * 16, "prepared")
+        self.tile_count = buf(m * 4, "tile_count")
+        self.depth_key, self.depth_val = buf(m * 4, "depth_key"), buf(m * 4, "depth_val")
+        self.rects = buf(m * MAX_VIEWS * 8, "rects")  # tile rectangle per pair and view
+        self.offsets = buf(m * 4, "offsets")
+        self.scanner = self._own(Scanner(self.ctx, m))
+        if self.lod is None:
+            self.depth_sorter = self._own(RadixSorter(self.ctx, m))
+        else:
+            self.sort_key, self.sort_val = buf(m * 4, "lod-sort-key"), buf(m * 4, "lod-sort-val")
+            self.lod_scanner = self._own(Scanner(self.ctx, m))
+            # A probe's cut is a small part of the tree: the stages after the compaction (depth sort, counts, emit)
+            # are sized for the cut, from the previous frame, and a frame whose cut outgrew them is drawn again.
+            per_probe = self.cut_capacity // old_slots if old_slots else max(1 << 16, self.scene_count // 8)
+            self._grow_cut(per_probe * self.slots)
+
+    def trim(self) -> None:
+        """Give back what a batch of many probes grew (pair buffers for a group, the instance list) and keep what
+        one probe needs: a renderer kept between bakes (Blender's splat cache) then holds no more than before its
+        batch. The next render re-records its program; the frame buffers stay."""
+        self.resolve()
+        self.generation += 1  # the last frame's pairs are gone
+        for name in self._PAIR_BUFFERS + ("inst_key", "inst_val", "tile_sorter", "cut_sorter"):
+            self._drop(getattr(self, name, None))
+            setattr(self, name, None)
+        self.slots = self.capacity = self.cut_capacity = 0
+        self._ensure_slots(1)
+        self._ensure_capacity(max(1 << 16, 4 * (self.cut_capacity if self.lod is not None else self.nodes)))
+
     def _ensure_capacity(self, need: int) -> None:
         if need <= self.capacity:
             return
@@ -284,7 +406,7 @@ class SplatRenderer:
 
     def _grow_cut(self, need: int) -> None:
         self._drop(self.cut_sorter)
-        self.cut_capacity = int(min(self.lod.count, need))
+        self.cut_capacity = int(min(self.lod.count * self.slots, need))
         self.cut_sorter = self._own(RadixSorter(self.ctx, self.cut_capacity))
 
     def _frame_buffer(self, name: str, nbytes: int) -> Buffer:
@@ -294,6 +416,15 @@ class SplatRenderer:
             self._drop(b)
             b = self._frame[name] = self._buffer(max(nbytes, int(b.nbytes * 1.5) if b is not None else 0), name)
         return b
+
+    def render_probes(self, origins, face_size: int, lod_k: float = 0.0, timestamps: bool = False,
+                      wait: bool = True) -> RenderResult:
+        """Cubemaps of ``face_size``^2 faces at every row of ``origins`` (N, 3), in one submission that shares
+        the uploaded splats. The frame holds probe after probe, six faces each (GpuFrame.read_probes(), or
+        probe.gpu_filters.filter_probes for their irradiance); each equals ``render(ViewBatch.cubemap(origin,
+        face_size))`` of its own position (see the module's docstring). ``lod_k``: as render's, each probe its
+        own cut."""
+        return self.render(ViewBatch.cubemaps(origins, face_size), timestamps=timestamps, wait=wait, lod_k=lod_k)
 
     def render(self, batch: ViewBatch, timestamps: bool = False, depth: bool = False,
                wait: bool = True, lod_k: float = 0.0) -> RenderResult:
@@ -311,17 +442,33 @@ class SplatRenderer:
             raise ValueError("render(lod_k=...) needs a renderer built with a level of detail (SplatRenderer(..., lod=True))")
         if not (lod_k >= 0 and np.isfinite(lod_k)):
             raise ValueError(f"lod_k {lod_k!r} must be 0 (every splat) or a positive number of pixels")
-        self.resolve()  # the previous render reads the views and origin written below
+        self.resolve()  # the previous render reads the views and origins written below
         view_data, total_tiles, total_pixels = _views_buffer_data(batch)
+        probes = batch.n_probes
+        if probes > 1:
+            check_probes_fit(self.ctx, probes, batch.views[0].width)
+        group = probes_per_group(self.ctx, self.nodes, probes, self.lod is not None) if probes > 1 else 1
+        if group * total_tiles >= MAX_GROUP_TILES:
+            group = max(1, (MAX_GROUP_TILES - 1) // total_tiles)
+        if depth and group < probes:
+            raise ValueError(f"depth of {probes} probes does not fit one group of this device ({group}): "
+                             "render them without depth, or fewer at a time")
+        self._ensure_slots(group)
+        last = probes - (-(-probes // group) - 1) * group
         self.views.write(view_data)
-        self.origin.write(np.append(batch.origin, 0.0).astype(np.float32))
+        if self._n_count != (group, last):  # a single probe's render uploads nothing more than it did
+            self.n_count.write(np.array([self.nodes * group, self.nodes * last, 0, 0], np.uint32))
+            self._n_count = (group, last)
+        origins = self._frame_buffer("origins", probes * 16)
+        origins.write(np.concatenate([batch.origins, np.zeros((probes, 1))], 1).astype(np.float32))
         self.generation += 1
-        prog = self._program(batch, total_tiles, total_pixels, timestamps, depth, float(lod_k))
+        args = (batch, total_tiles, total_pixels, timestamps, depth, float(lod_k), group)
+        prog = self._program(*args)
         frame = self.last_frame = GpuFrame(self, batch, self._frame["image"], self._frame["depth"] if depth else None,
                                            self.generation)
         result = RenderResult(frame, t0)
         prog.start()
-        self._pending = (prog, result, (batch, total_tiles, total_pixels, timestamps, depth, float(lod_k)))
+        self._pending = (prog, result, args)
         if wait:
             self.resolve()
         return result
@@ -336,11 +483,13 @@ class SplatRenderer:
         prog, result, args = pending
         timings = prog.wait()
         redrawn = False
+        n_groups = -(-args[0].n_probes // args[-1])
         while True:
-            counts = self.count.read(np.uint32, 3)  # [0] pairs kept, [1] pairs wanted, [2] nodes in the cut
-            needed = int(counts[1])
+            # per group: [0] pairs kept, [1] pairs wanted, [2] nodes in the cut
+            counts = self._frame["group_counts"].read(np.uint32, 4 * n_groups).reshape(n_groups, 4)
+            needed, total = int(counts[:, 1].max()), int(counts[:, 1].sum())
             if self.lod is not None:
-                self.drawn = int(counts[2])
+                self.drawn = int(counts[:, 2].max())
                 if self.drawn > self.cut_capacity:  # the cut outgrew its sort: nothing after it counts
                     self._grow_cut(int(self.drawn * 1.25) + 1024)
                 elif needed > self.capacity:
@@ -353,99 +502,132 @@ class SplatRenderer:
                 break
             timings = self._program(*args).run()
             redrawn = True
-        result._finished(timings, needed)
+        result._finished(timings, total)
         return redrawn
 
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                 depth: bool, lod_k: float = 0.0) -> Program:
+                 depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
         shape = tuple((v.width, v.height) for v in batch.views)
-        key = (shape, float(batch.pixel_angle), bool(batch.energy_preserving), bool(timestamps), bool(depth),
-               self.capacity, lod_k, getattr(self, "cut_capacity", 0), check_colour_space(self.colour_space))
+        key = (shape, batch.n_probes, group, float(batch.pixel_angle), bool(batch.energy_preserving),
+               bool(timestamps), bool(depth), self.capacity, lod_k, self.cut_capacity,
+               check_colour_space(self.colour_space))
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
             prog = None
         if prog is None:
-            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k)
+            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
         return prog
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                depth: bool, lod_k: float = 0.0) -> Program:
-        c, nv = self.ctx, len(batch.views)
+                depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
+        """One submission: the probes in groups of ``group``, one group after another through the same pair
+        buffers (a batch of one probe, or one that fits, is a single group). ``total_tiles`` / ``total_pixels``
+        are one probe's."""
+        c, nv, probes = self.ctx, len(batch.views), batch.n_probes
+        n_groups = -(-probes // group)
         tree = self.lod
-        n = tree.count if tree is not None else self.scene_count
-        chunks = raster_chunks(total_tiles)
-        ranges = self._frame_buffer("ranges", (total_tiles + 1) * 8)
-        image = self._frame_buffer("image", total_pixels * 16)
-        depth_buf = self._frame_buffer("depth", total_pixels * 4) if depth else self.no_depth
-        if chunks > 1:
-            partial = self._frame_buffer("partial", total_pixels * 16 * chunks)
-            partial_depth = self._frame_buffer("partial_depth", total_pixels * 4 * chunks) if depth else self.no_depth
+        image = self._frame_buffer("image", probes * total_pixels * 16)
+        depth_buf = self._frame_buffer("depth", probes * total_pixels * 4) if depth else self.no_depth
+        origins = self._frame["origins"]
+        counts = self._frame_buffer("group_counts", n_groups * 16)
+        ranges = self._frame_buffer("ranges", (group * total_tiles + 1) * 8)  # + the missed-tile key's run
+        split = n_groups > 1  # each group rasters into its own image and origins, copied from / to the batch's
+        g_image = self._frame_buffer("group_image", group * total_pixels * 16) if split else image
+        g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
+        chunks_max = raster_chunks(group * total_tiles)
+        if chunks_max > 1:
+            partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
+            partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
+                             else self.no_depth)
         rec = Recorder(c, timestamps=timestamps, reusable=True)
-        rec.fill(self.count)
-        rec.fill(ranges, 0, (total_tiles + 1) * 8)
-        rec.fill(image, 0, total_pixels * 16)
+        rec.fill(image, 0, probes * total_pixels * 16)
         if depth:
-            rec.fill(depth_buf, 0, total_pixels * 4)
+            rec.fill(depth_buf, 0, probes * total_pixels * 4)
         rec.timestamp("clear")
-        if n:
-            grid = (dict(lod=1, lod_tau=lod_k * batch.pixel_angle, lod_cell=tree.cell1, lod_ox=tree.origin[0],
-                         lod_oy=tree.origin[1], lod_oz=tree.origin[2]) if tree is not None else
-                    dict(lod=0, lod_tau=0.0, lod_cell=0.0, lod_ox=0.0, lod_oy=0.0, lod_oz=0.0))
-            rec.dispatch(KERNELS["gs_preprocess"],
-                         [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
-                          self.depth_key, self.depth_val, self.rects, self.origin,
-                          self.lod_words if tree is not None else self.no_depth,
-                          self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
-                         groups(n, 256, c),
-                         n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
-                         energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
-                         **grid)
-            rec.timestamp("preprocess")
-            if tree is not None:
-                # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)
-                live_total = self.lod_scanner.record(rec, self.offsets, n)
-                rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
-                             groups(n, 256, c), n=n)
-                rec.copy(live_total, self.count, 4, dst_offset=8)  # read back with the pair counts
-                rec.timestamp("lod_compact")
-                keys, vals, sort_count, sorter = self.sort_key, self.sort_val, live_total, self.cut_sorter
-                n = self.cut_capacity  # from here on only the cut's entries
-            else:
-                keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
-            sorter.record(rec, keys, vals, sort_count, 0, DEPTH_KEY_BITS,
-                          stamps="sort_depth" if PROFILE_SORTS else None)
-            rec.timestamp("sort_depth")
-            rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
-                         groups(n, 256, c), n=n, count_index=0)
-            total_buf = self.scanner.record(rec, self.offsets, n)
-            rec.dispatch(KERNELS["gs_emit"],
-                         [self.views, keys, vals, self.offsets, total_buf, self.inst_key,
-                          self.inst_val, self.count, self.prepared, self.rects],
-                         groups(self.capacity, 256, c), n=n, capacity=self.capacity, n_views=nv, n_tiles=total_tiles)
-            rec.timestamp("emit")
-            # total_tiles is the key of instances whose tile the footprint missed: the sort drops them (count[0]
-            # becomes the pairs kept), so the second pass, ranges and raster never see them
-            bits = max(1, int(total_tiles - 1).bit_length())
-            self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, bits, drop_key=total_tiles,
-                                    stamps="sort_tiles" if PROFILE_SORTS else None)
-            rec.timestamp("sort_tiles")
-            rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, ranges], groups(self.capacity, 256, c))
-            rec.timestamp("ranges")
-        rec.dispatch(KERNELS["gs_raster"],
-                     [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else image,
-                      partial_depth if chunks > 1 else depth_buf],
-                     groups(total_tiles * chunks, 1, c), n_views=nv, total_tiles=total_tiles, chunks=chunks,
-                     total_pixels=total_pixels, write_depth=int(depth))
-        if chunks > 1:
-            rec.dispatch(KERNELS["gs_merge"], [partial, image, partial_depth, depth_buf], groups(total_pixels, 256, c),
-                         chunks=chunks, total_pixels=total_pixels, write_depth=int(depth))
-        rec.timestamp("raster")
-        self.chunks = chunks
+        # Stage stamps for up to a few groups (a query pool holds MAX_STAMPS); beyond, one stamp per group.
+        stamp = rec.timestamp if n_groups <= 6 else (lambda _label: None)
+        for k in range(n_groups):
+            gp = min(group, probes - k * group)  # probes in this group
+            count_index = 0 if gp == group else 1  # n_count: pairs of a full group, of the last one
+            tiles, pixels = gp * total_tiles, gp * total_pixels
+            chunks = raster_chunks(tiles)
+            if split:
+                rec.copy(origins, g_origin, gp * 16, k * group * 16)
+            rec.fill(self.count)
+            rec.fill(ranges, 0, (tiles + 1) * 8)
+            n = tree.count if tree is not None else self.scene_count
+            if n:
+                self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp)
+            rec.dispatch(KERNELS["gs_raster"],
+                         [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
+                          partial_depth if chunks > 1 else depth_buf],
+                         groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
+                         chunks=chunks, total_pixels=pixels, write_depth=int(depth))
+            if chunks > 1:
+                rec.dispatch(KERNELS["gs_merge"], [partial, g_image, partial_depth, depth_buf], groups(pixels, 256, c),
+                             chunks=chunks, total_pixels=pixels, write_depth=int(depth))
+            stamp("raster")
+            if split:
+                rec.copy(g_image, image, pixels * 16, 0, k * group * total_pixels * 16)
+            rec.copy(self.count, counts, 16, 0, k * 16)
+            if n_groups > 6:
+                rec.timestamp("probes")
+        self.chunks = chunks_max
         return rec.program()
+
+    def _record_sort_emit(self, rec: Recorder, batch: ViewBatch, origins: Buffer, probes: int, n: int,
+                          count_index: int, tiles: int, lod_k: float, stamp) -> None:
+        """preprocess -> [the cut's compaction] -> depth sort -> counts -> emit -> tile sort -> ranges, for the
+        (probe, splat) pairs of ``probes`` probes at ``origins``."""
+        c, tree, nv = self.ctx, self.lod, len(batch.views)
+        grid = (dict(lod=1, lod_tau=lod_k * batch.pixel_angle, lod_cell=tree.cell1, lod_ox=tree.origin[0],
+                     lod_oy=tree.origin[1], lod_oz=tree.origin[2]) if tree is not None else
+                dict(lod=0, lod_tau=0.0, lod_cell=0.0, lod_ox=0.0, lod_oy=0.0, lod_oz=0.0))
+        rec.dispatch(KERNELS["gs_preprocess"],
+                     [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
+                      self.depth_key, self.depth_val, self.rects, origins,
+                      self.lod_words if tree is not None else self.no_depth,
+                      self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
+                     (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
+                     n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
+                     energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
+                     **grid)
+        stamp("preprocess")
+        pairs = n * probes
+        if tree is not None:
+            # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)
+            live_total = self.lod_scanner.record(rec, self.offsets, pairs)
+            rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
+                         groups(pairs, 256, c), n=pairs)
+            rec.copy(live_total, self.count, 4, dst_offset=8)  # read back with the pair counts
+            stamp("lod_compact")
+            keys, vals, sort_count, sorter, count_index = (self.sort_key, self.sort_val, live_total, self.cut_sorter,
+                                                           0)
+            pairs = self.cut_capacity  # from here on only the cut's entries
+        else:
+            keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
+        sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS,
+                      stamps="sort_depth" if PROFILE_SORTS else None)
+        stamp("sort_depth")
+        rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
+                     groups(pairs, 256, c), n=pairs, count_index=count_index)
+        total_buf = self.scanner.record(rec, self.offsets, pairs)
+        rec.dispatch(KERNELS["gs_emit"],
+                     [self.views, keys, vals, self.offsets, total_buf, self.inst_key,
+                      self.inst_val, self.count, self.prepared, self.rects],
+                     groups(self.capacity, 256, c), n=pairs, capacity=self.capacity, n_views=nv, n_tiles=tiles)
+        stamp("emit")
+        # `tiles` is the key of instances whose tile the footprint missed: the sort drops them (count[0] becomes
+        # the pairs kept), so its second pass, ranges and raster never see them
+        self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, max(1, int(tiles - 1).bit_length()),
+                                drop_key=tiles, stamps="sort_tiles" if PROFILE_SORTS else None)
+        stamp("sort_tiles")
+        rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, self._frame["ranges"]], groups(self.capacity, 256, c))
+        stamp("ranges")
 
     def close(self) -> None:
         self._pending = None

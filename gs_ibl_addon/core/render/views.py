@@ -1,4 +1,5 @@
-"""Cameras as batches of views sharing one origin: a pinhole camera is one view, a probe cubemap six.
+"""Cameras as batches of views sharing one origin: a pinhole camera is one view, a probe cubemap six; several
+probes are one batch of six views seen from N origins (``ViewBatch.cubemaps``).
 
 Each view is a rectangle on the plane at distance 1 along ``forward``: pixel (i, j), row 0 at the top, looks along
 ``forward + s * tan_x * right + t * tan_y * down`` with s, t the pixel centre in (-1, 1). A cubemap face (tan = 1)
@@ -6,7 +7,7 @@ is exactly the texel convention of core/cubemap.py, so rendered faces and filter
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -43,6 +44,17 @@ class ViewBatch:
     views: tuple[View, ...]
     pixel_angle: float  # radians per pixel at the view centre; sets the anti-aliasing dilation
     energy_preserving: bool = False  # probes: dilation keeps each splat's integral (render/splat_math.py)
+    # Several probes (ViewBatch.cubemaps): (N, 3) origins, each seeing ``views``; ``origin`` is the first.
+    probe_origins: np.ndarray | None = None
+
+    @property
+    def origins(self) -> np.ndarray:
+        """(N, 3) float64: the origin of every probe of the batch (one row for a plain batch)."""
+        return self.origin[None] if self.probe_origins is None else self.probe_origins
+
+    @property
+    def n_probes(self) -> int:
+        return 1 if self.probe_origins is None else len(self.probe_origins)
 
     @staticmethod
     def cubemap(origin, face_size: int, energy_preserving: bool = True) -> "ViewBatch":
@@ -52,6 +64,25 @@ class ViewBatch:
         views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
                       for f in range(6))
         return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving)
+
+    @staticmethod
+    def cubemaps(origins, face_size: int) -> "ViewBatch":
+        """The six faces of each of N probes (``origins`` (N, 3)), rendered in one submission
+        (SplatRenderer.render_probes): faces +X, -X, +Y, -Y, +Z, -Z of probe 0, then of probe 1, ..."""
+        try:
+            o = np.asarray(origins, np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"probe positions must be an (N, 3) array of numbers, got {origins!r:.80}") from None
+        if o.ndim == 1 and o.shape == (3,):
+            o = o[None]
+        if o.ndim != 2 or o.shape[1] != 3 or len(o) == 0:
+            raise ValueError(f"probe positions must be an (N, 3) array with N >= 1, got shape {o.shape}")
+        bad = np.flatnonzero(~np.all(np.isfinite(o), 1))
+        if len(bad):
+            raise ValueError(f"probe position {int(bad[0])} {o[bad[0]].tolist()} is not finite (NaN or infinity); "
+                             f"{len(bad)} of {len(o)} are: give ordinary numbers")
+        one = ViewBatch.cubemap(o[0], face_size)
+        return replace(one, probe_origins=o.copy()) if len(o) > 1 else one
 
     @staticmethod
     def pinhole(position, look_at, fov_deg: float, width: int, height: int, up=(0.0, 0.0, 1.0)) -> "ViewBatch":

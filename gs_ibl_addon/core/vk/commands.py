@@ -134,13 +134,15 @@ class Recorder:
         for b in buffers:
             self.buffers[b.serial] = b
 
-    def dispatch(self, kernel: Kernel, buffers: Sequence[Buffer], group_count: tuple[int, int] | int,
+    def dispatch(self, kernel: Kernel, buffers: Sequence[Buffer], group_count: tuple[int, ...] | int,
                  **push) -> None:
-        """Run ``kernel`` over ``group_count`` workgroups with ``buffers`` bound in its table order; ``push`` names
-        every push-constant field of the kernel (kernels.py)."""
+        """Run ``kernel`` over ``group_count`` workgroups (x, y[, z]) with ``buffers`` bound in its table order;
+        ``push`` names every push-constant field of the kernel (kernels.py). Kernels that batch several probes
+        read the probe from one workgroup axis (render/renderer.py render_probes, probe/gpu_filters.py)."""
         vk = self.vk
-        gx, gy = (group_count, 1) if isinstance(group_count, int) else group_count
-        if gx == 0 or gy == 0:
+        counts = (group_count,) if isinstance(group_count, int) else tuple(group_count)
+        gx, gy, gz = counts + (1,) * (3 - len(counts))
+        if gx == 0 or gy == 0 or gz == 0:
             return
         pipeline = get_pipeline(self.ctx, kernel)
         data = kernel.pack(push)
@@ -152,7 +154,7 @@ class Recorder:
             raw = vk.ffi.new("char[]", data)
             vk.vkCmdPushConstants(self.cmd, pipeline.layout, vk.VK_SHADER_STAGE_COMPUTE_BIT, 0, len(data), raw)
             del raw
-        vk.vkCmdDispatch(self.cmd, gx, gy, 1)
+        vk.vkCmdDispatch(self.cmd, gx, gy, gz)
         self._barrier()
 
     def fill(self, buffer: Buffer, value: int = 0, nbytes: int | None = None) -> None:

@@ -1,0 +1,125 @@
+"""Where one probe is not enough: which meshes it misleads (Check Light Variation) and per-object probes.
+
+Both bake cheap order-2 SH probes (core/probe/grid.py bake_sh_points) from the probe's splats, on the GPU
+renderer the probe's own bakes use (splat_cache). A per-object probe is baked at the mesh's bounds centre and
+lights the mesh through the local-light group (blender/local_light.py) as the difference to the World probe's
+light, so the World keeps the background and the specular.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import bpy
+import numpy as np
+from mathutils import Vector
+
+from ..core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coefficients
+from ..core.probe.variation import Variation, box_points, variation_from_sh
+from . import local_light as ll
+from . import splat_cache
+from .bake import find_splats
+from .properties import is_probe
+from .splat_object import is_splat_object
+
+Progress = Callable[[int, int], None]
+
+
+def world_box(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of the object's bounding box in world space (evaluated: modifiers included)."""
+    corners = np.array([list(obj.matrix_world @ Vector(c)) for c in obj.bound_box])
+    return corners.min(0), corners.max(0)
+
+
+def lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, selected=()) -> list[bpy.types.Object]:
+    """The meshes to look at: the selected ones, else every rendered mesh whose bounds centre lies inside the
+    probe's splats' bounds (a mesh in the captured room)."""
+    def mesh(o):
+        return o.type == "MESH" and not is_splat_object(o) and not o.hide_render
+    chosen = [o for o in selected if mesh(o)]
+    if chosen:
+        return chosen
+    splats = find_splats(scene, probe)
+    if splats is None:
+        return []
+    lo, hi = world_box(splats)
+    out = []
+    for o in scene.objects:
+        if mesh(o):
+            c = np.mean(world_box(o), axis=0)
+            if np.all(c >= lo) and np.all(c <= hi):
+                out.append(o)
+    return out
+
+
+def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False):
+    """The GPU renderer holding the probe's splats (splat_cache), after checking the probe, its splats and, with
+    ``need_world``, that it has been baked (local light corrects the light of its World)."""
+    if not is_probe(probe):
+        raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
+    splats = find_splats(scene, probe)
+    if splats is None:
+        raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
+    if need_world and probe.gs_ibl_probe.world is None:
+        raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
+    return splat_cache.get(splats).renderer
+
+
+def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],
+                    progress: Progress | None = None) -> tuple[list[Variation], list[str]]:
+    """Probes at each mesh's box centre and corners: (variations, report lines). The lines name the meshes over the
+    probe's Variation Tolerance; they are also kept in the probe's local report for the panel."""
+    if not objects:
+        raise ValueError("No mesh to check: select meshes, or put some inside the splats' bounds")
+    r = probe_renderer(scene, probe)
+    boxes = {o.name: world_box(o) for o in objects}
+    pts = np.concatenate([box_points(*boxes[n]) for n in boxes])
+    sh = bake_sh_points(r, pts, progress=progress)
+    found = [variation_from_sh(n, sh[9 * i:9 * i + 9], pts[9 * i:9 * i + 9]) for i, n in enumerate(boxes)]
+    tol = float(probe.gs_ibl_probe.variation_tolerance)
+    over = [v for v in found if v.exceeds(tol)]
+    lines = [v.message(tol) for v in sorted(found, key=lambda v: -v.variation)]
+    lines.insert(0, f"Light variation (tolerance {100 * tol:.0f}%): {len(over)} of {len(found)} meshes over it")
+    probe.gs_ibl_probe.local_report = "\n".join(lines)
+    return found, lines
+
+
+def coefficients_with_world(probe: bpy.types.Object, renderer, points: np.ndarray,
+                            progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Monomial coefficients of the World probe's light (9, 3) and of probes at ``points`` (P, 9, 3), baked in one
+    batch the same way (so their difference carries no difference of method)."""
+    pos = np.array(probe.matrix_world.translation, np.float64)
+    d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), progress=progress))
+    return d[0], d[1:]
+
+
+def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],
+                       progress: Progress | None = None) -> str:
+    """Each mesh its own probe at its bounds centre, through the local-light group; returns the report line."""
+    if not objects:
+        raise ValueError("No mesh to light: select meshes, or put some inside the splats' bounds")
+    r = probe_renderer(scene, probe, need_world=True)
+    centres = np.stack([np.mean(world_box(o), axis=0) for o in objects])
+    d_world, d = coefficients_with_world(probe, r, centres, progress)
+    strength = float(probe.gs_ibl_probe.strength)
+    for obj, di in zip(objects, d):
+        ll.set_object_coefficients(obj, di - d_world, grid=False)
+        ll.light_object(obj, strength)
+        obj.update_tag()
+    names = ", ".join(o.name for o in objects[:6]) + (", ..." if len(objects) > 6 else "")
+    text = (f"Per-object probes for {len(objects)} meshes ({names}), {POINT_FACE_SIZE}x{POINT_FACE_SIZE} faces, "
+            "SH order 2")
+    probe.gs_ibl_probe.local_report = text
+    return text
+
+
+def remove_local_light(scene: bpy.types.Scene, objects: list[bpy.types.Object]) -> int:
+    """Take per-object probes and the grid off ``objects`` (all lit objects of the scene when empty); returns how
+    many objects changed."""
+    targets = objects or [o for o in scene.objects if ll.has_local_light(o)]
+    n = 0
+    for obj in targets:
+        if ll.has_local_light(obj) or any(ll.in_material(s.material) for s in obj.material_slots):
+            ll.unlight_object(obj)
+            obj.update_tag()
+            n += 1
+    return n

@@ -1,0 +1,183 @@
+"""One probe is not enough (issue 17 part 3), checked against the outside reference: Cycles path-tracing Blender's
+native splats, in the bpy 5.3 root with the built zip installed by Blender's installer
+(tests/real_blender/local_light_reference.py does the Blender side).
+
+The sample room (samples/room.ply: a window in the +X wall with bright daylight behind it, a ceiling lamp) and two
+white diffuse spheres (radius 0.3): one 0.5 m from the window, one in the far corner. The World probe sits in the
+middle of the room. Each sphere is rendered by Cycles lit only by the native splats (the reference), then by our
+World alone, our World plus a per-object probe, our World plus a 5 x 4 x 3 probe grid over the room, and (the
+window sphere) our World plus a 3 x 3 x 3 grid over its own bounds. Compared per 2 x 2 screen blocks of the sphere
+and over the whole sphere (mean, per channel); the picture docs/img/local_light_spheres.png shows them all.
+
+Skipped unless the trixie root is made (`scripts/blender_roots.sh ensure trixie`; scripts/test_real_blender.sh).
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+import test_matrix as matrix  # noqa: E402 (the matrix's runner, installer and roots)
+
+REPO = matrix.REPO
+OUT = matrix.OUT / "local-light"
+ENTRY = next(e for e in matrix.ENTRIES if e.name == "bpy-5.3")
+PICTURE = REPO / "docs" / "img" / "local_light_spheres.png"
+
+SIZE = 40
+FOV = 40.0
+ALBEDO = 0.8
+SPHERES = {
+    "window": {"centre": [2.2, 0.0, 1.4], "radius": 0.3, "camera_offset": [0.0, -1.2, 0.1]},
+    "corner": {"centre": [-2.2, 1.8, 0.8], "radius": 0.3, "camera_offset": [1.0, -0.6, 0.2]},
+}
+PROBE = [0.0, 0.0, 1.2]
+GRID = {"centre": [0.0, 0.0, 1.4], "half": [2.7, 2.2, 1.1], "shape": [5, 4, 3]}
+FINE_GRID = {"sphere": "window", "shape": [3, 3, 3]}  # over the sphere's own bounds
+NATIVE_SAMPLES = int(os.environ.get("GS_IBL_CYCLES_SAMPLES", 1024))
+SAMPLES = 128
+METHODS = ("one", "object", "grid", "fine")
+
+
+def _spheres_args():
+    out = {}
+    for name, s in SPHERES.items():
+        c = np.asarray(s["centre"])
+        out[name] = {"centre": s["centre"], "radius": s["radius"],
+                     "camera": {"position": (c + s["camera_offset"]).tolist(), "look_at": s["centre"],
+                                "fov_deg": FOV}}
+    return out
+
+
+def sphere_mask(name: str) -> np.ndarray:
+    """Pixels (top row first) well inside the sphere's outline."""
+    from gs_ibl_addon.core.render.views import ViewBatch
+    s = _spheres_args()[name]
+    cam = s["camera"]
+    d = ViewBatch.pinhole(cam["position"], cam["look_at"], FOV, SIZE, SIZE).views[0].pixel_directions()
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    o = np.asarray(cam["position"]) - np.asarray(s["centre"])
+    b = d @ o
+    disc = b * b - (o @ o - s["radius"] ** 2)
+    t = -b - np.sqrt(np.maximum(disc, 0.0))
+    n = (o + t[..., None] * d) / s["radius"]
+    return (disc > 0) & (-(n * d).sum(-1) > 0.35)
+
+
+def blocks(got: np.ndarray, want: np.ndarray, mask: np.ndarray, k: int = 2) -> np.ndarray:
+    ys, xs = np.nonzero(mask)
+    ye = np.linspace(ys.min(), ys.max() + 1, k + 1).astype(int)
+    xe = np.linspace(xs.min(), xs.max() + 1, k + 1).astype(int)
+    out = []
+    for i in range(k):
+        for j in range(k):
+            sel = np.zeros_like(mask)
+            sel[ye[i]:ye[i + 1], xe[j]:xe[j + 1]] = True
+            sel &= mask
+            if sel.sum() >= 20:
+                out.append(got[sel].mean(0) / want[sel].mean(0) - 1.0)
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def local_run(tmp_path_factory):
+    if not matrix._ready(ENTRY.root):
+        pytest.skip(f"{ENTRY.root} not made: scripts/blender_roots.sh ensure {ENTRY.root}")
+    from gs_ibl_addon.core.colour import linear_sh_for_srgb_rule
+    from gs_ibl_addon.core.formats import read_scene
+    from gs_ibl_addon.core.formats.ply import write_ply
+    OUT.mkdir(parents=True, exist_ok=True)
+    zip_path = OUT / "gs_ibl.zip"
+    subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
+                   capture_output=True, text=True)
+    runner = matrix.Runner(ENTRY, tmp_path_factory.mktemp("local"))
+    try:
+        room = read_scene(REPO / "samples" / "room.ply")
+        assert room.colour_space == "linear"
+        room.sh = linear_sh_for_srgb_rule(room.sh)  # Blender decodes every splat as sRGB: it gets the linear light
+        room.colour_space = "srgb"
+        write_ply(runner.host / "room.ply", room)
+        shutil.copy(zip_path, runner.host / zip_path.name)
+        shutil.copy(HERE / "local_light_reference.py", runner.host / "local_light_reference.py")
+        args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": SIZE, "albedo": ALBEDO,
+                "spheres": _spheres_args(), "probe": PROBE, "grid": GRID, "fine_grid": FINE_GRID, "face_size": 64,
+                "native_samples": NATIVE_SAMPLES, "samples": SAMPLES, "threads": 2}
+        (runner.host / "args.json").write_text(json.dumps(args, indent=1))
+        assert matrix._install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
+            (runner.host / "install.log").read_text()[-2000:]
+        r = runner.run([runner.python(), str(runner.inner / "local_light_reference.py"),
+                        str(runner.inner / "args.json")], "local")
+        line = next((x for x in r.stdout.splitlines() if x.startswith("GSIBL-LOCAL-RESULT ")), None)
+        assert line, f"no result (rc {r.returncode}): {r.stdout[-2000:]}\n{r.stderr[-3000:]}"
+        result = json.loads(line.split(" ", 1)[1])
+        arrays = {p.stem: np.load(p) for p in runner.host.glob("*.npy")}
+        yield result, arrays, read_scene(REPO / "samples" / "room.ply")
+    finally:
+        keep = OUT / "run"
+        shutil.rmtree(keep, ignore_errors=True)
+        shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
+        runner.close()
+
+
+def _picture(arrays) -> None:
+    """Rows: the spheres; columns: native Cycles, one probe, per-object probe, room grid, fine grid (one exposure)."""
+    from gs_ibl_addon.core.image_io import write_png_preview
+    rows = []
+    for name in SPHERES:
+        blank = np.ones((SIZE, SIZE, 3), np.float32)
+        tiles = [arrays.get(f"{m}_{name}", blank)[..., :3] for m in ("native", *METHODS)]
+        gap = np.ones((SIZE, 2, 3), np.float32)
+        rows.append(np.concatenate(sum(([t, gap] for t in tiles), [])[:-1], 1))
+    img = np.concatenate([rows[0], np.ones((2, rows[0].shape[1], 3), np.float32), rows[1]], 0)
+    img = np.repeat(np.repeat(img, 4, 0), 4, 1)  # 40 px renders, shown at 160 px
+    write_png_preview(PICTURE, img)
+
+
+def test_local_light_matches_native_cycles(local_run):
+    result, arrays, room = local_run
+    assert result.get("ok"), result.get("error")
+    assert result["native"]
+    # Blender's PLY importer put the splats where our reader does (no axis change), so the spheres stand where meant
+    head = np.asarray(result["positions_head"])
+    assert np.abs(head - room.positions[:len(head)]).max() < 1e-4
+    lines = [f"\n[local light] Cycles {SIZE}x{SIZE}: native {NATIVE_SAMPLES} spp, ours {SAMPLES} spp; "
+             f"World bake {result['bake_s']:.1f} s; variation check {result['variation_s']:.1f} s "
+             f"({result['variations']}); per-object bake {result['object_bake_s']:.1f} s; grid "
+             f"{'x'.join(map(str, GRID['shape']))} bake {result['grid_bake_s']:.1f} s"]
+    means, worst = {}, {}
+    for name in SPHERES:
+        mask = sphere_mask(name)
+        native = arrays[f"native_{name}"][..., :3].astype(np.float64)
+        for m in (*METHODS, "reloaded"):
+            if f"{m}_{name}" not in arrays:
+                continue
+            got = arrays[f"{m}_{name}"][..., :3].astype(np.float64)
+            means[(name, m)] = got[mask].mean(0) / native[mask].mean(0)
+            worst[(name, m)] = np.abs(blocks(got, native, mask)).max()
+            lines.append(f"  {name:6s} {m:8s}: whole sphere / native {np.round(means[(name, m)], 3)}, worst 2x2 "
+                         f"block {worst[(name, m)]:.1%}")
+    print("\n".join(lines + [f"  variation: {result['variation']}", f"  {result['grid_report']}",
+                             f"  {result['fine_report']} in {result['fine_bake_s']:.1f} s"]))
+    _picture(arrays)
+
+    def off(name, m):
+        return float(np.abs(means[(name, m)] - 1).max())
+    np.testing.assert_allclose(means[("window", "reloaded")], means[("window", "grid")], rtol=0.03)
+    # one probe in the middle of the room misleads both spheres, and the check says so
+    assert off("window", "one") > 0.4 and off("corner", "one") > 0.4
+    assert all(("use a per-object probe" in line) for line in result["variation"] if line.startswith(tuple(SPHERES)))
+    # local light brings both to within 15% (measured 4-16%: the light still varies across each sphere, and in the
+    # corner our splats' light is 7-10% above Cycles' even at the surface: docs/stability.md) ...
+    for name in SPHERES:
+        for m in ("object", "grid"):
+            assert off(name, m) < 0.2 and off(name, m) < off(name, "one") / 3, (name, m, means[(name, m)])
+    # ... and a 3 x 3 x 3 grid over the window sphere's own bounds to within 3% (measured 0.6-2.8%, worst block 6.8%)
+    assert off("window", "fine") < 0.04 and worst[("window", "fine")] < worst[("window", "object")] / 2

@@ -1,0 +1,194 @@
+"""More than one probe in Blender (issue 17 part 3): the local-light group renders what core/probe/grid.py says,
+in EEVEE and Cycles, and the operators bake, insert, save, reload and remove it without losing the user's material.
+
+The group is checked on a unit sphere seen by an orthographic camera (as tests/test_blender_lighting.py): the
+World is black and the material a white Diffuse BSDF, so each pixel is the group's emission alone,
+sum_k c_k(P) P_k(n) with c_k = the object's coefficients + the grid interpolated at the surface point P; the
+numpy twin (grid.sample_packed, eval_irradiance) gives each pixel's answer.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+OpenImageIO = pytest.importorskip("OpenImageIO")
+
+from gs_ibl_addon.blender.compat import node_tree  # noqa: E402
+from gs_ibl_addon.core import synthetic  # noqa: E402
+from gs_ibl_addon.core.probe import grid as pg  # noqa: E402
+
+RES = 48
+ORTHO = 2.4
+
+
+def _camera_scene(engine: str):
+    """The conftest ``blender`` fixture's empty scene, a camera and a white diffuse unit sphere."""
+    scene = bpy.context.scene
+    scene.render.engine = engine
+    scene.render.resolution_x = scene.render.resolution_y = RES
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    scene.view_settings.view_transform = "Standard"
+    scene.view_settings.look = "None"
+    if engine == "CYCLES":
+        scene.cycles.samples = 16
+        scene.cycles.use_denoising = False
+        scene.cycles.device = "CPU"
+    else:
+        scene.eevee.taa_render_samples = 4
+    cam = bpy.data.objects.new("cam", bpy.data.cameras.new("cam"))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", ORTHO
+    cam.location = (5.0, 0.0, 0.0)
+    cam.rotation_euler = (math.pi / 2, 0.0, math.pi / 2)  # looks along -X; image right = +Y, up = +Z
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=1.0)
+    sphere = bpy.context.active_object
+    bpy.ops.object.shade_smooth()
+    mat = bpy.data.materials.new("user white")
+    nt = node_tree(mat, clear=True)
+    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    sphere.data.materials.append(mat)
+    return scene, sphere, mat
+
+
+def _render(scene, tmp_path, name):
+    path = os.path.join(str(tmp_path), name + ".exr")
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    return np.asarray(OpenImageIO.ImageBuf(path).get_pixels(OpenImageIO.FLOAT))[..., :3]
+
+
+def _sphere_pixels(max_r=0.85):
+    c = (np.arange(RES) + 0.5) / RES * ORTHO - ORTHO / 2
+    zz, yy = np.meshgrid(c[::-1], c, indexing="ij")
+    rows, cols = np.nonzero(yy * yy + zz * zz < max_r * max_r)
+    y, z = yy[rows, cols], zz[rows, cols]
+    return rows, cols, np.stack([np.sqrt(1.0 - y * y - z * z), y, z], -1)
+
+
+@pytest.mark.parametrize("engine", ["CYCLES", "BLENDER_EEVEE_NEXT"])
+def test_group_renders_the_numpy_grid(blender, engine, tmp_path):
+    """Per-object coefficients plus a 3 x 2 x 2 grid over the sphere: every pixel within 2% (Cycles) / 4% (EEVEE,
+    half-float textures and its film filter) of the numpy answer, and the user's material intact."""
+    from gs_ibl_addon.blender import local_light as ll
+    if engine == "BLENDER_EEVEE_NEXT" and "BLENDER_EEVEE_NEXT" not in \
+            bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys():
+        engine = "BLENDER_EEVEE"
+    scene, sphere, mat = _camera_scene(engine)
+    spec = pg.GridSpec((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0), (3, 2, 2))
+    rng = np.random.default_rng(4)
+    d_obj = np.zeros((9, 3))
+    d_obj[0] = (0.35, 0.3, 0.25)
+    d_obj[1:4] = rng.uniform(-0.05, 0.05, (3, 3))
+    d_grid = rng.uniform(-0.04, 0.04, (*spec.shape, 9, 3))
+    d_grid[..., 0, :] += spec.points() @ np.array([[0.1, 0.0, 0.05], [0.0, 0.08, 0.0], [0.05, 0.05, 0.1]]) + 0.2
+    image = ll.grid_image(pg.pack_grid(d_grid))
+    ll.local_light_group(spec, image)
+    ll.set_object_coefficients(sphere, d_obj, grid=True)
+    ll.light_object(sphere)
+    px = _render(scene, tmp_path, engine)
+    rows, cols, n = _sphere_pixels()
+    c = d_obj[None] + pg.sample_packed(pg.pack_grid(d_grid), spec, n)  # the surface point of a unit sphere is n
+    want = pg.eval_irradiance(c, n)
+    got = px[rows, cols]
+    rel = np.abs(got - want) / np.abs(want).mean()
+    print(f"\n{engine}: local light vs numpy: median {100 * np.median(rel):.2f}%, 95th pct "
+          f"{100 * np.percentile(rel, 95):.2f}%, max {100 * rel.max():.2f}%")
+    assert np.median(rel) < 0.01 and np.percentile(rel, 95) < (0.02 if engine == "CYCLES" else 0.04)
+    # the user's shader still feeds the output through our node; removing it links them directly again
+    nt = mat.node_tree
+    bsdf = next(nd for nd in nt.nodes if nd.bl_idname == "ShaderNodeBsdfDiffuse")
+    assert ll.in_material(mat) and bsdf.outputs[0].links[0].to_node.bl_idname == "ShaderNodeGroup"
+    ll.unlight_object(sphere)
+    assert not ll.in_material(mat) and bsdf.outputs[0].links[0].to_node.bl_idname == "ShaderNodeOutputMaterial"
+    assert ll.has_local_light(sphere) is None and len(nt.nodes) == 2
+
+
+ROOM = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "samples", "room.ply")
+
+
+def test_operators_bake_save_reload_and_remove(blender, tmp_path):
+    """The sample room, a probe in its middle, a sphere by the window and a cube in the far corner: Check Light
+    Variation names the sphere; Per-Object Probes sets each mesh's coefficients (its centre's SH minus the World
+    probe's, as the core computes them) and inserts the group into its material without losing the user's shader; the
+    grid lights them after a save and reload; Remove Local Light gives back the material as it was."""
+    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients
+    assert bpy.ops.gs_ibl.import_splats(filepath=ROOM, axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    room = bpy.context.active_object
+    assert room.gs_ibl_splats.colour_space == "LINEAR"
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(2.2, 0.0, 1.4))
+    sphere = bpy.context.active_object
+    sphere.name = "Sphere"
+    mat = bpy.data.materials.new("user")
+    nt = node_tree(mat, clear=True)
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    bsdf.inputs["Base Color"].default_value = (0.5, 0.6, 0.7, 1.0)
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    sphere.data.materials.append(mat)
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=(-2.3, 1.9, 0.5))  # no material: gets our grey one
+    cube = bpy.context.active_object
+    cube.name = "Cube"
+    bpy.context.scene.cursor.location = (0.0, 0.0, 1.2)
+    bpy.ops.object.select_all(action="DESELECT")
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    s = probe.gs_ibl_probe
+    s.splats, s.face_size, s.irradiance_size = room, 32, 8
+    # local light needs the World it corrects
+    with pytest.raises(RuntimeError, match="Bake 'GS-IBL Probe' first"):
+        bpy.ops.gs_ibl.object_probes()
+    assert not ll.in_material(mat)
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert bpy.ops.gs_ibl.check_variation() == {"FINISHED"}  # nothing selected: the meshes inside the room
+    report = s.local_report
+    print("\n" + report)
+    assert "Sphere: light varies" in report and "use a per-object probe or a grid" in report.split("Sphere:")[1]
+    assert "Cube:" in report
+    from types import SimpleNamespace
+
+    from gs_ibl_addon.blender.local_light_ui import GSIBL_PT_local_light
+    from test_blender_native_import import _Layout  # records the labels a panel draws
+    labels: list[str] = []
+    GSIBL_PT_local_light.draw(SimpleNamespace(layout=_Layout(labels)), bpy.context)
+    assert "Sphere: light varies" in " ".join(labels) and "per-object probe" in " ".join(labels)
+    assert bpy.ops.gs_ibl.object_probes() == {"FINISHED"}
+    r = splat_cache.get(room).renderer
+    d = monomial_coefficients(bake_sh_points(r, np.array([[0.0, 0.0, 1.2], [2.2, 0.0, 1.4]])))
+    got = np.array([sphere[ll.SH_PROP.format(k)] for k in range(9)])
+    np.testing.assert_allclose(got, d[1] - d[0], atol=1e-4)
+    assert ll.has_local_light(sphere) == "probe" and ll.has_local_light(cube) == "probe"
+    group_node = bsdf.outputs[0].links[0].to_node
+    assert group_node.bl_idname == "ShaderNodeGroup" and out.inputs["Surface"].links[0].from_node == group_node
+    assert tuple(group_node.inputs["Albedo"].default_value)[:3] == pytest.approx((0.5, 0.6, 0.7))
+    assert cube.material_slots[0].material.get("gs_ibl") == ll.DEFAULT_MATERIAL_ROLE
+    # a grid instead, kept through save and reload
+    s.grid_resolution = (2, 2, 2)
+    assert bpy.ops.gs_ibl.probe_grid() == {"FINISHED"}
+    assert ll.has_local_light(sphere) == "grid" and "Probe grid 2x2x2" in s.local_report
+    path = str(tmp_path / "local.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    sphere, cube = bpy.data.objects["Sphere"], bpy.data.objects["Cube"]
+    mat = bpy.data.materials["user"]
+    assert ll.has_local_light(sphere) == "grid" and ll.in_material(mat)
+    grid = next(i for i in bpy.data.images if i.get("gs_ibl") == "grid")
+    px = np.empty(grid.size[0] * grid.size[1] * 4, np.float32)
+    grid.pixels.foreach_get(px)
+    assert grid.size[:] == (18, 4) and np.abs(px).max() > 0
+    assert bpy.ops.gs_ibl.remove_local_light() == {"FINISHED"}
+    assert not ll.in_material(mat) and ll.has_local_light(sphere) is None and len(cube.material_slots) == 0
+    nt = mat.node_tree
+    assert [n.bl_idname for n in nt.nodes] == ["ShaderNodeBsdfPrincipled", "ShaderNodeOutputMaterial"]
+    assert nt.nodes[0].outputs[0].links[0].to_node == nt.nodes[1]

@@ -1,0 +1,125 @@
+"""Settings from a tolerance (core/tolerance.py): the error estimate against the truth on small scenes, the chosen
+setting within the tolerance, and bad tolerances refused.
+
+Truth here: the same bake at 512^2 faces (exact filter from a 128^2 copy). Its own error is 0.2% on the sample
+environment and under 0.02% on the others (docs/accuracy.md, against 1024^2), far below the 1-9% errors checked at
+64^2 and 128^2 (the assertions leave that margin).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from gs_ibl_addon.cli import main
+from gs_ibl_addon.core import synthetic
+from gs_ibl_addon.core.bake import BadSetting, ProbeSettings, bake_probe, check_settings, relative_rms
+from gs_ibl_addon.core.render.renderer import SplatRenderer
+from gs_ibl_addon.core.tolerance import (ErrorModel, check_tolerance, footprints, interpolation_error, plan_text,
+                                         upsample2)
+
+FACES = (32, 64, 128)
+TRUTH_FACE = 512
+
+
+def _scenes() -> dict:
+    return {
+        "room": (synthetic.room_scene().scene, np.array([0.0, 0.0, 1.5])),
+        "sample_env": (synthetic.sample_environment(), np.array([0.0, 0.0, 1.0])),
+        "sun": (synthetic.shell_scene(synthetic.radiance_functions()["sun"], 20_000), np.zeros(3)),
+    }
+
+
+@pytest.fixture(scope="module")
+def baked():
+    """Per scene: (scene, position, renderer, {face: irradiance at 16^2} for FACES and the truth)."""
+    out, renderers = {}, []
+    for name, (scene, pos) in _scenes().items():
+        r = SplatRenderer(scene)
+        renderers.append(r)
+        irr = {f: bake_probe(scene, pos, ProbeSettings(face_size=f), renderer=r).irradiance for f in FACES}
+        irr["truth"] = bake_probe(scene, pos, ProbeSettings(face_size=TRUTH_FACE, extra={"downsample_to": 128}),
+                                  renderer=r).irradiance
+        out[name] = (scene, pos, r, irr)
+    yield out
+    for r in renderers:
+        r.close()
+
+
+@pytest.mark.parametrize("name", ["room", "sample_env", "sun"])
+def test_estimate_is_conservative_within_a_stated_band(baked, name):
+    # calibrated on 32^2 -> 64^2, as the bake does. Measured est / true (pooled error, lavapipe, 2026-12-02): at 64^2
+    # and predicted at 128^2: room 2.0 and 2.2, sample_env 2.5 and 2.8, sun 1.5 and 2.2 (docs/accuracy.md has the
+    # table against a 1024^2 truth: 1.3-7.4x above 0.01%). Band asserted: [1, 6].
+    scene, pos, _r, irr = baked[name]
+    model = ErrorModel(footprints(scene, pos))
+    est64 = model.calibrate(32, 64, relative_rms(irr[32], irr[64]))
+    true64 = relative_rms(irr[64], irr["truth"])
+    true128 = relative_rms(irr[128], irr["truth"])
+    assert true64 <= est64 <= 6 * true64, (est64, true64)
+    assert true128 <= model.estimate(128) <= 6 * true128, (model.estimate(128), true128)
+    # recalibrated on the next pair, the estimate still bounds the error
+    est128 = model.calibrate(64, 128, relative_rms(irr[64], irr[128]))
+    assert true128 <= est128 <= 6 * true128, (est128, true128)
+
+
+@pytest.mark.parametrize("name,tol", [("room", 0.01), ("room", 0.002), ("sample_env", 0.05), ("sun", 0.01)])
+def test_the_chosen_setting_meets_the_tolerance(baked, name, tol):
+    scene, pos, r, irr = baked[name]
+    p = bake_probe(scene, pos, ProbeSettings(tolerance=tol, max_face_size=TRUTH_FACE), renderer=r)
+    st, plan = p.settings, p.settings["tolerance_plan"]
+    assert plan["met"] and st["converged"] and plan["estimated_error"] <= tol
+    assert relative_rms(p.irradiance, irr["truth"]) <= tol
+    faces = [t["face_size"] for t in st["face_size_trials"]]
+    assert faces[:2] == [32, 64] and st["face_size"] == faces[-1] == plan["face_size"]
+    assert "estimated error" in plan_text(st)
+
+
+def test_the_sample_does_not_double_through_every_size(baked):
+    # the old rule rendered 32, 64, 128, 256 and 512 at 1% on the sample; the model jumps from 64^2
+    scene, pos, r, irr = baked["sample_env"]
+    p = bake_probe(scene, pos, ProbeSettings(tolerance=0.01, max_face_size=TRUTH_FACE), renderer=r)
+    faces = [t["face_size"] for t in p.settings["face_size_trials"]]
+    assert len(faces) <= 4 and p.settings["tolerance_plan"]["met"], faces
+
+
+def test_irradiance_size_zero_is_chosen_by_the_error_between_texels(baked):
+    scene, pos, r, _irr = baked["room"]
+    p = bake_probe(scene, pos, ProbeSettings(face_size=64, irradiance_size=0, tolerance=0.01), renderer=r)
+    m = p.settings["irradiance_size"]
+    assert m in (8, 16, 32) and p.irradiance.shape == (6, m, m, 3)
+    between = p.settings["tolerance_plan"]["irradiance_between_texels"]
+    assert between[str(m)] <= 0.01 and all(between[k] > 0.01 for k in between if int(k) < m)
+
+
+def test_without_the_splats_on_the_host_the_tail_model_is_used(baked):
+    _scene, pos, r, _irr = baked["room"]
+    p = bake_probe(None, pos, ProbeSettings(tolerance=0.05, max_face_size=TRUTH_FACE), renderer=r)
+    assert p.settings["tolerance_plan"]["model"] == "tail" and p.settings["tolerance_plan"]["met"]
+
+
+def test_footprint_curve_and_interpolation_helpers():
+    scene = synthetic.room_scene().scene
+    f = footprints(scene, [0.0, 0.0, 1.5])
+    s = [f.excess(n) for n in (16, 32, 64, 128, 256)]
+    assert all(0 < b < a < 1 for a, b in zip(s, s[1:]))
+    assert np.isclose(f.weight.sum(), 1.0)
+    flat = np.full((6, 8, 8, 3), 0.7)
+    np.testing.assert_allclose(upsample2(flat), np.full((6, 16, 16, 3), 0.7))
+    assert interpolation_error(flat, np.full((6, 16, 16, 3), 0.7)) < 1e-12
+
+
+@pytest.mark.parametrize("value", ["0", "0.0001", "0.9", "-1", "nan", "inf", "abc"])
+def test_bad_tolerances_are_refused_by_the_command_line(value, capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["bake", "X.ply", "--tolerance", value, "--out", "o"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert "--tolerance" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("value", [0, 1e-4, 0.9, float("nan"), True, "0.01"])
+def test_bad_tolerances_are_refused_by_the_core(value):
+    with pytest.raises(BadSetting) as e:
+        check_settings(ProbeSettings(tolerance=value))
+    assert e.value.option == "tolerance"
+    assert check_tolerance(0.01) == 0.01
