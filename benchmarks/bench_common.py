@@ -22,6 +22,27 @@ def bench_scene(n: int, sh_degree: int = 3, extent: float = 5.0) -> SplatScene:
     return scene
 
 
+def shell_scene(n: int, seed: int = 7) -> SplatScene:
+    """A random shell of radius 5-6 around the origin: isotropic splats of scale 0.02 * sqrt(1e6 / n), opacity 0.8,
+    SH degree 3 (shared/tools/gpu_peer's second scene). Every splat is at about the same distance and most
+    overlap many others: the opposite of bench_scene's volume for the sorts."""
+    import numpy as np
+    from gs_ibl_addon.core.scene import rgb_to_sh_dc
+    rng = np.random.default_rng(seed)
+    f32 = np.float32
+    d = rng.standard_normal((n, 3), dtype=f32)
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    pos = d * (f32(5.0) + rng.random(n, dtype=f32))[:, None]
+    scales = np.full((n, 3), 0.02 * np.sqrt(1e6 / n), f32)
+    rot = rng.standard_normal((n, 4), dtype=f32)
+    rot /= np.linalg.norm(rot, axis=1, keepdims=True)
+    sh = rng.random((n, 16, 3), dtype=f32) - f32(0.5)
+    band = np.array([0.96] + [2.0 * np.sqrt(3.0) * 0.15 / l for l in range(1, 4) for _ in range(2 * l + 1)], f32)
+    sh *= band[:, None]
+    sh[:, 0] = rgb_to_sh_dc(sh[:, 0] + f32(0.5))
+    return SplatScene(pos, scales, rot, np.full(n, 0.8, f32), sh, source=f"<shell n={n} seed={seed}>")
+
+
 def warm_up(step: Callable[[], object], seconds: float = 1.0) -> None:
     """Run ``step`` for a while: GPU clocks ramp after the idle seconds of building a scene on the CPU."""
     t = time.perf_counter()

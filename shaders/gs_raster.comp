@@ -71,11 +71,11 @@ void main() {
             vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
             if (dot(ol, dl) >= 0.0) continue;  // the closest approach lies behind the origin
             vec3 cr = cross(ol, dl);
-            float m = dot(cr, cr) / dot(dl, dl);
-            if (m > s_cut[k]) continue;  // outside the footprint (3DGS: alpha < 1/255)
-            float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
+            float cc = dot(cr, cr), dd = dot(dl, dl);
+            if (cc > s_cut[k] * dd) continue;  // outside the footprint (3DGS: alpha < 1/255); m = cc / dd
+            float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * cc / dd));
             color += T * alpha * s_col[k].rgb;
-            zsum += T * alpha * (-dot(ol, dl) / dot(dl, dl));  // closest approach along d; d's forward part is 1
+            if (p.write_depth != 0u) zsum += T * alpha * (-dot(ol, dl) / dd);  // closest approach along d; d's forward part is 1
             T *= 1.0 - alpha;
             // Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then composes chunk by chunk, and a
             // nearly opaque last splat does not leave up to 1% of transmittance behind.

@@ -10,7 +10,9 @@ layout(std430, binding = 2) writeonly buffer KeysOut { uint keys_out[]; };
 layout(std430, binding = 3) writeonly buffer ValsOut { uint vals_out[]; };
 layout(std430, binding = 4) readonly buffer Hist { uint hist[]; };
 layout(std430, binding = 5) readonly buffer Count { uint count[]; };
-layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; } p;
+// drop = 1: keys equal to drop_key are left out (counted nowhere, written nowhere).
+layout(push_constant) uniform P { uint n_blocks; uint shift; uint count_index; uint drop; uint drop_key; } p;
+bool dropped(uint key) { return p.drop != 0u && key == p.drop_key; }
 shared uint cnt[16 * 256];   // [digit][thread], scanned in place to per-thread offsets within the block
 shared uint partial[256];
 shared uint digit_start[16];
@@ -25,8 +27,8 @@ void main() {
     uint k[16];
     for (uint i = 0u; i < 16u; ++i) {
         uint idx = base + i;
-        k[i] = idx < n ? keys_in[idx] : 0xFFFFFFFFu;
-        if (idx < n) cnt[((k[i] >> p.shift) & 15u) * 256u + lid] += 1u;
+        k[i] = idx < n ? keys_in[idx] : 0u;
+        if (idx < n && !dropped(k[i])) cnt[((k[i] >> p.shift) & 15u) * 256u + lid] += 1u;
     }
     barrier();
     // Exclusive scan of the 4096 counters in [digit][thread] order: thread t scans entries [16t, 16t+16).
@@ -53,6 +55,7 @@ void main() {
     for (uint i = 0u; i < 16u; ++i) {
         uint idx = base + i;
         if (idx >= n) break;
+        if (dropped(k[i])) continue;
         uint d = (k[i] >> p.shift) & 15u;
         uint slot = cnt[d * 256u + lid];
         cnt[d * 256u + lid] = slot + 1u;

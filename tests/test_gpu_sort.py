@@ -15,7 +15,7 @@ def test_exclusive_scan(n):
 
 
 @pytest.mark.parametrize("digit_bits", [4, 8])
-@pytest.mark.parametrize("n", [1, 4095, 4096, 4097, 70_000])
+@pytest.mark.parametrize("n", [1, 511, 513, 4095, 4096, 4097, 70_000, 200_000, 700_000])
 def test_radix_sort_is_a_stable_sort(digit_bits, n):
     ctx = get_context()
     if digit_bits == 8 and digit_bits_for(ctx) != 8:
@@ -47,3 +47,65 @@ def test_lavapipe_and_gpus_get_the_8_bit_sorter():
     # double the sorting passes, so say it if it ever happens
     ctx = get_context()
     assert digit_bits_for(ctx) == 8, (ctx.device_name, ctx.subgroup_size, ctx.subgroup_ballot)
+
+
+@pytest.mark.parametrize("digit_bits", [4, 8])
+@pytest.mark.parametrize("bits", [7, 15])
+def test_dropped_keys_leave_the_sort(digit_bits, bits):
+    # the tile sort drops instances whose tile the footprint missed (key = one past the last tile): the rest come
+    # out packed, stable, and the count says how many
+    ctx = get_context()
+    if digit_bits == 8 and digit_bits_for(ctx) != 8:
+        pytest.skip("no 8-bit sorter on this device")
+    rng = np.random.default_rng(bits)
+    drop = (1 << bits) - 1
+    keys = rng.integers(0, drop + 1, 30_000).astype(np.uint32)
+    keys[rng.random(len(keys)) < 0.3] = drop
+    vals = np.arange(len(keys), dtype=np.uint32)
+    k, v = sort_pairs(ctx, keys, vals, bits, digit_bits, drop_key=drop)
+    kept = np.flatnonzero(keys != drop)
+    order = kept[np.argsort(keys[kept], kind="stable")]
+    np.testing.assert_array_equal(k, keys[order])
+    np.testing.assert_array_equal(v, vals[order])
+
+
+def test_long_sorts_scan_their_histogram():
+    # long sorts (4096-key blocks, more than UNSCANNED_MAX_BLOCKS of them: the histogram goes through the scan)
+    # give the same stable order and kept count as the short ones the other tests check (512-key blocks, each
+    # summing the histogram itself)
+    from gs_ibl_addon.core.render.gpu_sort import SHORT_SORT_MAX, UNSCANNED_MAX_BLOCKS
+    from gs_ibl_addon.core.vk.constants import SORT_BLOCK
+    ctx = get_context()
+    n = max(SHORT_SORT_MAX + 1, (UNSCANNED_MAX_BLOCKS + 3) * SORT_BLOCK + 17)
+    rng = np.random.default_rng(5)
+    keys = rng.integers(0, 1 << 15, n).astype(np.uint32)
+    keys[rng.random(n) < 0.2] = (1 << 15) - 1
+    vals = np.arange(n, dtype=np.uint32)
+    k, v = sort_pairs(ctx, keys, vals, 15, drop_key=(1 << 15) - 1)
+    kept = np.flatnonzero(keys != (1 << 15) - 1)
+    order = kept[np.argsort(keys[kept], kind="stable")]
+    np.testing.assert_array_equal(v, vals[order])
+    np.testing.assert_array_equal(k, keys[order])
+
+
+def test_a_short_list_in_a_large_sorter():
+    # a level-of-detail cut: the sorter is sized for the whole tree, the count (on the GPU) is a small part of it
+    from gs_ibl_addon.core.render.gpu_sort import RadixSorter
+    from gs_ibl_addon.core.vk import Buffer, Recorder
+    ctx = get_context()
+    cap, n = 120_000, 13_001
+    rng = np.random.default_rng(9)
+    keys = rng.integers(0, 2 ** 32, cap, dtype=np.uint64).astype(np.uint32)
+    kb, vb, cb = Buffer(ctx, cap * 4, "k"), Buffer(ctx, cap * 4, "v"), Buffer(ctx, 16, "c")
+    kb.write(keys)
+    vb.write(np.arange(cap, dtype=np.uint32))
+    cb.write(np.array([0, n, 0, 0], np.uint32))
+    sorter = RadixSorter(ctx, cap)
+    with Recorder(ctx) as rec:
+        sorter.record(rec, kb, vb, cb, 1, 32)
+    order = np.argsort(keys[:n], kind="stable")
+    np.testing.assert_array_equal(vb.read(np.uint32, n), order)
+    np.testing.assert_array_equal(kb.read(np.uint32, n), keys[:n][order])
+    sorter.destroy()
+    for b in (kb, vb, cb):
+        b.destroy()

@@ -57,6 +57,19 @@ def digit_bits_for(ctx) -> int:
     return 8 if ctx.subgroup_ballot and 8 <= ctx.subgroup_size <= 128 else 4
 
 
+# Sorts of at most this many blocks skip the histogram's scan: each scatter block sums the counts before it
+# (radix8_scatter.comp, scanned = 0), and a pass is two dispatches instead of four or five. Measured on an H200
+# (docs/benchmarks.md): a 100k-key depth sort (25 blocks of 4096) 0.19 -> 0.15 ms; at 245 blocks of 4096 (1M keys)
+# summing cost more than the scan saved (0.22 -> 0.28 ms), so long blocks go unscanned only up to 128 of them.
+UNSCANNED_MAX_BLOCKS = 128
+UNSCANNED_MAX_SHORT_BLOCKS = 256  # 512-key blocks: each block sums only the blocks that hold keys
+# A block's 128-key rounds run one after another (each a few barriers), so a block's latency is what a short sort
+# costs: sorts of up to SHORT_SORT_MAX keys use blocks of SHORT_BLOCK_ROUNDS rounds (512 keys) instead of 32 (a
+# level-of-detail cut of 13k nodes: 4 busy blocks of 32 rounds took ~35 us a pass on an H200).
+SHORT_SORT_MAX = 1 << 19
+SHORT_BLOCK_ROUNDS = 4
+
+
 class RadixSorter:
     """Stable sort of (key, value) uint32 pairs by the low ``bits`` bits of the key, for up to ``capacity`` pairs.
 
@@ -70,28 +83,56 @@ class RadixSorter:
             raise ValueError(f"radix digits are 4 or 8 bits, not {self.digit_bits}")
         self.bins = 1 << self.digit_bits
         self.capacity = max(1, int(capacity))
-        self.n_blocks = -(-self.capacity // SORT_BLOCK)
+        self.block_rounds = SHORT_BLOCK_ROUNDS if self.digit_bits == 8 and self.capacity <= SHORT_SORT_MAX else 32
+        self.block_keys = SORT_BLOCK if self.digit_bits != 8 else 128 * self.block_rounds
+        self.n_blocks = -(-self.capacity // self.block_keys)
         self.keys_tmp = Buffer(ctx, self.capacity * 4, "sort-keys-tmp")
         self.vals_tmp = Buffer(ctx, self.capacity * 4, "sort-vals-tmp")
-        self.hist = Buffer(ctx, self.bins * self.n_blocks * 4, "sort-hist")
+        self.hist = Buffer(ctx, self.bins * self.n_blocks * 4 + 4, "sort-hist")  # + the kept count (unscanned)
         self.scanner = Scanner(ctx, self.bins * self.n_blocks)
 
-    def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int) -> None:
-        """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy)."""
+    def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int,
+               drop_key: int | None = None, stamps: str | None = None) -> None:
+        """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy).
+
+        ``drop_key``: pairs with exactly this key are left out of the result, which is then packed at the front,
+        and ``count[count_index]`` becomes the number kept (the first pass's histogram total): the later passes,
+        and whoever reads the count, see only those. ``stamps``: a label prefix for a timestamp after each step
+        (``<prefix>.hist``, ``.scan``, ``.scatter``; benchmarks only, they split the sort's time).
+        """
         prefix = "radix8" if self.digit_bits == 8 else "radix"
         hist_k, scat_k = KERNELS[f"{prefix}_hist"], KERNELS[f"{prefix}_scatter"]
         g = groups(self.n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
         passes = max(1, -(-int(bits) // self.digit_bits))
+        short = self.digit_bits == 8 and self.block_rounds == SHORT_BLOCK_ROUNDS
+        scan = self.digit_bits != 8 or self.n_blocks > (UNSCANNED_MAX_SHORT_BLOCKS if short else UNSCANNED_MAX_BLOCKS)
+
+        def stamp(step: str) -> None:
+            if stamps:
+                rec.timestamp(f"{stamps}.{step}")
         for i in range(passes):
-            push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index}
-            rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
-            self.scanner.record(rec, self.hist, self.bins * self.n_blocks)
-            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g, **push)
+            drop = i == 0 and drop_key is not None
+            push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index,
+                    "drop": int(drop), "drop_key": int(drop_key or 0)}
+            rec.dispatch(hist_k, [src_k, self.hist, count], g,
+                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds)))
+            stamp("hist")
+            if scan:
+                total, total_at = self.scanner.record(rec, self.hist, self.bins * self.n_blocks), 0
+                stamp("scan")
+            else:
+                total, total_at = self.hist, 4 * self.bins * self.n_blocks
+            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g,
+                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds, scanned=int(scan))))
+            if drop:  # the histogram's total is what the first pass kept
+                rec.copy(total, count, 4, src_offset=total_at, dst_offset=4 * count_index)
+            stamp("scatter")
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
         if src_k is not keys:
             rec.copy(src_k, keys, self.capacity * 4)
             rec.copy(src_v, vals, self.capacity * 4)
+            stamp("copy")
 
     def destroy(self) -> None:
         for b in (self.keys_tmp, self.vals_tmp, self.hist):
@@ -99,9 +140,9 @@ class RadixSorter:
         self.scanner.destroy()
 
 
-def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32,
-               digit_bits: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Convenience for tests: sort host arrays on the GPU."""
+def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32, digit_bits: int | None = None,
+               drop_key: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Convenience for tests: sort host arrays on the GPU (pairs with key ``drop_key`` left out)."""
     n = len(keys)
     kb, vb = Buffer(ctx, n * 4, "k"), Buffer(ctx, n * 4, "v")
     cb = Buffer(ctx, 16, "count")
@@ -110,8 +151,9 @@ def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32,
     cb.write(np.array([n, 0, 0, 0], np.uint32))
     sorter = RadixSorter(ctx, n, digit_bits)
     with Recorder(ctx) as rec:
-        sorter.record(rec, kb, vb, cb, 0, bits)
-    out = kb.read(np.uint32, n), vb.read(np.uint32, n)
+        sorter.record(rec, kb, vb, cb, 0, bits, drop_key)
+    kept = int(cb.read(np.uint32, 1)[0])
+    out = kb.read(np.uint32, n)[:kept], vb.read(np.uint32, n)[:kept]
     sorter.destroy()
     for b in (kb, vb, cb):
         b.destroy()

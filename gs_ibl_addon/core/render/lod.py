@@ -6,7 +6,7 @@ always drawn) is split into 2^b cells per axis at level 1 and halved going up, l
 ``cell1 * 2^(L-1)`` wide. Level 0 are the splats. A level-L node merges everything in one occupied cell by moment
 matching: weight w = opacity x mean footprint area (the integral of the coverage a ray sees, averaged over view
 directions), mean and covariance = the weighted mean and the weighted second moment about it, colour = the
-weighted mean of every SH coefficient, and an opacity whose footprint integral is the children's summed weight
+weighted mean of every SH coefficient (of the light: an sRGB scene's colours are decoded first), and an opacity whose footprint integral is the children's summed weight
 (a Gaussian saturating at ALPHA_MAX keeps the integral with opacity > 1: ``o = a * exp(W / (a A) - 1)``, so an
 opaque wall stays opaque instead of turning into a lattice of half-transparent blobs). A cell holding a single
 child repeats that child exactly and is not stored; a node's ``parent_level`` is its nearest stored ancestor.
@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..scene import SplatScene, quat_to_matrix
+from ..colour import srgb_to_linear
+from ..scene import SH_C0, SplatScene, quat_to_matrix
 from .splat_math import ALPHA_MAX
 
 NO_PARENT = 255  # parent_level of a node no stored node contains: its parent's error is infinite
@@ -99,6 +100,39 @@ def matrix_to_quat_batch(r: np.ndarray) -> np.ndarray:
 
 
 _PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))  # the covariance's six entries
+
+
+# An sRGB scene's colours are merged as the light they stand for (core/colour.py): averaging the encoded values
+# darkens a cluster whose children differ in brightness (the curve is convex; the guitar capture's irradiance fell
+# 23% at k = 0.5). The DC colour is decoded to linear radiance before the weighted mean and encoded again after; the
+# higher bands, small view-dependent changes of the encoded colour, go through the curve's slope at the DC colour.
+def _srgb_encode(x: np.ndarray) -> np.ndarray:
+    """The inverse of colour.srgb_to_linear on x >= 0 (no clamp above 1: the extended curve)."""
+    x = np.maximum(np.asarray(x, np.float64), 0.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def _srgb_slope(c: np.ndarray) -> np.ndarray:
+    """d srgb_to_linear / dc."""
+    c = np.asarray(c, np.float64)
+    return np.where(c < 0.04045, np.where(c > 0.0, 1.0 / 12.92, 0.0),
+                    2.4 / 1.055 * np.power((np.maximum(c, 0.04045) + 0.055) / 1.055, 1.4))
+
+
+def _sh_to_linear(sh: np.ndarray) -> np.ndarray:
+    """(N, K, 3) SH of sRGB-encoded colour -> the same layout in linear radiance (DC: the decoded colour itself)."""
+    c = SH_C0 * sh[:, 0].astype(np.float64) + 0.5
+    out = sh.astype(np.float64) * _srgb_slope(c)[:, None, :]
+    out[:, 0] = srgb_to_linear(c)
+    return out
+
+
+def _sh_from_linear(lin: np.ndarray) -> np.ndarray:
+    """The inverse of _sh_to_linear."""
+    c = _srgb_encode(lin[:, 0])
+    out = lin / np.maximum(_srgb_slope(c), 1e-12)[:, None, :]
+    out[:, 0] = (c - 0.5) / SH_C0
+    return out
 
 
 @dataclass
@@ -194,12 +228,16 @@ def _moments_of_splats(scene: SplatScene, sel: np.ndarray) -> tuple[_Moments, np
     w = scene.opacities[sel].astype(np.float64) * mean_footprint(scene.scales[sel])
     mu = scene.positions[sel].astype(np.float64)
     m2 = np.stack([w * (cov[:, i, j] + mu[:, i] * mu[:, j]) for i, j in _PAIRS], 1)
-    sh = scene.sh[sel].reshape(int(sel.sum()), -1).astype(np.float64) * w[:, None]
+    sh = scene.sh[sel].astype(np.float64)
+    if scene.colour_space == "srgb":
+        sh = _sh_to_linear(sh)
+    sh = sh.reshape(int(sel.sum()), -1) * w[:, None]
     return _Moments(w, mu * w[:, None], m2, sh), w
 
 
-def _splats_of(mom: _Moments, sh_k: int) -> tuple[np.ndarray, ...]:
-    """Means, scales, quaternions, opacities, SH of merged nodes from their sums."""
+def _splats_of(mom: _Moments, sh_k: int, srgb: bool) -> tuple[np.ndarray, ...]:
+    """Means, scales, quaternions, opacities, SH of merged nodes from their sums (``srgb``: the sums are of linear
+    colour, returned encoded)."""
     w = np.maximum(mom.w, 1e-300)
     mu = mom.m1 / w[:, None]
     cov = np.empty((len(w), 3, 3))
@@ -210,7 +248,8 @@ def _splats_of(mom: _Moments, sh_k: int) -> tuple[np.ndarray, ...]:
     # a merged disk stays flat, but not flatter than 1e-3 of its width (the whitening transform stays finite)
     scales = np.sqrt(np.maximum(evals, 1e-6 * np.maximum(evals[:, 2:], 1e-30)))
     opacity = opacity_for_weight(mom.w, mean_footprint(scales))
-    return mu, scales, matrix_to_quat_batch(evecs), opacity, (mom.sh / w[:, None]).reshape(len(w), sh_k, 3)
+    sh = (mom.sh / w[:, None]).reshape(len(w), sh_k, 3)
+    return mu, scales, matrix_to_quat_batch(evecs), opacity, _sh_from_linear(sh) if srgb else sh
 
 
 def build_lod(scene: SplatScene) -> LodTree:
@@ -254,7 +293,7 @@ def build_lod(scene: SplatScene) -> LodTree:
         if not keep.any():
             continue
         sub = _Moments(lv["mom"].w[keep], lv["mom"].m1[keep], lv["mom"].m2[keep], lv["mom"].sh[keep])
-        mu, s, q, o, sh = _splats_of(sub, sh_k)
+        mu, s, q, o, sh = _splats_of(sub, sh_k, scene.colour_space == "srgb")
         k = lv["keys"][keep]
         pos.append(mu); scl.append(s); rot.append(q); opa.append(o); shs.append(sh)
         lvl.append(np.full(len(k), li + 1)); plv.append(lv["parent"][keep])

@@ -74,6 +74,9 @@ def raster_chunks(tiles_per_probe: int, partial_bytes_per_chunk: int = 0) -> int
     return int(max(1, chunks))
 
 
+# Benchmarks only: a timestamp after each step of both sorts (labels "<stage>.hist", ".scan", ".scatter").
+PROFILE_SORTS = False
+
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
 # GPU bytes per (probe, splat) pair: prepared (PREP vec4), tile rectangles (MAX_VIEWS uvec2), tile count, depth
@@ -617,7 +620,8 @@ class SplatRenderer:
             pairs = self.cut_capacity  # from here on only the cut's entries
         else:
             keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
-        sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS)
+        sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS,
+                      stamps="sort_depth" if PROFILE_SORTS else None)
         stamp("sort_depth")
         rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                      groups(pairs, 256, c), n=pairs, count_index=count_index)
@@ -627,8 +631,10 @@ class SplatRenderer:
                       self.inst_val, self.count, self.prepared, self.rects],
                      groups(self.capacity, 256, c), n=pairs, capacity=self.capacity, n_views=nv, n_tiles=tiles)
         stamp("emit")
-        # tile ids run to `tiles` inclusive: that one is the key of instances whose tile was missed
-        self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, max(1, int(tiles).bit_length()))
+        # `tiles` is the key of instances whose tile the footprint missed: the sort drops them (count[0] becomes
+        # the pairs kept), so its second pass, ranges and raster never see them
+        self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, max(1, int(tiles - 1).bit_length()),
+                                drop_key=tiles, stamps="sort_tiles" if PROFILE_SORTS else None)
         stamp("sort_tiles")
         rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, self._frame["ranges"]], groups(self.capacity, 256, c))
         stamp("ranges")

@@ -44,7 +44,7 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
     return Kernel(name, tuple(buffers.split()), fields, tuple(local) + (1,) * (3 - len(local)))
 
 
-_SORT_PUSH = "n_blocks shift count_index"
+_SORT_PUSH = "n_blocks shift count_index drop drop_key"
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
@@ -63,8 +63,8 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("scan_add", "Data Sums", "n"),
     _k("radix_hist", "Keys Hist Count", _SORT_PUSH),
     _k("radix_scatter", "KeysIn ValsIn KeysOut ValsOut Hist Count", _SORT_PUSH),
-    _k("radix8_hist", "Keys Hist Count", _SORT_PUSH, (128,)),
-    _k("radix8_scatter", "KeysIn ValsIn KeysOut ValsOut Hist Count", _SORT_PUSH, (128,)),
+    _k("radix8_hist", "Keys Hist Count", _SORT_PUSH + " block_rounds", (128,)),
+    _k("radix8_scatter", "KeysIn ValsIn KeysOut ValsOut Hist Count", _SORT_PUSH + " block_rounds scanned", (128,)),
     # probe filters (probe/gpu_filters.py)
     _k("probe_split_alpha", "Frame Omega Cube Partial", "n n_groups"),
     _k("probe_sh_project", "Cube Omega Partial", "n n_groups"),

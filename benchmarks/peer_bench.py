@@ -1,0 +1,354 @@
+"""Our cube renderer against gsplat, same splats, same six cube-face views, one process, one GPU.
+
+Adapted from shared/tools/gpu_peer/peer_bench.py (the same-process peer bench of 2026-12-01): gsplat's
+``rasterization()`` (1.5.3, antialiased mode: its opacity compensation matches our energy-preserving probe
+dilation) renders the six faces of ``ViewBatch.cubemap`` in one call. Per scene x splat count x face size each
+renderer is warmed up, then timed in interleaved blocks; the SM clock (NVML) is read before and after each block.
+
+  python benchmarks/peer_bench.py bench [--scenes random,shell] [--counts 100000,1000000,6000000]
+         [--faces 64,256,1024] [--csv out/bench/peer.csv] [--profile-at 6000000@1024]
+  python benchmarks/peer_bench.py plot --csv docs/bench/peer_nvidia-h200.csv --png docs/performance.png
+
+Rows (one per renderer and configuration): GPU ms (ours: Vulkan timestamps; gsplat: CUDA events around the call),
+wall ms (ours: render() on the host, the frame stays on the GPU; gsplat: the call and a synchronize), the pairs
+each renders, and for ours the per-stage times beside each stage's memory-bandwidth floor: the bytes it must
+move at the least (below) over the peak bandwidth NVML reports (memory clock x bus width x 2). Floors, bytes:
+  preprocess  its reads (position, scale, rotation, SH: (48 + 12 K) per splat) + its writes per splat
+              (the prepared splat, depth key and value, tile count, a tile rectangle per view)
+  sort_depth  one read and one write of every (key, value) pair: 16 per splat (any sort moves at least that)
+  emit        the tile counts in depth order and their prefix sum (16 per splat) + 8 per pair written
+  sort_tiles  16 per pair (one read and one write)
+  ranges      4 per pair drawn + 8 per tile
+  raster      4 per pair drawn + the prepared splats once + 16 per pixel written
+--profile-at N@FACE,... adds a run of our renderer with a timestamp after every sort step (hist, scan, scatter)
+and gsplat's kernel times (torch profiler) there. On the GPU machine: a CUDA context (torch, needed for gsplat
+anyway) holds the SM clock (docs/benchmarks.md); gsplat JIT-compiles its CUDA on first use (~50 s for sm_90
+with TORCH_CUDA_ARCH_LIST=9.0 MAX_JOBS=16); GSPLAT_SO=path/gsplat_cuda.so loads a build kept from before.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import os
+import statistics
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
+
+from bench_common import append_csv, bench_scene, shell_scene  # noqa: E402
+
+STAGES = ("preprocess", "sort_depth", "emit", "sort_tiles", "ranges", "raster")
+SCENES = {"random": lambda n: bench_scene(n, 3, 5.0), "shell": shell_scene}
+T0 = time.perf_counter()
+
+
+def log(*a) -> None:
+    print(f"[{time.perf_counter() - T0:7.1f}s]", *a, flush=True)
+
+
+class Nvml:
+    """SM clock and peak memory bandwidth of GPU 0; empty where NVML is missing."""
+
+    def __init__(self) -> None:
+        self.h = None
+        try:
+            import pynvml
+            pynvml.nvmlInit()
+            self.nv, self.h = pynvml, pynvml.nvmlDeviceGetHandleByIndex(0)
+        except Exception:  # noqa: BLE001 - no NVML: no clock column
+            pass
+
+    def sm_mhz(self) -> int | str:
+        try:
+            return int(self.nv.nvmlDeviceGetClockInfo(self.h, self.nv.NVML_CLOCK_SM))
+        except Exception:  # noqa: BLE001
+            return ""
+
+    def info(self) -> dict:
+        out = {}
+        try:
+            nv, h = self.nv, self.h
+            out["gpu"] = nv.nvmlDeviceGetName(h)
+            out["driver"] = nv.nvmlSystemGetDriverVersion()
+            mem = nv.nvmlDeviceGetMaxClockInfo(h, nv.NVML_CLOCK_MEM)
+            bus = nv.nvmlDeviceGetMemoryBusWidth(h)
+            out["peak_gbs"] = round(mem * 1e6 * 2 * bus / 8 / 1e9, 1)
+        except Exception:  # noqa: BLE001
+            pass
+        return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in out.items()}
+
+
+def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pixels: int, views: int) -> dict:
+    """The least bytes each stage must move (module docstring)."""
+    from gs_ibl_addon.core.vk.constants import PREP
+    return {"preprocess": n * (48 + 12 * sh_k) + n * (PREP * 16 + 12 + 8 * views),
+            "sort_depth": 16 * n, "emit": 16 * n + 8 * pairs, "sort_tiles": 16 * pairs,
+            "ranges": 4 * drawn + 8 * tiles, "raster": 4 * drawn + PREP * 16 * n + 16 * pixels}
+
+
+class Ours:
+    name = "gs-ibl"
+
+    def __init__(self, scene, ctx) -> None:
+        from gs_ibl_addon.core.render.renderer import SplatRenderer
+        self.r = SplatRenderer(scene, ctx)
+        self.sh_k = scene.sh.shape[1]
+
+    def set_face(self, face: int) -> None:
+        from gs_ibl_addon.core.render.renderer import _views_buffer_data
+        from gs_ibl_addon.core.render.views import ViewBatch
+        self.batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
+        _, self.tiles, self.pixels = _views_buffer_data(self.batch)
+
+    def rep(self) -> dict:
+        t0 = time.perf_counter()
+        res = self.r.render(self.batch, timestamps=True)
+        wall = (time.perf_counter() - t0) * 1e3
+        t = res.timings_ms
+        out = {"gpu_ms": t["total"], "wall_ms": wall, "pairs": res.instances}
+        for s in STAGES:
+            out[s] = t.get(s, 0.0) + sum(v for k, v in t.items() if k.startswith(s + "."))
+        return out
+
+    def drawn_pairs(self) -> int:
+        """Pairs the raster drew in the last render (the tile sort leaves out those whose tile was missed)."""
+        return int(self.r.count.read(np.uint32, 1)[0])
+
+    def images(self) -> np.ndarray:
+        return np.stack(self.r.render(self.batch).images)
+
+    def close(self) -> None:
+        self.r.close()
+
+
+def load_gsplat():
+    """gsplat with its CUDA backend; GSPLAT_SO (a gsplat_cuda.so built before) skips the JIT compile."""
+    import importlib.util
+    import torch  # noqa: F401
+    so = os.environ.get("GSPLAT_SO")
+    if so and os.path.exists(so):
+        spec = importlib.util.spec_from_file_location("gsplat_cuda", so)
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        sys.modules["gsplat.csrc"] = mod
+    import gsplat
+    from gsplat.cuda._backend import _C
+    if _C is None:
+        raise RuntimeError("gsplat's CUDA backend did not load")
+    return gsplat
+
+
+class Gsplat:
+    name = "gsplat"
+
+    def __init__(self, scene) -> None:
+        import gsplat
+        import torch
+        self.torch, self.raster = torch, gsplat.rasterization
+        f = lambda a: torch.from_numpy(np.ascontiguousarray(a, np.float32)).cuda()  # noqa: E731
+        self.t = (f(scene.positions), f(scene.rotations), f(scene.scales), f(scene.opacities), f(scene.sh))
+        self.e0, self.e1 = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
+
+    def set_face(self, face: int) -> None:
+        """gsplat's OpenCV cameras from our face frames: x = -right (a proper rotation: our frames are
+        left-handed), so its images are ours mirrored left-right; images() flips them back."""
+        from gs_ibl_addon.core.render.views import ViewBatch
+        batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
+        vms, ks = [], []
+        for v in batch.views:
+            rot = np.stack([-np.asarray(v.right), np.asarray(v.down), np.asarray(v.forward)])
+            m = np.eye(4)
+            m[:3, :3], m[:3, 3] = rot, -rot @ batch.origin
+            vms.append(m)
+            ks.append([[v.width / (2 * v.tan_x), 0, v.width / 2], [0, v.height / (2 * v.tan_y), v.height / 2], [0, 0, 1]])
+        tt = lambda a: self.torch.tensor(np.array(a), dtype=self.torch.float32, device="cuda")  # noqa: E731
+        self.face, self.vm, self.k = face, tt(vms), tt(ks)
+
+    def call(self):
+        return self.raster(*self.t, self.vm, self.k, self.face, self.face, sh_degree=3, near_plane=0.01,
+                           rasterize_mode="antialiased", packed=True)
+
+    def rep(self) -> dict:
+        torch = self.torch
+        torch.cuda.synchronize()
+        t0 = time.perf_counter()
+        self.e0.record()
+        colors, alphas, meta = self.call()
+        self.e1.record()
+        torch.cuda.synchronize()
+        wall = (time.perf_counter() - t0) * 1e3
+        return {"gpu_ms": self.e0.elapsed_time(self.e1), "wall_ms": wall, "pairs": int(meta["isect_ids"].numel())}
+
+    def images(self) -> np.ndarray:
+        colors, alphas, _ = self.call()
+        im = np.concatenate([colors.float().cpu().numpy(), alphas.float().cpu().numpy()], -1)
+        return np.ascontiguousarray(im[:, :, ::-1])
+
+    def kernel_ms(self) -> list[tuple[str, float]]:
+        """Per-kernel GPU ms per call (torch profiler over 5 calls), largest first."""
+        from torch.profiler import ProfilerActivity, profile
+        self.torch.cuda.synchronize()
+        with profile(activities=[ProfilerActivity.CUDA]) as prof:
+            for _ in range(5):
+                self.call()
+            self.torch.cuda.synchronize()
+        rows = []
+        for e in prof.key_averages():
+            dt = getattr(e, "device_time_total", None) or getattr(e, "cuda_time_total", 0.0)
+            if dt and dt > 0 and not e.key.startswith("ProfilerStep"):
+                rows.append((e.key[:80], dt / 5 / 1000.0))
+        return sorted(rows, key=lambda r: -r[1])
+
+
+def timed(rends: list, nv: Nvml, warmup_s: float, rounds: int, block: int) -> dict:
+    """Warm each renderer up, then interleave blocks of reps; per renderer its reps and block clocks."""
+    for r in rends:
+        t = time.perf_counter()
+        while time.perf_counter() - t < warmup_s:
+            r.rep()
+    reps = {r.name: [] for r in rends}
+    clocks = {r.name: [] for r in rends}
+    for _ in range(rounds):
+        for r in rends:
+            c0 = nv.sm_mhz()
+            reps[r.name] += [r.rep() for _ in range(block)]
+            clocks[r.name] += [c0, nv.sm_mhz()]
+    return {r.name: (reps[r.name], [c for c in clocks[r.name] if c != ""]) for r in rends}
+
+
+def run_bench(args) -> None:
+    import gs_ibl_addon.core.render.renderer as renderer_module
+    from gs_ibl_addon.core.vk import get_context
+    nv = Nvml()
+    info = nv.info()
+    import torch
+    torch.zeros(1, device="cuda")  # the CUDA context that holds the SM clock (gsplat needs it anyway)
+    t = time.perf_counter()
+    gsplat = load_gsplat()
+    log(f"gsplat {gsplat.__version__} ready in {time.perf_counter() - t:.1f} s")
+    ctx = get_context()
+    date = datetime.date.today().isoformat()
+    peak = info.get("peak_gbs", 0.0) * 1e9
+    log(f"device {ctx.device_name}, NVML {info}")
+    profile_at = {tuple(int(x) for x in p.split("@")) for p in args.profile_at.split(",") if p}
+    for kind in args.scenes.split(","):
+        for n in [int(x) for x in args.counts.split(",")]:
+            t = time.perf_counter()
+            scene = SCENES[kind](n)
+            ours, peer = Ours(scene, ctx), Gsplat(scene)
+            log(f"{kind} {n:,}: scene and uploads {time.perf_counter() - t:.1f} s")
+            for face in [int(x) for x in args.faces.split(",")]:
+                ours.set_face(face)
+                peer.set_face(face)
+                got = timed([ours, peer], nv, args.warmup, args.rounds, args.block)
+                ref, im = ours.images(), peer.images()
+                diff = float(np.abs(ref[..., :3] - im[..., :3]).mean() / max(float(ref[..., :3].mean()), 1e-12))
+                drawn = ours.drawn_pairs()
+                rows = []
+                for r in (ours, peer):
+                    reps, clk = got[r.name]
+                    gpu = [x["gpu_ms"] for x in reps]
+                    row = {"device": ctx.device_name, "driver": info.get("driver", ""), "date": date, "scene": kind,
+                           "splats": n, "face": face, "renderer": r.name, "gpu_ms": round(statistics.median(gpu), 4),
+                           "gpu_min_ms": round(min(gpu), 4), "gpu_max_ms": round(max(gpu), 4),
+                           "wall_ms": round(statistics.median(x["wall_ms"] for x in reps), 3),
+                           "pairs": reps[-1]["pairs"], "pairs_drawn": drawn if r is ours else "",
+                           "sm_mhz_min": min(clk) if clk else "", "sm_mhz_max": max(clk) if clk else "",
+                           "image_diff": "" if r is ours else round(diff, 4),
+                           "coverage": round(float((ref if r is ours else im)[..., 3].mean()), 4)}
+                    if r is ours:
+                        floors = stage_floor_bytes(n, ours.sh_k, row["pairs"], drawn, ours.tiles, ours.pixels, 6)
+                        for s in STAGES:
+                            row[f"{s}_ms"] = round(statistics.median(x[s] for x in reps), 4)
+                            row[f"{s}_floor_ms"] = round(floors[s] / peak * 1e3, 4) if peak else ""
+                    else:
+                        for s in STAGES:
+                            row[f"{s}_ms"] = row[f"{s}_floor_ms"] = ""
+                    rows.append(row)
+                append_csv(args.csv, rows)
+                o, g = rows
+                log(f"{kind} {n:>9,} {face:>5}: ours {o['gpu_ms']:.3f} (wall {o['wall_ms']:.2f}) gsplat "
+                    f"{g['gpu_ms']:.3f} (wall {g['wall_ms']:.2f}) ratio {o['gpu_ms'] / g['gpu_ms']:.2f} | pairs "
+                    f"{o['pairs']:,}/{drawn:,} vs {g['pairs']:,} | SM {o['sm_mhz_min']}-{o['sm_mhz_max']} | "
+                    + " ".join(f"{s} {o[s + '_ms']:.2f}/{o[s + '_floor_ms']}" for s in STAGES) + f" | diff {diff:.3f}")
+                if (n, face) in profile_at:
+                    renderer_module.PROFILE_SORTS = True
+                    prof = Ours(scene, ctx)
+                    prof.set_face(face)
+                    for _ in range(5):
+                        prof.rep()
+                    tms = [prof.r.render(prof.batch, timestamps=True).timings_ms for _ in range(10)]
+                    keys = [k for k in tms[0] if "." in k]
+                    log("  our sort steps (ms, summed over passes): "
+                        + ", ".join(f"{k} {statistics.median(x[k] for x in tms):.3f}" for k in keys))
+                    prof.close()
+                    renderer_module.PROFILE_SORTS = False
+                    log("  gsplat kernels (ms per call): "
+                        + ", ".join(f"{k} {v:.3f}" for k, v in peer.kernel_ms()[:12]))
+            ours.close()
+            del peer, scene
+            torch.cuda.empty_cache()
+
+
+def run_plot(args) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    with open(args.csv) as f:
+        rows = list(csv.DictReader(f))
+    scenes = list(dict.fromkeys(r["scene"] for r in rows))
+    faces = sorted({int(r["face"]) for r in rows})
+    fig, axes = plt.subplots(len(scenes), len(faces), figsize=(4.2 * len(faces), 3.6 * len(scenes)), squeeze=False,
+                             sharey=True)
+    style = {("gs-ibl", "gpu_ms"): ("C0", "-", "ours GPU"), ("gs-ibl", "wall_ms"): ("C0", ":", "ours wall"),
+             ("gsplat", "gpu_ms"): ("C3", "-", "gsplat GPU"), ("gsplat", "wall_ms"): ("C3", ":", "gsplat wall")}
+    for i, sc in enumerate(scenes):
+        for j, face in enumerate(faces):
+            ax = axes[i][j]
+            for (rend, col), (c, ls, label) in style.items():
+                pts = sorted((int(r["splats"]), float(r[col])) for r in rows
+                             if r["scene"] == sc and int(r["face"]) == face and r["renderer"] == rend)
+                if pts:
+                    ax.plot(*zip(*pts), color=c, linestyle=ls, marker="o", ms=3, label=label)
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_title(f"{sc}, six {face}² faces", fontsize=10)
+            ax.grid(True, which="both", alpha=0.3)
+            if i == len(scenes) - 1:
+                ax.set_xlabel("splats")
+            if j == 0:
+                ax.set_ylabel("ms")
+    axes[0][0].legend(fontsize=8)
+    r0 = rows[0]
+    clocks = sorted({r["sm_mhz_min"] for r in rows} | {r["sm_mhz_max"] for r in rows})
+    fig.suptitle(f"gs-ibl vs gsplat 1.5.3 (antialiased), one process: {r0['device']}, driver {r0['driver']}, "
+                 f"SM {'/'.join(c for c in clocks if c)} MHz, {r0['date']}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(args.png, dpi=110)
+    print(f"wrote {args.png}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("mode", choices=["bench", "plot"])
+    ap.add_argument("--scenes", default="random,shell")
+    ap.add_argument("--counts", default="100000,1000000,6000000")
+    ap.add_argument("--faces", default="64,256,1024")
+    ap.add_argument("--warmup", type=float, default=1.0, help="seconds of warm-up per renderer and configuration")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--block", type=int, default=10)
+    ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
+    ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
+    ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
+    args = ap.parse_args()
+    {"bench": run_bench, "plot": run_plot}[args.mode](args)
+
+
+if __name__ == "__main__":
+    main()
