@@ -134,6 +134,24 @@ def main() -> dict:
         rec["positions_head"] = pos[:64].tolist()  # the host checks Blender placed the file's splats as we do
         spheres = {name: _sphere(name, s["centre"], s["radius"]) for name, s in ARGS["spheres"].items()}
         _render_spheres(spheres, "native", ARGS["native_samples"], rec)
+        # what the camera sees of the native splats from each sphere's centre, all around (the spheres hidden):
+        # the host compares its mean radiance with our probe's there
+        for obj in spheres.values():
+            obj.hide_render = True
+        for name, sph in ARGS["spheres"].items():
+            data = bpy.data.cameras.new("pano")
+            data.type = "PANO"
+            data.panorama_type = "EQUIRECTANGULAR"
+            cam = bpy.data.objects.new("pano", data)
+            bpy.context.collection.objects.link(cam)
+            cam.location = sph["centre"]
+            bpy.context.scene.camera = cam
+            r = bpy.context.scene.render
+            r.resolution_x, r.resolution_y = 2 * ARGS["pano_height"], ARGS["pano_height"]
+            rec[f"pano_{name}_s"] = _render(f"pano_{name}", ARGS["pano_samples"])
+            r.resolution_x = r.resolution_y = ARGS["size"]
+        for obj in spheres.values():
+            obj.hide_render = False
         # our light: the World probe, then per-object probes, then a grid
         bpy.ops.object.empty_add(location=ARGS["probe"])
         probe = bpy.context.active_object

@@ -45,6 +45,7 @@ FINE_GRID = {"shape": [3, 3, 3]}  # over each sphere's own bounds
 NATIVE_SAMPLES = int(os.environ.get("GS_IBL_CYCLES_SAMPLES", 1024))
 SAMPLES = 128
 METHODS = ("one", "object", "grid", "fine")
+PANO_HEIGHT = 96  # Cycles' equirectangular view of the splats from each sphere's centre
 
 
 def _spheres_args():
@@ -109,7 +110,8 @@ def local_run(tmp_path_factory):
         shutil.copy(HERE / "local_light_reference.py", runner.host / "local_light_reference.py")
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": SIZE, "albedo": ALBEDO,
                 "spheres": _spheres_args(), "probe": PROBE, "grid": GRID, "fine_grid": FINE_GRID, "face_size": 64,
-                "native_samples": NATIVE_SAMPLES, "samples": SAMPLES, "threads": 2}
+                "native_samples": NATIVE_SAMPLES, "samples": SAMPLES, "threads": 2,
+                "pano_height": PANO_HEIGHT, "pano_samples": 16}
         (runner.host / "args.json").write_text(json.dumps(args, indent=1))
         assert matrix._install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
             (runner.host / "install.log").read_text()[-2000:]
@@ -125,6 +127,21 @@ def local_run(tmp_path_factory):
         shutil.rmtree(keep, ignore_errors=True)
         shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
         runner.close()
+
+
+def mean_radiance_ratio(pano: np.ndarray, room, centre) -> np.ndarray:
+    """Per channel: the solid-angle mean of Cycles' equirectangular view (H, 2H) over our probe's at ``centre``
+    (orientation-free: the mean of the irradiance over all normals is pi times this mean)."""
+    from gs_ibl_addon.core import cubemap
+    from gs_ibl_addon.core.bake import ProbeSettings, bake_probe
+    h = pano.shape[0]
+    w_row = np.cos((np.arange(h) + 0.5) / h * np.pi - np.pi / 2)  # cos(latitude) of each row
+    cyc = (pano[..., :3].astype(np.float64) * w_row[:, None, None]).sum((0, 1)) / (w_row.sum() * pano.shape[1])
+    p = bake_probe(room, centre, ProbeSettings(method="exact", face_size=128, irradiance_size=8))
+    rad = np.asarray(p.radiance)[..., :3].astype(np.float64)
+    sa = cubemap.texel_solid_angles(rad.shape[1])[None, :, :, None]
+    ours = (rad * sa).sum((0, 1, 2)) / (4 * np.pi)
+    return cyc / ours
 
 
 def _picture(arrays) -> None:
@@ -168,6 +185,11 @@ def test_local_light_matches_native_cycles(local_run):
     print("\n".join(lines + [f"  variation: {result['variation']}", f"  {result['grid_report']}",
                              f"  {result['fine_report']} in {result['fine_bake_s']:.1f} s"]))
     _picture(arrays)
+
+    for name, s in SPHERES.items():  # the splats' mean radiance all around the centre: Cycles' camera vs our probe
+        lines = [f"  {name}: mean radiance seen from the centre, Cycles panorama / our probe "
+                 f"{np.round(mean_radiance_ratio(arrays[f'pano_{name}'], room, s['centre']), 3)}"]
+        print("\n".join(lines))
 
     def off(name, m):
         return float(np.abs(means[(name, m)] - 1).max())
