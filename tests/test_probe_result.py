@@ -28,6 +28,18 @@ def test_latlong_resample_error_on_smooth_environment():
     np.testing.assert_allclose(img, want, atol=1e-2)
 
 
+@pytest.mark.parametrize("n,width,height", [(1, 8, None), (3, 50, 17), (16, 64, None), (32, 130, 64)])
+def test_latlong_tap_table_is_the_lookup(n, width, height):
+    # The cached tap table must read exactly what the per-direction seamless lookup reads, corners included
+    # (n = 1 and 3 put lat-long texels on cube corners: the table splits those taps in three).
+    from gs_ibl_addon.core.probe.latlong import cube_to_latlong_reference, latlong_taps
+    cube = np.random.default_rng(n).random((6, n, n, 4)) * 10.0 ** np.random.default_rng(1).normal(0, 2, (6, n, n, 1))
+    np.testing.assert_allclose(cube_to_latlong(cube, width, height), cube_to_latlong_reference(cube, width, height),
+                               rtol=1e-12)
+    if n in (1, 3):
+        assert len(latlong_taps(n, width, height or width // 2).corner_rows) > 0
+
+
 def test_sh_latlong_irradiance_matches_exact():
     # Order-2 SH evaluated per lat-long texel vs exact integration of the cube: 1% relative RMS (brief).
     cube = cube_from_function(smooth_environment, 32)
