@@ -164,6 +164,35 @@ def default_probe_position(scene: SplatScene) -> np.ndarray:
     return (scene.positions.astype(np.float64) * w[:, None]).sum(0) / max(w.sum(), 1e-12)
 
 
+def choose_face(probe_at: Callable[[int, float], object], model, s: ProbeSettings, lod_k: float,
+                say: Callable[[str, float], None], largest: int | None = None) -> tuple[object, int, list, dict, float]:
+    """Face size 0: the face (and whether to keep the level of detail) from the tolerance's error model, for one
+    probe (bake_probe) or a batch (bake_batch, a model per probe, the worst deciding). ``probe_at(face, lod_k)``
+    renders and filters. Returns (the kept render, its face, the trials, the tolerance plan, the lod_k kept)."""
+    plan: dict = {}
+    if lod_k > 0:  # the level of detail is kept only where its own error is within half the tolerance
+        merged = probe_at(AUTO_FIRST_FACE, lod_k).irradiance
+        plan["lod_error"] = float(np.max(model.change(merged, probe_at(AUTO_FIRST_FACE, 0.0).irradiance)))
+        lod_k = lod_k if plan["lod_error"] <= s.tolerance / 2 else 0.0
+    limit = int(s.max_face_size) if largest is None else min(int(s.max_face_size), largest)
+    result, face, trials, est = search_face(lambda f: probe_at(f, lod_k), model, s.tolerance, AUTO_FIRST_FACE,
+                                            limit, say)
+    plan.update(model=model.kind, estimated_error=est, met=est <= s.tolerance)
+    return result, face, trials, plan, lod_k
+
+
+def light_from_radiance(result: ProbeResult, s: ProbeSettings, colour_space: str,
+                        hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
+                        highlights_done: bool = False) -> bool:
+    """Fill the holes of ``result.radiance``, gain its clipped texels (unless the splats were gained) and split its
+    lights off, in place; True when the radiance changed so its irradiance must be filtered again."""
+    result.radiance, result.hole_fill = fill_holes(result.radiance, s.hole_fill, s.hole_colour, hole_radiance)
+    if s.highlight_gain != 1 and not highlights_done:  # no scene to gain the splats of: the cube's clipped texels
+        result.radiance, result.highlights = recover_highlights(result.radiance, s.highlight_gain, colour_space)
+    result.radiance, result.lights = extract_lights(result.radiance, s.lights)
+    return bool((result.hole_fill["fraction"] > 0 and s.hole_fill != "black") or result.highlights or result.lights)
+
+
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
                        say: Callable[[str, float], None],
                        hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -175,13 +204,13 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     m_search = int(s.irradiance_size) or DEFAULT_IRRADIANCE_SIZE  # the size 0 chooses from is picked at the end
 
-    def probe_at(face: int) -> ProbeResult:
+    def probe_at(face: int, lod: float = lod_k) -> ProbeResult:
         cube = ViewBatch.cubemap(pos, face)
         if face < FACE_BY_FACE_FROM:
             # The frame stays on the GPU: the filter reads back the irradiance only, the radiance is read once,
             # for the face size kept (below).
             # wait=False: the filter is queued behind the render and the host waits once for both.
-            res = r.render(cube, timestamps=True, wait=False, lod_k=lod_k)
+            res = r.render(cube, timestamps=True, wait=False, lod_k=lod)
             probe = filter_probe(res.frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
                                  roughness=None, read_radiance=False, splat_count=splat_count,
                                  device=r.ctx.device_name, **s.extra)
@@ -191,7 +220,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             images, timings = [], {}
             for f, view in enumerate(cube.views):
                 say(f"rendering face {f + 1} of 6 ({face}x{face})", 0.2 + 0.6 * f / 6)
-                res = r.render(replace(cube, views=(view,)), timestamps=True, lod_k=lod_k)
+                res = r.render(replace(cube, views=(view,)), timestamps=True, lod_k=lod)
                 images += res.images
                 for k, v in res.timings_ms.items():
                     timings[f"render_{k}"] = timings.get(f"render_{k}", 0.0) + v
@@ -206,25 +235,14 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
         say(f"rendering a {face}x{face} cubemap", 0.2)
         result = probe_at(face)
     else:
-        if lod_k > 0:  # the level of detail is kept only where its own error is within half the tolerance
-            merged, lod_k = probe_at(AUTO_FIRST_FACE).irradiance, 0.0
-            plan["lod_error"] = relative_rms(merged, probe_at(AUTO_FIRST_FACE).irradiance)
-            lod_k = float(s.lod_k) if plan["lod_error"] <= s.tolerance / 2 else 0.0
-        model = ErrorModel(prints)
-        result, face, trials, est = search_face(probe_at, model, s.tolerance, AUTO_FIRST_FACE,
-                                                int(s.max_face_size), say)
-        plan.update(model=model.kind, estimated_error=est, met=est <= s.tolerance)
+        result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(prints), s, lod_k, say)
     frame = None
     if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
         frame = r.last_frame
         result.radiance = frame.read_cube()
     # Holes are filled on the radiance read back (the search above compared the unfilled probes: a fill moves
     # every size alike) and the kept size is filtered again from it; a probe without holes pays nothing.
-    result.radiance, result.hole_fill = fill_holes(result.radiance, s.hole_fill, s.hole_colour, hole_radiance)
-    if s.highlight_gain != 1 and not highlights_done:  # no scene to gain the splats of: the cube's clipped texels
-        result.radiance, result.highlights = recover_highlights(result.radiance, s.highlight_gain, r.colour_space)
-    result.radiance, result.lights = extract_lights(result.radiance, s.lights)
-    if (result.hole_fill["fraction"] > 0 and s.hole_fill != "black") or result.highlights or result.lights:
+    if light_from_radiance(result, s, r.colour_space, hole_radiance, highlights_done):
         t0 = time.perf_counter()
         filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
                               sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)

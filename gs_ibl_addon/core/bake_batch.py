@@ -6,10 +6,12 @@ exact irradiance (or the order-2 SH) of all of them is one more submission over 
 only when it is kept, has holes to fill, or feeds the glossy maps. Each probe's result is what bake_probe gives at
 its position with the same face size (tests/test_multi_probe.py).
 
-The one difference from bake_probe is the face-size search (face_size 0): the batch doubles the faces of all
-probes together until every probe's irradiance moved by less than the tolerance, so all probes share the face size
-the slowest-converging one needs (a grid or per-object probes are compared with each other: one resolution is
-what they should have anyway). Methods "convolve" and "box" render in one batch and filter probe by probe.
+Face size 0 follows bake_probe's rule (bake.choose_face: the tolerance's error model, core/tolerance.py) with one
+model per probe, and all probes share the face the worst of them needs (a grid or per-object probes are compared
+with each other: one resolution is what they should have anyway); each ProbeResult records the batch's
+tolerance_plan with its own estimated error. Highlight gain and lights are bake_probe's too: the gain on the splats
+when the batch uploads them, else on each cube's clipped texels (bake.light_from_radiance). Methods "convolve" and
+"box" render in one batch and filter probe by probe.
 """
 from __future__ import annotations
 
@@ -19,15 +21,49 @@ from typing import Callable
 
 import numpy as np
 
-from .bake import BadSetting, ProbeSettings, check_settings, relative_rms
+from .bake import BadSetting, ProbeSettings, check_settings, choose_face, light_from_radiance
 from .probe import ProbeResult, filter_probe
+from .probe.highlights import gain_clipped_splats
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import BATCH_METHODS, filter_probes, gpu_ggx_prefilter
 from .probe.holes import fill_holes
 from .render.renderer import SplatRenderer, largest_probe_face
 from .scene import SplatScene
 from .settings import AUTO_FIRST_FACE
+from .tolerance import ErrorModel, footprints, relative_rms
 from .vk import get_context
+
+
+class ProbeModels:
+    """One tolerance.ErrorModel per probe of a batch, read as one: the face is the largest any probe needs and the
+    estimate the worst (search_face and choose_face take it in place of an ErrorModel)."""
+
+    def __init__(self, prints: list) -> None:
+        self.models = [ErrorModel(p) for p in prints]
+
+    @property
+    def kind(self) -> str:
+        kinds = {m.kind for m in self.models}
+        return kinds.pop() if len(kinds) == 1 else "mixed"
+
+    def change(self, coarse: np.ndarray, fine: np.ndarray) -> np.ndarray:
+        return np.array([relative_rms(a, b) for a, b in zip(coarse, fine)])
+
+    def calibrate(self, coarse: int, fine: int, changes) -> float:
+        return max(m.calibrate(coarse, fine, float(c)) for m, c in zip(self.models, changes))
+
+    def estimate(self, face: int) -> float:
+        return max(m.estimate(face) for m in self.models)
+
+    def next_face(self, tolerance: float, current: int, largest: int) -> int:
+        return max(m.next_face(tolerance, current, largest) for m in self.models)
+
+
+class _Batch:
+    """One render of the batch at one face size, filtered: what choose_face keeps or compares (``irradiance``)."""
+
+    def __init__(self, frame, sh: np.ndarray, irradiance: np.ndarray, holes: np.ndarray, timings: dict) -> None:
+        self.frame, self.sh, self.irradiance, self.holes, self.timings = frame, sh, irradiance, holes, timings
 
 
 def check_probe_positions(positions) -> np.ndarray:
@@ -77,9 +113,10 @@ def _filter_cubes(cubes: np.ndarray, s: ProbeSettings, method: str, ctx
 def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | dict | None = None,
                 renderer: SplatRenderer | None = None, progress: Callable[[str, float], None] | None = None,
                 hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
-                keep_radiance: bool = True) -> list[ProbeResult]:
+                keep_radiance: bool = True, estimate_from: SplatScene | None = None) -> list[ProbeResult]:
     """One ProbeResult per row of ``positions`` (N, 3), as bake_probe would give each (see the module's
-    docstring for the face-size search). ``scene`` may be None when ``renderer`` holds the splats.
+    docstring for the face-size search). ``scene`` may be None when ``renderer`` holds the splats;
+    ``estimate_from``: then the splats on the host for the error model, as bake_probe's.
     ``keep_radiance=False`` leaves ProbeResult.radiance None where nothing else needs it (a grid keeps SH only).
     SH orders other than 2 are not batched: use bake_probe."""
     s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
@@ -87,6 +124,10 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
     if s.sh_order != 2:
         raise BadSetting("sh_order", s.sh_order, f"SH order {s.sh_order}: batched probes keep order-2 SH; "
                                                  "use bake_probe for other orders")
+    if not s.irradiance_size:
+        raise BadSetting("irradiance_size", s.irradiance_size, "irradiance size 0 (from the tolerance) is chosen "
+                                                               "probe by probe: give batched probes a size (4-64), "
+                                                               "or use bake_probe")
     if s.hole_fill == "environment" and hole_radiance is None:
         raise BadSetting("hole_fill", s.hole_fill, "hole fill 'environment' needs the environment's radiance "
                                                    "(bake_probes' hole_radiance); use mean, constant or black")
@@ -102,11 +143,16 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
     say = progress or (lambda _msg, _frac: None)
     t0 = time.perf_counter()
     r = renderer
+    highlights = None
+    if scene is not None and renderer is None:  # clipped splats gained before upload, as bake_probe does
+        scene, highlights = gain_clipped_splats(scene, s.highlight_gain)
     try:
+        host = scene if scene is not None else estimate_from
+        prints = [footprints(host, p) for p in pos] if host is not None and not s.face_size else [None] * len(pos)
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        results = _bake(r, pos, s, method, say, hole_radiance, keep_radiance, largest)
+        results = _bake(r, pos, s, method, say, hole_radiance, keep_radiance, largest, prints, highlights)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count
@@ -127,57 +173,59 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
 
 
 def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say, hole_radiance,
-          keep_radiance: bool, largest: int) -> list[ProbeResult]:
+          keep_radiance: bool, largest: int, prints: list, highlights: dict | None) -> list[ProbeResult]:
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     n = len(pos)
 
-    def at(face: int):
-        res = r.render_probes(pos, face, lod_k=lod_k, timestamps=True, wait=False)
+    def at(face: int, lod: float) -> _Batch:
+        res = r.render_probes(pos, face, lod_k=lod, timestamps=True, wait=False)
         sh, irr, holes, tm = _filter_batch(res.frame, s, method)
         timings = {**{f"render_{k}": v for k, v in res.timings_ms.items()},
                    **{f"filter_{k}": v for k, v in tm.items()}}
-        return res.frame, sh, irr, holes, timings
+        return _Batch(res.frame, sh, irr, holes, timings)
 
     trials: list[dict] = []
-    face = int(s.face_size) or AUTO_FIRST_FACE
-    say(f"rendering {n} probes at {face}x{face}", 0.1)
-    frame, sh, irr, holes, timings = at(face)
-    if not s.face_size:
-        trials.append({"face_size": face, "change": None})
-        while face < min(s.max_face_size, largest):  # the search stops where the batch's frame would not fit
-            face *= 2
-            frame, sh2, irr2, holes, timings = at(face)
-            change = max(relative_rms(a, b) for a, b in zip(irr, irr2))
-            trials.append({"face_size": face, "change": change})
-            say(f"{face}x{face}: irradiance moved {100 * change:.2f}% at most from {face // 2}x{face // 2}",
-                min(0.8, 0.1 + 0.1 * len(trials)))
-            sh, irr = sh2, irr2
-            if change <= s.tolerance:
-                break
+    plan: dict = {}
+    models = ProbeModels(prints)
+    if s.face_size:
+        face = int(s.face_size)
+        say(f"rendering {n} probes at {face}x{face}", 0.1)
+        b = at(face, lod_k)
+    else:
+        b, face, trials, plan, lod_k = choose_face(at, models, s, lod_k, say, largest)
+        plan.update(face_size=face, irradiance_size=int(s.irradiance_size), method=method, sh_order=s.sh_order,
+                    lod="auto" if lod_k > 0 else "off", batch_estimated_error=plan["estimated_error"])
+    frame, sh, irr, holes, timings = b.frame, b.sh, b.irradiance, b.holes, b.timings
+    on_cube = (s.highlight_gain != 1 and highlights is None) or s.lights > 0  # needs each probe's radiance
     fills = s.hole_fill != "black" and bool(np.any(holes > 0))
-    radiance = frame.read_probes() if (keep_radiance or s.glossy or fills) else [None] * n
-    converged = (not trials) or (trials[-1]["change"] is not None and trials[-1]["change"] <= s.tolerance)
-    out = []
+    radiance = frame.read_probes() if (keep_radiance or s.glossy or fills or on_cube) else [None] * n
+    out, again = [], []
     for k in range(n):
         p = ProbeResult(radiance=radiance[k], irradiance=irr[k], sh_coefficients=sh[k], settings={},
                         timings_ms={**timings, "gpu_per_probe": (timings.get("render_total", 0.0)
                                                                  + timings.get("filter_total", 0.0)) / n},
                         splat_count=r.scene_count, device=r.ctx.device_name, hole_fraction=float(holes[k]))
+        p.highlights = highlights
         if radiance[k] is not None:
-            p.radiance, p.hole_fill = fill_holes(radiance[k], s.hole_fill, s.hole_colour, hole_radiance)
+            if light_from_radiance(p, s, r.colour_space, hole_radiance, highlights is not None):
+                again.append(p)
         else:  # nothing to fill (no holes, or black): recorded as fill_holes would
             p.hole_fill = {"method": s.hole_fill, "value": [0.0, 0.0, 0.0], "fraction": float(holes[k])}
+        mine = dict(plan)
+        if trials:  # this probe's own estimate at the shared face
+            mine.update(estimated_error=models.models[k].estimate(face),
+                        met=models.models[k].estimate(face) <= s.tolerance)
         p.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
-                           "face_size_trials": trials, "converged": converged,
-                           "probe_position": [float(x) for x in pos[k]], "colour_space": r.colour_space,
-                           "batch": {"probes": n, "index": k}})
+                           "face_size_trials": trials, "converged": (not trials) or bool(plan.get("met")),
+                           "tolerance_plan": mine, "probe_position": [float(x) for x in pos[k]],
+                           "colour_space": r.colour_space, "batch": {"probes": n, "index": k}})
         out.append(p)
-    # Probes with holes are filtered again from their filled radiance, all in one batch (as bake_probe does one).
-    filled = [p for p in out if s.hole_fill != "black" and p.hole_fill["fraction"] > 0]
-    if filled:
+    # Probes whose radiance changed (holes filled, highlights, lights) are filtered again, all in one batch (as
+    # bake_probe does one).
+    if again:
         t0 = time.perf_counter()
-        again = _filter_cubes(np.stack([p.radiance for p in filled]), s, method, r.ctx)
-        for p, sh_k, irr_k in zip(filled, again[0], again[1]):
+        sh2, irr2, _, _ = _filter_cubes(np.stack([np.asarray(p.radiance)[..., :3] for p in again]), s, method, r.ctx)
+        for p, sh_k, irr_k in zip(again, sh2, irr2):
             p.sh_coefficients, p.irradiance = sh_k, irr_k
             p.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
     for p in out:

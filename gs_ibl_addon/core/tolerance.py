@@ -119,6 +119,10 @@ class ErrorModel:
         change = self.changes[-1][2]
         return float(max(change * r / (1.0 - r), floor) * fall)
 
+    def change(self, coarse: np.ndarray, fine: np.ndarray) -> float:
+        """The measured change between two sizes' irradiance that calibrate takes."""
+        return relative_rms(coarse, fine)
+
     def next_face(self, tolerance: float, current: int, largest: int) -> int:
         """The smallest power-of-two multiple of ``current`` (up to ``largest``) predicted to meet the tolerance;
         the fallback model only doubles (it has no shape to extrapolate with)."""
@@ -171,8 +175,9 @@ def search_face(probe_at: Callable[[int], Any], model: ErrorModel, tolerance: fl
         face = min(face * 2, largest) if len(trials) == 1 else model.next_face(tolerance, face, largest)
         say(f"rendering a {face}x{face} cubemap", min(0.8, 0.1 + 0.15 * len(trials)))
         finer = probe_at(face)
-        change = relative_rms(result.irradiance, finer.irradiance)
-        est = model.calibrate(coarse, face, change)
+        changes = model.change(result.irradiance, finer.irradiance)  # one per probe with a batch's model
+        est = model.calibrate(coarse, face, changes)
+        change = float(np.max(changes))
         trials.append({"face_size": face, "change": change, "estimate": est})
         say(f"{face}x{face}: irradiance moved {100 * change:.2f}% from {coarse}x{coarse}; estimated error "
             f"{100 * est:.2f}% ({model.kind} model)", min(0.8, 0.1 + 0.15 * len(trials)))
