@@ -312,5 +312,6 @@ def scene_from_object(obj: bpy.types.Object) -> SplatScene:
         raise ValueError(f"{obj.name}: {e}") from e
     if world.sh.shape[1] > 1:
         u, _, vt = np.linalg.svd(matrix[:3, :3])  # the rotation nearest the (uniformly scaled) matrix
-        world.sh = rotate_sh(world.sh, u @ vt)
+        if not np.allclose(u @ vt, np.identity(3), atol=1e-7):  # unrotated: no copy of the SH
+            world.sh = rotate_sh(world.sh, u @ vt)
     return world
