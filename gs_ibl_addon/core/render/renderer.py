@@ -392,11 +392,15 @@ class SplatRenderer:
             self._grow_cut(per_probe * self.slots)
 
     def trim(self) -> None:
-        """Give back what a batch of many probes grew (pair buffers for a group, the instance list) and keep what
-        one probe needs: a renderer kept between bakes (Blender's splat cache) then holds no more than before its
-        batch. The next render re-records its program; the frame buffers stay."""
+        """Give back what a batch of many probes grew (pair buffers for a group, the instance list, the frame
+        buffers: the batch's image and its chunks' partial images) and keep what one probe needs: a renderer kept
+        between bakes (Blender's splat cache) then holds no more than before its batch. The next render re-records
+        its program and makes its frame buffers again (their size, not their contents, is what a render reuses)."""
         self.resolve()
         self.generation += 1  # the last frame's pairs are gone
+        for b in self._frame.values():
+            self._drop(b)
+        self._frame.clear()
         for name in self._PAIR_BUFFERS + ("inst_key", "inst_val", "tile_sorter", "cut_sorter"):
             self._drop(getattr(self, name, None))
             setattr(self, name, None)
