@@ -73,7 +73,10 @@ def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
     r = probe_renderer(scene, probe)
     boxes = {o.name: world_box(o) for o in objects}
     pts = np.concatenate([box_points(*boxes[n]) for n in boxes])
-    sh = bake_sh_points(r, pts, progress=progress)
+    try:
+        sh = bake_sh_points(r, pts, progress=progress)
+    finally:
+        r.trim()  # the cached renderer keeps no more than one probe's buffers (core/render/renderer.py)
     found = [variation_from_sh(n, sh[9 * i:9 * i + 9], pts[9 * i:9 * i + 9]) for i, n in enumerate(boxes)]
     tol = float(probe.gs_ibl_probe.variation_tolerance)
     over = [v for v in found if v.exceeds(tol)]
@@ -88,7 +91,10 @@ def coefficients_with_world(probe: bpy.types.Object, renderer, points: np.ndarra
     """Monomial coefficients of the World probe's light (9, 3) and of probes at ``points`` (P, 9, 3), baked in one
     batch the same way (so their difference carries no difference of method)."""
     pos = np.array(probe.matrix_world.translation, np.float64)
-    d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), progress=progress))
+    try:
+        d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), progress=progress))
+    finally:
+        renderer.trim()  # as check_variation: a batch's buffers are not kept in the splat cache
     return d[0], d[1:]
 
 
