@@ -155,7 +155,8 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
         from .splat_object import scene_from_object
         result = bake_probe(scene_from_object(splats), where, settings, progress=progress)
     else:
-        result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress)
+        result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress,
+                            estimate_from=cached.host)
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]
     # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)

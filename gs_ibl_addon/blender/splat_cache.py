@@ -8,10 +8,15 @@ The object's colour space is not part of the key: it is a push constant of the r
 Entries of deleted objects are dropped at the next depsgraph update; everything is freed when a file is loaded
 and when the extension is disabled. Renderers stay on the GPU between bakes (that is what makes "Update When
 Moved" cheap).
+
+Next to the GPU copy an entry keeps a slim host copy (``host``: positions, scales, rotations, opacities and the
+base colour, 56 bytes a splat, 56 MB for 1M splats; the higher SH bands, up to 180 bytes more, are not kept): the
+face-size error model (core/tolerance.py footprints) and the near-splats check (core/probe/near.py) read it, so a
+bake from the cache gets the footprint model instead of the weaker fallback without reading the object again.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import bpy
 import numpy as np
@@ -26,8 +31,14 @@ _GEOMETRY = tuple(t for t in (bpy.types.Mesh, getattr(bpy.types, "PointCloud", N
 @dataclass
 class CachedSplats:
     key: tuple
-    renderer: object  # core.render.renderer.SplatRenderer holding the object's splats in world space (GPU only:
-    # no CPU copy is kept, which for millions of splats would double what Blender's mesh already holds)
+    renderer: object  # core.render.renderer.SplatRenderer holding the object's splats in world space (no full
+    # CPU copy is kept, which for millions of splats would double what Blender's mesh already holds)
+    host: object = None  # core.scene.SplatScene without the higher SH bands: bake_probe's estimate_from
+
+
+def slim(scene):
+    """``scene`` with only the base colour of its SH (what footprints and near_splats read)."""
+    return replace(scene, sh=scene.sh[:, :1].copy())
 
 
 _entries: dict[int, CachedSplats] = {}  # uid(object) -> entry
@@ -61,10 +72,14 @@ def get(obj: bpy.types.Object) -> CachedSplats:
     if entry is None or entry.key != key:
         release(uid(obj))
         from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
-        entry = CachedSplats(key, SplatRenderer(scene_from_object(obj)))
+        scene = scene_from_object(obj)
+        entry = CachedSplats(key, SplatRenderer(scene), slim(scene))
+        del scene  # the higher SH bands go with it
         _entries[uid(obj)] = entry
         uploads += 1
     entry.renderer.colour_space = colour_space_of(obj)  # the colour rule: nothing uploaded again when it changes
+    if entry.host.colour_space != entry.renderer.colour_space:  # the footprints weigh light by it
+        entry.host = replace(entry.host, colour_space=entry.renderer.colour_space)
     return entry
 
 
