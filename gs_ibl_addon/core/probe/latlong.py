@@ -49,8 +49,22 @@ class LatlongTaps:
         return out.reshape(self.shape + cube.shape[-1:])
 
 
-@lru_cache(maxsize=4)  # a bake writes one or two sizes per face size; Blender re-bakes at the same sizes
+# Tables up to this many lat-long texels (64 bytes each: 32 MiB) are kept for the next image of the same sizes
+# (Blender re-bakes at the same sizes; the preview and irradiance images are small); larger ones are built per call.
+CACHED_TEXELS = 1 << 19
+
+
 def latlong_taps(n: int, width: int, height: int) -> LatlongTaps:
+    """The tap table of a (height, width) lat-long image of a cube of face n (cached when small)."""
+    return _cached_taps(n, width, height) if width * height <= CACHED_TEXELS else _build_taps(n, width, height)
+
+
+@lru_cache(maxsize=4)
+def _cached_taps(n: int, width: int, height: int) -> LatlongTaps:
+    return _build_taps(n, width, height)
+
+
+def _build_taps(n: int, width: int, height: int) -> LatlongTaps:
     """The taps sampling.sample_cube_bilinear reads for every lat-long texel centre, by the same seam rules
     (sampling._texel_lookup): a tap off one edge is the neighbouring face's texel along its extrapolated centre
     direction (found by looking up a cube of texel indices), a tap off two edges the mean of the three texels at
