@@ -28,10 +28,11 @@ def test_latlong_resample_error_on_smooth_environment():
     np.testing.assert_allclose(img, want, atol=1e-2)
 
 
-@pytest.mark.parametrize("n,width,height", [(1, 8, None), (3, 50, 17), (16, 64, None), (32, 130, 64)])
+@pytest.mark.parametrize("n,width,height", [(1, 8, None), (3, 50, 17), (16, 64, None), (32, 130, 64), (3, 400, 170)])
 def test_latlong_tap_table_is_the_lookup(n, width, height):
     # The cached tap table must read exactly what the per-direction seamless lookup reads, corners included
-    # (n = 1 and 3 put lat-long texels on cube corners: the table splits those taps in three).
+    # (n = 1 and 3 put lat-long texels on cube corners: the table splits those taps in three; 400 x 170 is built
+    # in several chunks).
     from gs_ibl_addon.core.probe.latlong import cube_to_latlong_reference, latlong_taps
     cube = np.random.default_rng(n).random((6, n, n, 4)) * 10.0 ** np.random.default_rng(1).normal(0, 2, (6, n, n, 1))
     np.testing.assert_allclose(cube_to_latlong(cube, width, height), cube_to_latlong_reference(cube, width, height),

