@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from gs_ibl_addon.core.scene import SplatScene, quat_to_matrix, rgb_to_sh_dc, sh_dc_to_rgb
-from gs_ibl_addon.core.sh import C0, coeff_count, degree_of
+from gs_ibl_addon.core.sh import C0, coeff_count, degree_of, eval_sh_color
 from gs_ibl_addon.core.synthetic import random_scene
 
 
@@ -40,7 +40,17 @@ def test_rotation_uniform_scale_and_translation():
     want = (2.5 * r) @ covariances(scene) @ (2.5 * r).T
     np.testing.assert_allclose(covariances(out), want, rtol=1e-4, atol=1e-9)
     np.testing.assert_allclose(np.linalg.norm(out.rotations, axis=1), 1.0, atol=1e-6)
-    assert out.sh is scene.sh and out.opacities is scene.opacities
+    assert out.opacities is scene.opacities
+    # View-dependent colour turns too: each splat shows toward R d what it showed toward d.
+    d = np.random.default_rng(3).normal(size=(200, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    np.testing.assert_allclose(eval_sh_color(out.sh, d @ r.T), eval_sh_color(scene.sh, d), atol=2e-5)
+
+
+def test_translation_and_scale_keep_the_sh_arrays():
+    scene = random_scene(20, seed=6, sh_degree=2)
+    out = scene.transformed(matrix(3.0 * np.identity(3), np.array([1.0, 2.0, 3.0])))
+    assert out.sh is scene.sh  # nothing turned: no copy of the (large) SH
 
 
 def test_noise_of_a_float32_matrix_is_still_uniform():

@@ -31,7 +31,6 @@ from mathutils import Matrix
 from ..core.colour import linear_sh_for_srgb_rule
 from ..core.scene import SplatScene, sh_dc_to_rgb
 from ..core.sh import degree_of
-from ..core.sh_rotation import rotate_sh
 from .compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
 from .datablocks import MARKER, find_ours
 
@@ -310,8 +309,4 @@ def scene_from_object(obj: bpy.types.Object) -> SplatScene:
     except ValueError as e:
         # The core's message says what is wrong with the matrix; the user needs to know which object has it.
         raise ValueError(f"{obj.name}: {e}") from e
-    if world.sh.shape[1] > 1:
-        u, _, vt = np.linalg.svd(matrix[:3, :3])  # the rotation nearest the (uniformly scaled) matrix
-        if not np.allclose(u @ vt, np.identity(3), atol=1e-7):  # unrotated: no copy of the SH
-            world.sh = rotate_sh(world.sh, u @ vt)
-    return world
+    return world  # transformed() turned the SH with the object

@@ -16,6 +16,7 @@ import numpy as np
 from .colour import check_colour_space
 from .sh import C0 as SH_C0  # re-exported: the degree-0 colour rule's constant, under its 3DGS name
 from .sh import coeff_count, degree_of
+from .sh_rotation import rotate_sh
 
 # Relative spread of a transform's singular values below which its scale counts as uniform (float32 matrices
 # from Blender carry ~1e-7 noise; a deliberate non-uniform scale differs by far more).
@@ -85,8 +86,8 @@ class SplatScene:
 
         A non-uniform scale or a mirror raises ValueError saying what to do: lin / cbrt(det) is then no rotation,
         and using it would silently give the splats wrong shapes.
-        SH view dependence is not rotated (as most viewers do); the DC colour, which carries
-        nearly all of a probe's light, is exact.
+        View-dependent colour (SH bands 1-3) turns with the splats (core/sh_rotation.py), so a rotated object, a
+        glTF node transform and an import's axis conversion all show each splat's colour toward the same side of it.
         """
         m = np.asarray(matrix, np.float64)
         lin = m[:3, :3]
@@ -94,8 +95,12 @@ class SplatScene:
         r = lin / s
         pos = self.positions.astype(np.float64) @ lin.T + m[:3, 3]
         q = quat_multiply(matrix_to_quat(r), self.rotations.astype(np.float64))
+        sh = self.sh
+        if sh.shape[1] > 1 and not np.allclose(r, np.identity(3), atol=1e-7):  # unrotated: no copy of the SH
+            u, _, vt = np.linalg.svd(r)  # the nearest rotation: a float32 matrix is orthonormal only to ~1e-5
+            sh = rotate_sh(sh, u @ vt)
         return SplatScene(pos.astype(np.float32), (self.scales * s).astype(np.float32), q.astype(np.float32),
-                          self.opacities, self.sh, self.source, dict(self.repairs), self.colour_space)
+                          self.opacities, sh, self.source, dict(self.repairs), self.colour_space)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         if self.count == 0:
