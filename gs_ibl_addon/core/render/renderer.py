@@ -50,25 +50,25 @@ from .views import ViewBatch
 
 # A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles per probe each
 # tile's list is split into chunks composited in parallel (gs_raster.comp / gs_merge.comp), up to
-# RASTER_TARGET_GROUPS workgroups per probe. Chunks give up the early termination of pixels that turned opaque in
-# an earlier chunk, so they only pay where a tile's list is long: on an H200, for 1M splats, 32 chunks took a 32^2
-# probe's raster from 2.0 to 1.1 ms, while 10 chunks made 64^2 slower than one pass (1.16 vs 0.76 ms)
-# (docs/bench/runs/chunk_experiment.md). A tile's list length depends on the tiles per probe, not on how many probes
-# a batch holds (each probe's splats spread over its own tiles), so the rule is per probe: 8 probes of 32^2 (192
-# tiles) unchunked took 11.6 ms where 8 single renders took 8 x 1.1 ms. The partial images of the chunks are
-# bounded by CHUNK_BYTES (one storage binding, and memory a large batch would otherwise multiply by 32).
+# RASTER_TARGET_GROUPS workgroups for the whole group of probes. Chunks give up the early termination of pixels that
+# turned opaque in an earlier chunk, so they only pay while workgroups are few: on an H200, for 1M splats, 32 chunks
+# took a 32^2 probe's raster from 2.0 to 1.1 ms, while 10 chunks made 64^2 slower than one pass (1.16 vs 0.76 ms)
+# (docs/bench/runs/chunk_experiment.md). In a batch of 32^2 probes, chunking every probe as if alone (32 chunks)
+# measured 9.0 ms raster at 8 probes (11.6 unchunked) but 27.1 at 27 (13.3 unchunked) and 122 at 125 (44.1)
+# (docs/bench/multi_probe_nvidia-h200*.csv): the target counts the group's tiles, not one probe's. The partial
+# images of the chunks are bounded by CHUNK_BYTES (one storage binding, and memory a large batch would multiply).
 RASTER_TARGET_GROUPS = 1024
 MAX_RASTER_CHUNKS = 32
 CHUNK_BELOW_TILES = 64
 CHUNK_BYTES = 128 << 20
 
 
-def raster_chunks(tiles_per_probe: int, partial_bytes_per_chunk: int = 0) -> int:
-    """Chunks per tile list for probes of ``tiles_per_probe`` tiles; ``partial_bytes_per_chunk``: one chunk's
-    partial image(s) for the whole group, which CHUNK_BYTES bounds."""
+def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk: int = 0) -> int:
+    """Chunks per tile list for a group of ``probes`` probes of ``tiles_per_probe`` tiles each;
+    ``partial_bytes_per_chunk``: one chunk's partial image(s) for the whole group, which CHUNK_BYTES bounds."""
     if tiles_per_probe >= CHUNK_BELOW_TILES:
         return 1
-    chunks = min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, tiles_per_probe)))
+    chunks = min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, tiles_per_probe * max(1, probes))))
     if partial_bytes_per_chunk > 0:
         chunks = min(chunks, CHUNK_BYTES // partial_bytes_per_chunk)
     return int(max(1, chunks))
@@ -553,7 +553,7 @@ class SplatRenderer:
         g_image = self._frame_buffer("group_image", group * total_pixels * 16) if split else image
         g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
         # the same chunks for every group (the last, smaller one included): partial sized for a full group
-        chunks = chunks_max = raster_chunks(total_tiles, group * total_pixels * (16 + (4 if depth else 0)))
+        chunks = chunks_max = raster_chunks(total_tiles, group, group * total_pixels * (16 + (4 if depth else 0)))
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
