@@ -273,8 +273,7 @@ def test_installs_with_blenders_extension_installer(tmp_path, write_3dgs_ply):
 BLENDER_PROVIDES = {"bpy", "bpy_extras", "bpy_types", "gpu", "gpu_extras", "mathutils", "bmesh", "idprop", "numpy"}
 # Imported only by the command line's modules, which the extension loads but never calls there: (module, import)
 # and why Blender never gets there.
-CLI_ONLY = {("core.preview", "matplotlib"): "draws the command line's preview PNG",
-            ("core.image_io", "OpenImageIO"): "reads and writes the command line's EXR/PNG files; in Blender, "
+CLI_ONLY = {("core.image_io", "OpenImageIO"): "reads and writes the command line's EXR/PNG files; in Blender, "
                                               "images are written by Blender itself (blender/world.py)"}
 # Imported by the extension where some Blenders have them and others not; always inside a function that handles
 # their absence (a fallback, or a message saying what to install).
