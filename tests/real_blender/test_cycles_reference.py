@@ -26,7 +26,6 @@ Skipped unless the trixie root is made (`scripts/blender_roots.sh ensure trixie`
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import shutil
 import subprocess
@@ -137,9 +136,6 @@ def cycles_run(tmp_path_factory):
         pytest.skip(f"{ENTRY.root} not made: scripts/blender_roots.sh ensure {ENTRY.root}")
     from gs_ibl_addon.core.formats.ply import write_ply
     OUT.mkdir(parents=True, exist_ok=True)
-    zip_path = OUT / "gs_ibl.zip"
-    subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
-                   capture_output=True, text=True)
     runner = matrix.Runner(ENTRY, tmp_path_factory.mktemp("cycles"))
     try:
         cases = []
@@ -153,20 +149,11 @@ def cycles_run(tmp_path_factory):
         captures = [{"key": "guitar", "ply": str(runner.inner / "guitar.ply"), "size": list(CAPTURE_SIZE),
                      "samples": CAPTURE_SAMPLES, "camera": capture_camera(read_scene(runner.host / "guitar.ply"))}]
         shutil.copy(runner.host / "guitar.ply", OUT / "guitar.ply")  # our render reads the same file
-        shutil.copy(zip_path, runner.host / zip_path.name)
-        shutil.copy(HERE / "cycles_reference.py", runner.host / "cycles_reference.py")
         args = {"work": str(runner.inner), "cases": cases, "sphere": SPHERE, "sphere_camera": SPHERE_CAMERA,
                 "view_camera": VIEW_CAMERA, "size": [SPHERE_SIZE, SPHERE_SIZE], "view_size": list(VIEW_SIZE),
                 "samples": SAMPLES, "view_samples": VIEW_SAMPLES, "world_samples": WORLD_SAMPLES,
                 "albedo": ALBEDO, "face_size": 64, "threads": 2, "captures": captures}
-        (runner.host / "args.json").write_text(json.dumps(args, indent=1))
-        assert matrix._install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
-            (runner.host / "install.log").read_text()[-2000:]
-        r = runner.run([runner.python(), str(runner.inner / "cycles_reference.py"), str(runner.inner / "args.json")],
-                       "cycles")
-        line = next((x for x in r.stdout.splitlines() if x.startswith("GSIBL-CYCLES-RESULT ")), None)
-        assert line, f"no result (rc {r.returncode}): {r.stdout[-2000:]}\n{r.stderr[-3000:]}"
-        result = json.loads(line.split(" ", 1)[1])
+        result = matrix.run_script(runner, HERE / "cycles_reference.py", args, "GSIBL-CYCLES-RESULT", "cycles")
         arrays = {p.stem: np.load(p) for p in runner.host.glob("*.npy")}
         yield result, arrays
     finally:

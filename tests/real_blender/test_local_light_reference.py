@@ -13,10 +13,8 @@ Skipped unless the trixie root is made (`scripts/blender_roots.sh ensure trixie`
 """
 from __future__ import annotations
 
-import json
 import os
 import shutil
-import subprocess
 import sys
 from pathlib import Path
 
@@ -96,9 +94,6 @@ def local_run(tmp_path_factory):
     from gs_ibl_addon.core.formats import read_scene
     from gs_ibl_addon.core.formats.ply import write_ply
     OUT.mkdir(parents=True, exist_ok=True)
-    zip_path = OUT / "gs_ibl.zip"
-    subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
-                   capture_output=True, text=True)
     runner = matrix.Runner(ENTRY, tmp_path_factory.mktemp("local"))
     try:
         room = read_scene(REPO / "samples" / "room.ply")
@@ -106,20 +101,11 @@ def local_run(tmp_path_factory):
         room.sh = linear_sh_for_srgb_rule(room.sh)  # Blender decodes every splat as sRGB: it gets the linear light
         room.colour_space = "srgb"
         write_ply(runner.host / "room.ply", room)
-        shutil.copy(zip_path, runner.host / zip_path.name)
-        shutil.copy(HERE / "local_light_reference.py", runner.host / "local_light_reference.py")
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": SIZE, "albedo": ALBEDO,
                 "spheres": _spheres_args(), "probe": PROBE, "grid": GRID, "fine_grid": FINE_GRID, "face_size": 64,
                 "native_samples": NATIVE_SAMPLES, "samples": SAMPLES, "threads": 2,
                 "pano_height": PANO_HEIGHT, "pano_samples": 16}
-        (runner.host / "args.json").write_text(json.dumps(args, indent=1))
-        assert matrix._install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
-            (runner.host / "install.log").read_text()[-2000:]
-        r = runner.run([runner.python(), str(runner.inner / "local_light_reference.py"),
-                        str(runner.inner / "args.json")], "local")
-        line = next((x for x in r.stdout.splitlines() if x.startswith("GSIBL-LOCAL-RESULT ")), None)
-        assert line, f"no result (rc {r.returncode}): {r.stdout[-2000:]}\n{r.stderr[-3000:]}"
-        result = json.loads(line.split(" ", 1)[1])
+        result = matrix.run_script(runner, HERE / "local_light_reference.py", args, "GSIBL-LOCAL-RESULT", "local")
         arrays = {p.stem: np.load(p) for p in runner.host.glob("*.npy")}
         yield result, arrays, read_scene(REPO / "samples" / "room.ply")
     finally:

@@ -62,12 +62,23 @@ def _ready(root: str) -> bool:
 CONVERTED = ("sog", "glb", "ksplat")  # formats Blender cannot read, written by our convert (SOG: WebP in Blender)
 
 
+_ZIP: list[Path] = []
+
+
+def built_zip() -> Path:
+    """The extension's zip, built once per test session: every entry and every check installs the same file."""
+    if not _ZIP:
+        OUT.mkdir(parents=True, exist_ok=True)
+        zip_path = OUT / "gs_ibl.zip"
+        subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO,
+                       check=True, capture_output=True, text=True)
+        _ZIP.append(zip_path)
+    return _ZIP[0]
+
+
 def _build_inputs() -> dict[str, Path]:
-    """The zip, built once, and the splat files every entry imports (SPZ and plain PLY made by our CLI)."""
-    OUT.mkdir(parents=True, exist_ok=True)
-    zip_path = OUT / "gs_ibl.zip"
-    subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
-                   capture_output=True, text=True)
+    """The zip and the splat files every entry imports (SPZ and plain PLY made by our CLI)."""
+    zip_path = built_zip()
     files = {"room": REPO / "samples" / "room.ply", "capture": CAPTURE,
              "spz": OUT / "inputs" / "guitar.spz", "ply": OUT / "inputs" / "guitar.ply",
              "spz4": OUT / "inputs" / "guitar.v4.spz", **{k: OUT / "inputs" / f"guitar.{k}" for k in CONVERTED}}
@@ -166,6 +177,21 @@ def _install(runner: Runner, zip_inner: str) -> subprocess.CompletedProcess:
                            zip_inner], "install")
     (runner.host / "install.py").write_text(_INSTALL_BPY)
     return runner.run([runner.python(), str(runner.inner / "install.py"), zip_inner], "install")
+
+
+def run_script(runner: Runner, script: Path, args: dict, tag: str, log: str) -> dict:
+    """Install the built zip with Blender's installer in ``runner``'s bpy module, run ``script`` there on
+    args.json (``args``), and return the JSON of its stdout line starting with ``tag``."""
+    zip_path = built_zip()
+    shutil.copy(zip_path, runner.host / zip_path.name)
+    shutil.copy(script, runner.host / script.name)
+    (runner.host / "args.json").write_text(json.dumps(args, indent=1))
+    assert _install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
+        (runner.host / "install.log").read_text()[-2000:]
+    r = runner.run([runner.python(), str(runner.inner / script.name), str(runner.inner / "args.json")], log)
+    line = next((x for x in r.stdout.splitlines() if x.startswith(tag + " ")), None)
+    assert line, f"no result (rc {r.returncode}): {r.stdout[-2000:]}\n{r.stderr[-3000:]}"
+    return json.loads(line.split(" ", 1)[1])
 
 
 def _scenario_cmd(runner: Runner, args_inner: str) -> list[str]:

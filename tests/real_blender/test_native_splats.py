@@ -7,7 +7,6 @@ Skipped unless the trixie root is made (`scripts/blender_roots.sh ensure trixie`
 """
 from __future__ import annotations
 
-import json
 import shutil
 import subprocess
 import sys
@@ -61,26 +60,14 @@ def test_bake_from_blenders_native_splats(tmp_path):
     from gs_ibl_addon.core.bake import ProbeSettings, bake_probe
     from gs_ibl_addon.core.formats import read_scene
     OUT.mkdir(parents=True, exist_ok=True)
-    zip_path = OUT / "gs_ibl.zip"
-    subprocess.run([sys.executable, "scripts/build_extension.py", "--output", str(zip_path)], cwd=REPO, check=True,
-                   capture_output=True, text=True)
     runner = matrix.Runner(ENTRY, tmp_path)
     try:
         files = _inputs(tmp_path)
-        shutil.copy(zip_path, runner.host / zip_path.name)
-        shutil.copy(HERE / "native_splats.py", runner.host / "native_splats.py")
         args = {"work": str(runner.inner),
                 "files": [[k, str(runner.inner / p.name), kind] for k, (p, kind) in files.items()]}
         for p, _ in files.values():
             shutil.copy(p, runner.host / p.name)
-        (runner.host / "args.json").write_text(json.dumps(args))
-        assert matrix._install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
-            (runner.host / "install.log").read_text()[-2000:]
-        r = runner.run([runner.python(), str(runner.inner / "native_splats.py"), str(runner.inner / "args.json")],
-                       "native")
-        line = next((x for x in r.stdout.splitlines() if x.startswith("GSIBL-NATIVE-RESULT ")), None)
-        assert line, f"no result (rc {r.returncode}): {r.stdout[-2000:]}\n{r.stderr[-3000:]}"
-        result = json.loads(line.split(" ", 1)[1])
+        result = matrix.run_script(runner, HERE / "native_splats.py", args, "GSIBL-NATIVE-RESULT", "native")
         for key, (path, _kind) in files.items():
             rec = result["files"][key]
             assert rec.get("ok"), f"{key}: {rec.get('error')}"
