@@ -132,8 +132,7 @@ def block_errors(got: np.ndarray, want: np.ndarray, mask: np.ndarray) -> np.ndar
 
 @pytest.fixture(scope="module")
 def cycles_run(tmp_path_factory):
-    if not matrix._ready(ENTRY.root):
-        pytest.skip(f"{ENTRY.root} not made: scripts/blender_roots.sh ensure {ENTRY.root}")
+    matrix.require_root(ENTRY.root)
     from gs_ibl_addon.core.formats.ply import write_ply
     OUT.mkdir(parents=True, exist_ok=True)
     runner = matrix.Runner(ENTRY, tmp_path_factory.mktemp("cycles"))

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from gs_ibl_addon.blender.overlay_math import MOVING_SCALE
-from test_matrix import OUT, REPO, Entry, Runner, _inputs_once, _install, _ready, xvfb_shell
+from test_matrix import OUT, REPO, Entry, Runner, _inputs_once, _install, require_root, xvfb_shell
 
 HERE = Path(__file__).resolve().parent
 ENTRY = Entry("gui-overlay", "sid", True, gui=True)
@@ -69,8 +69,7 @@ def _patch(img: np.ndarray, shot: dict, name: str, r: int = 4) -> np.ndarray:
 
 
 def test_gui_overlay(tmp_path_factory):
-    if not _ready(ENTRY.root):
-        pytest.skip("sid root not made: scripts/blender_roots.sh ensure sid (or bash scripts/test_real_blender.sh)")
+    require_root(ENTRY.root)
     zip_path = _inputs_once()["zip"]
     runner = Runner(ENTRY, tmp_path_factory.mktemp("gui"))
     for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_overlay.py"):

@@ -88,8 +88,7 @@ def blocks(got: np.ndarray, want: np.ndarray, mask: np.ndarray, k: int = 2) -> n
 
 @pytest.fixture(scope="module")
 def local_run(tmp_path_factory):
-    if not matrix._ready(ENTRY.root):
-        pytest.skip(f"{ENTRY.root} not made: scripts/blender_roots.sh ensure {ENTRY.root}")
+    matrix.require_root(ENTRY.root)
     from gs_ibl_addon.core.colour import linear_sh_for_srgb_rule
     from gs_ibl_addon.core.formats import read_scene
     from gs_ibl_addon.core.formats.ply import write_ply

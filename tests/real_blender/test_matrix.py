@@ -55,6 +55,17 @@ def _roots(*args: str, **kw) -> subprocess.CompletedProcess:
     return subprocess.run(["bash", str(ROOTS_SH), *args], capture_output=True, text=True, **kw)
 
 
+def require_root(root: str) -> None:
+    """Skip (or fail) a check that runs in a real Blender's root: every such check runs once in CI, in
+    scripts/test_real_blender.sh, which requires the roots; the fast suite before it skips them."""
+    if os.environ.get("GS_IBL_SKIP_MATRIX"):
+        pytest.skip("GS_IBL_SKIP_MATRIX is set (CI runs the real-Blender checks in scripts/test_real_blender.sh)")
+    if not _ready(root):
+        if os.environ.get("GS_IBL_REQUIRE_MATRIX"):
+            pytest.fail(f"{root} is not made, and scripts/test_real_blender.sh requires every root")
+        pytest.skip(f"{root} not made: scripts/blender_roots.sh ensure {root} (or bash scripts/test_real_blender.sh)")
+
+
 def _ready(root: str) -> bool:
     return _roots("ready", root).returncode == 0
 
@@ -213,13 +224,7 @@ def xvfb_shell(command: str, screen: str = "1600x1000x24") -> list[str]:
 
 @pytest.mark.parametrize("entry", [pytest.param(e, id=e.name) for e in ENTRIES])
 def test_entry(entry: Entry, tmp_path_factory):
-    if os.environ.get("GS_IBL_SKIP_MATRIX"):
-        pytest.skip("GS_IBL_SKIP_MATRIX is set (CI runs the matrix in scripts/test_real_blender.sh)")
-    if not _ready(entry.root):
-        if os.environ.get("GS_IBL_REQUIRE_MATRIX"):
-            pytest.fail(f"{entry.root} is not made, and scripts/test_real_blender.sh requires every entry")
-        pytest.skip(f"{entry.root} not made: scripts/blender_roots.sh ensure {entry.root} "
-                    "(or bash scripts/test_real_blender.sh)")
+    require_root(entry.root)
     files = _inputs_once()
     runner = Runner(entry, tmp_path_factory.mktemp("matrix"))
     inner = {}

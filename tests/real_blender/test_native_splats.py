@@ -55,8 +55,7 @@ def _similarity(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, float]:
 
 
 def test_bake_from_blenders_native_splats(tmp_path):
-    if not matrix._ready(ENTRY.root):
-        pytest.skip(f"{ENTRY.root} not made: scripts/blender_roots.sh ensure {ENTRY.root}")
+    matrix.require_root(ENTRY.root)
     from gs_ibl_addon.core.bake import ProbeSettings, bake_probe
     from gs_ibl_addon.core.formats import read_scene
     OUT.mkdir(parents=True, exist_ok=True)
