@@ -120,6 +120,12 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):
         self.exit(2, f"error: {message} (see {self.prog} --help)\n")
 
+    def add_argument(self, *args, **kwargs):
+        # Help texts are plain text shared with other front ends ("1%"); argparse %-formats them again at --help.
+        if isinstance(kwargs.get("help"), str):
+            kwargs["help"] = kwargs["help"].replace("%", "%%")
+        return super().add_argument(*args, **kwargs)
+
 
 OUTPUT_WRITERS = {".ply": ("ply", "write_ply"), ".spz": ("spz", "write_spz"), ".splat": ("splat", "write_splat"),
                   ".sog": ("sog", "write_sog"), ".glb": ("gltf", "write_glb"), ".ksplat": ("ksplat", "write_ksplat")}

@@ -37,9 +37,10 @@ DEFAULT_IRRADIANCE_SIZE = 16  # irradiance cube face size (lat-long output is 4x
 DEFAULT_TOLERANCE = 0.01  # relative RMS irradiance error the settings are chosen for (core/tolerance.py)
 MIN_TOLERANCE = 0.001  # below 0.1% the render's own error floor (0.005-0.02% on the synthetic scenes) is near
 MAX_TOLERANCE = 0.5
-TOLERANCE_HELP = ("relative RMS irradiance error allowed (default 0.01 = 1%%, %g-%g): face size, irradiance size and "
-                  "level of detail are chosen from an error estimate to meet it (docs/accuracy.md)"
-                  % (MIN_TOLERANCE, MAX_TOLERANCE))
+# Help texts here are plain text (the command line escapes them for argparse).
+TOLERANCE_HELP = (f"relative RMS irradiance error allowed (default 0.01 = 1%, {MIN_TOLERANCE:g}-{MAX_TOLERANCE:g}): "
+                  "face size, irradiance size and level of detail are chosen from an error estimate to meet it "
+                  "(docs/accuracy.md)")
 IRRADIANCE_SIZES = (8, 16, 32)  # what irradiance size 0 chooses from, by the error of reading between texels
 DEFAULT_DOWNSAMPLE_TO = 32  # exact method: integrate a <= 32^2-face copy (rel RMS loss ~2e-4, docs/accuracy.md)
 AUTO_FIRST_FACE = 32  # the face-size search renders this and twice this, then jumps where the estimate says
