@@ -26,7 +26,7 @@ NUMPY42=1.26.4  # what Blender 4.2 LTS bundles; bpy 4.2.0 asks for any numpy, so
 BPY50=5.0.1
 BPY53=5.3.0
 SID_PACKAGES="blender libegl1 xvfb xauth imagemagick python3-numpy python3-openimageio python3-cffi python3-attr \
-python3-typing-extensions python3-requests mesa-vulkan-drivers libvulkan1 libgl1-mesa-dri unzip"
+python3-typing-extensions python3-requests mesa-vulkan-drivers libvulkan1 libgl1-mesa-dri unzip xdotool"
 TRIXIE_PACKAGES="libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 libxxf86vm1 libsm6 libgl1 libegl1 \
 mesa-vulkan-drivers libvulkan1"
 CATTRS=25.3.0  # Blender's extensions add-on imports cattrs, which Debian does not package
@@ -70,7 +70,9 @@ unmount_root() {  # every bind mount first: deleting a root must never reach /de
 make_root() {  # make_root NAME SUITE PACKAGES: a changed package list tops the root up, a new suite remakes it
   local name=$1 suite=$2 packages=$3 r="$ROOTS/$1"
   if [ "$(cat "$r/.gs-ibl-base" 2>/dev/null)" != "$suite" ]; then
-    command -v debootstrap >/dev/null || { $SUDO apt-get update -qq; $SUDO apt-get install -y -qq debootstrap >/dev/null; }
+    # the host's apt, locked: roots are made side by side, and two apt-get runs at once fail on apt's own lock
+    command -v debootstrap >/dev/null || $SUDO flock "$ROOTS/.host-apt.lock" sh -c \
+      'command -v debootstrap >/dev/null || { apt-get update -qq && apt-get install -y -qq debootstrap >/dev/null; }'
     unmount_root "$r"
     $SUDO rm -rf "$r"
     echo "[roots] debootstrap $suite into $r"
@@ -126,18 +128,23 @@ ensure_one() {
   echo "[roots] $name ready in $((SECONDS - t0)) s"
 }
 
-cmd=${1:-}; shift || true
-case "$cmd" in
-  ensure) for n in "$@"; do ensure_one "$n"; done ;;
-  path) recipe "$1" >/dev/null; echo "$ROOTS/$1" ;;
-  ready) stamp_ok "$1" ;;
-  remove) recipe "$1" >/dev/null; rm -f "$ROOTS/$1.stamp"; unmount_root "$ROOTS/$1"; $SUDO rm -rf "${ROOTS:?}/$1" ;;
-  chroot)
-    name=$1; shift
-    stamp_ok "$name" || { echo "[roots] $name is not made: scripts/blender_roots.sh ensure $name" >&2; exit 1; }
-    r="$ROOTS/$name"
-    mount_root "$r"
-    in_root "$r" "$@"
-    ;;
-  *) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
-esac
+main() {
+  local cmd=${1:-} name r; shift || true
+  case "$cmd" in
+    ensure) for n in "$@"; do ensure_one "$n"; done ;;
+    path) recipe "$1" >/dev/null; echo "$ROOTS/$1" ;;
+    ready) stamp_ok "$1" ;;
+    remove) recipe "$1" >/dev/null; rm -f "$ROOTS/$1.stamp"; unmount_root "$ROOTS/$1"; $SUDO rm -rf "${ROOTS:?}/$1" ;;
+    chroot)
+      name=$1; shift
+      stamp_ok "$name" || { echo "[roots] $name is not made: scripts/blender_roots.sh ensure $name" >&2; exit 1; }
+      r="$ROOTS/$name"
+      mount_root "$r"
+      in_root "$r" "$@"
+      ;;
+    *) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 2 ;;
+  esac
+}
+
+# Sourced (scripts/fresh_debian.sh), it only defines the helpers above: make_root, in_root, unmount_root.
+if [ "${BASH_SOURCE[0]}" = "$0" ]; then main "$@"; fi

@@ -10,6 +10,6 @@ mkdir -p out/demo
 if .venv/bin/python -c "import bpy" 2>/dev/null; then
   .venv/bin/python scripts/blender_demo.py --out out/demo/blender_render.png --blend out/demo/demo.blend
 else
-  echo "[demo] skipping the Blender render: bpy is not installed (it needs Python 3.11; see the setup output)" >&2
+  echo "[demo] skipping the Blender render: bpy is not installed (it needs Python 3.11 or 3.13; see the setup output)" >&2
 fi
 echo "[demo] look at out/demo/probe/preview.png (radiance | irradiance | lit sphere) and out/demo/blender_render.png"

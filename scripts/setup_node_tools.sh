@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Installs PlayCanvas's splat-transform (the splat ecosystem's own converter) into build/node_tools, pinned, so the
-# format tests can compare our readers with files the ecosystem writes. Needs node >= 18 and npm; safe to run again.
+# format tests can compare our readers with files the ecosystem writes. Needs node >= 18 and npm (Debian 12 has 18,
+# Debian 13 has 20; scripts/test.sh has scripts/setup.sh --node install them from apt); safe to run again.
 # 2.7.1 is the newest release whose package.json accepts node 18/20 (3.x asks for node >= 22).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VERSION=2.7.1
 DEST=build/node_tools
 if ! command -v node >/dev/null || ! command -v npm >/dev/null; then
-  echo "[node_tools] node/npm not found: the splat-transform comparison tests will be skipped" >&2
+  echo "[node_tools] node/npm not found (scripts/setup.sh --node installs them from apt): the splat-transform" \
+       "comparison tests will be skipped" >&2
   exit 0
 fi
 major=$(node -p 'process.versions.node.split(".")[0]')

@@ -2,7 +2,7 @@
 # Sets everything up, then runs the whole test suite (on lavapipe when there is no GPU).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+bash scripts/setup.sh --node     # --node: node and npm from apt when missing, for the next line
 bash scripts/setup_node_tools.sh  # PlayCanvas splat-transform for tests/test_formats_ecosystem.py (needs node/npm)
 if [ -n "${CI:-}" ]; then
   # CI must run the Blender half: a bpy that fails to import would otherwise only skip those tests
