@@ -7,6 +7,11 @@ cd "$(dirname "$0")/.."
 [ -x .venv/bin/python ] || bash scripts/setup.sh
 mkdir -p build/matrix
 t0=$SECONDS
+# debootstrap once, before the roots are made side by side: two apt-get runs at once fail on apt's lock
+if ! command -v debootstrap >/dev/null; then
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq debootstrap >/dev/null
+fi
 # The four are independent and mostly wait on the network: made side by side, each with its own log.
 pids=()
 for group in "sid" "trixie" "bpy42 bpy50"; do

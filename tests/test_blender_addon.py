@@ -89,7 +89,11 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
     m = np.array(obj.matrix_world)
     np.testing.assert_allclose(m[:3, :3] @ [0, -1, 0], [0, 0, 1], atol=1e-6)
     np.testing.assert_allclose(m[:3, :3] @ [0, 0, 1], [0, 1, 0], atol=1e-6)
-    # the proxy draws the splats as points
+    # the import turns Show Splats on, which hides the point proxy; off, the proxy draws the splats as points
+    assert bpy.context.scene.gs_ibl_overlay.show
+    ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    assert len(ev.evaluated_geometry().pointcloud.points) == 0
+    bpy.context.scene.gs_ibl_overlay.show = False
     ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
     assert len(ev.evaluated_geometry().pointcloud.points) == 500
     from gs_ibl_addon.blender.splat_object import scene_from_mesh

@@ -12,6 +12,7 @@ from typing import Callable
 import bpy
 import numpy as np
 from bpy.app.handlers import persistent
+from mathutils import Vector
 
 from ..core.bake import ProbeSettings, bake_probe, check_fits_device
 from ..core.tolerance import plan_text
@@ -22,12 +23,14 @@ from ..core.probe.near import near_warning
 from ..core.probe.latlong import cube_to_latlong
 from ..core.settings import method_from_blender
 from . import splat_cache
+from .bake_undo import stamp
 from . import world as gw
 from .lights_from_probe import sync_lights
 from .properties import is_probe
 from .splat_object import is_splat_object
 
 HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
+WARNING_PREFIX = "Warning: "  # a report line the panel shows with a warning icon
 
 
 def probe_settings(props) -> ProbeSettings:
@@ -37,15 +40,61 @@ def probe_settings(props) -> ProbeSettings:
                          highlight_gain=float(props.highlight_gain), lights=int(props.lights))
 
 
+def scene_splats(scene: bpy.types.Scene) -> list[bpy.types.Object]:
+    return [o for o in scene.objects if is_splat_object(o)]
+
+
+def in_scene(scene: bpy.types.Scene, obj: bpy.types.Object | None) -> bool:
+    """Whether ``obj`` is one of the scene's objects: a deleted object lives on (unlinked) while a pointer such as
+    a probe's Splats field still refers to it."""
+    return obj is not None and scene.objects.get(obj.name) == obj
+
+
+def require_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,
+                   active: bpy.types.Object | None = None) -> bpy.types.Object:
+    """The splat object a bake of ``probe`` reads: the probe's Splats field, else the active splat object, else the
+    scene's only one. Raises ValueError saying what is wrong and what to do."""
+    chosen = probe.gs_ibl_probe.splats if probe is not None else None
+    if chosen is not None:
+        if not in_scene(scene, chosen):
+            raise ValueError(f"{probe.name}: its splat object {chosen.name!r} is no longer in the scene (deleted or "
+                             "unlinked): pick another in the probe's Splats field")
+        return chosen
+    if is_splat_object(active) and in_scene(scene, active):
+        return active
+    found = scene_splats(scene)
+    if len(found) == 1:
+        return found[0]
+    if not found:
+        raise ValueError("No splat object in the scene: import a splat file (File > Import > Gaussian Splatting)")
+    names = ", ".join(repr(o.name) for o in found[:4]) + (", ..." if len(found) > 4 else "")
+    raise ValueError(f"{len(found)} splat objects in the scene ({names}): pick one in the probe's Splats field")
+
+
 def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,
                 active: bpy.types.Object | None = None) -> bpy.types.Object | None:
-    """The probe's splat object, else the active one, else the only one in the scene."""
-    if probe is not None and probe.gs_ibl_probe.splats is not None:
-        return probe.gs_ibl_probe.splats
-    if is_splat_object(active):
-        return active
-    found = [o for o in scene.objects if is_splat_object(o)]
-    return found[0] if len(found) == 1 else None
+    """require_splats, or None where it would refuse."""
+    try:
+        return require_splats(scene, probe, active)
+    except ValueError:
+        return None
+
+
+def enclosing_splats(scene: bpy.types.Scene, point) -> bpy.types.Object | None:
+    """The scene's only splat object, or of several the largest whose world bounds hold ``point`` (the room a
+    probe stands in, not a small capture inside it); None when none does."""
+    found = scene_splats(scene)
+    if len(found) == 1:
+        return found[0]
+    p = np.asarray(point, np.float64)
+    best, best_volume = None, -1.0
+    for o in found:
+        corners = np.array([list(o.matrix_world @ Vector(c)) for c in o.bound_box])
+        lo, hi = corners.min(0), corners.max(0)
+        volume = float(np.prod(hi - lo))
+        if np.all(p >= lo) and np.all(p <= hi) and volume > best_volume:
+            best, best_volume = o, volume
+    return best
 
 
 def result_latlong(result, kind: str, height: int) -> np.ndarray:
@@ -113,7 +162,8 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
     how = f"method {method}"
     trials = [t for t in st.get("face_size_trials", []) if t.get("change") is not None]
     if trials:
-        steps = ", ".join(f"{t['face_size']}: {100 * t['change']:.2f}%" for t in trials)
+        steps = ", ".join(f"{'/'.join(map(str, t.get('face_sizes') or [t['face_size']]))}: {100 * t['change']:.2f}%"
+                          for t in trials)  # per-face sizes: +X/-X/+Y/-Y/+Z/-Z
         verdict = "converged" if st.get("converged") else "NOT converged at the size limit"
         how = f"{method}; face size by irradiance change ({steps}) {verdict}"
     face = st.get("face_size", np.asarray(result.radiance).shape[1])
@@ -142,9 +192,10 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     """
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
-    splats = splats or find_splats(scene, probe)
-    if splats is None:
-        raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
+    splats = splats or require_splats(scene, probe)
+    if not in_scene(scene, splats):
+        raise ValueError(f"{splats.name!r} is not in scene {scene.name!r}: a deleted or unlinked splat object is "
+                         "never baked")
     t0 = time.perf_counter()
     settings = probe_settings(probe.gs_ibl_probe)
     check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
@@ -164,9 +215,12 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
     apply_probe_images(scene, probe, radiance, irradiance)
     sync_lights(scene, probe, result.lights, probe.gs_ibl_probe.strength)
+    if probe.gs_ibl_probe.splats is None:
+        probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
     _baked[(scene.name, probe.name)] = bake_state(probe, splats)
     lines, warning = summary(result, time.perf_counter() - t0)
-    probe.gs_ibl_probe.last_report = "\n".join(lines + ([warning] if warning else []))
+    probe.gs_ibl_probe.last_report = "\n".join(lines + ([WARNING_PREFIX + warning] if warning else []))
+    stamp(probe)
     return result, ", ".join(lines), warning
 
 
@@ -176,6 +230,7 @@ _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a
 _baked: dict[tuple[str, str], tuple] = {}  # (scene name, probe name) -> bake_state() of its last bake
 last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
 auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
+_rebaseline_next = False  # an undo or redo happened: the next depsgraph update is not a move
 
 
 def bake_state(probe: bpy.types.Object, splats: bpy.types.Object | None) -> tuple:
@@ -188,6 +243,41 @@ def bake_state(probe: bpy.types.Object, splats: bpy.types.Object | None) -> tupl
             splat_cache.data_key(splats) if splats is not None else None)
 
 
+def auto_splats(scene: bpy.types.Scene, probe: bpy.types.Object) -> bpy.types.Object | None:
+    """The splat object an automatic re-bake reads: only the probe's own Splats field, and only while that object
+    is in the scene (never a guess: a deleted room must not hand the probe to another capture)."""
+    splats = probe.gs_ibl_probe.splats
+    return splats if in_scene(scene, splats) else None
+
+
+def clear_lost_splats(scene: bpy.types.Scene) -> None:
+    """Empty the Splats field of the scene's probes whose splat object is in no scene any more (deleted or
+    unlinked: the pointer alone would keep it alive and baked). Undo brings the object and the field back."""
+    for obj in scene.objects:
+        if is_probe(obj):
+            splats = obj.gs_ibl_probe.splats
+            if splats is not None and not splats.users_scene:
+                obj.gs_ibl_probe.splats = None
+
+
+def rebaseline_after_undo() -> None:
+    """After an undo or redo, which brings back the probe, its World and their report together, nothing has moved
+    since their bake: waiting re-bakes are dropped, and the next depsgraph update (when the restored objects'
+    world matrices are evaluated; in undo_post they are not yet) takes every state as baked."""
+    global _rebaseline_next
+    _pending.clear()
+    if bpy.app.timers.is_registered(run_pending):
+        bpy.app.timers.unregister(run_pending)
+    _rebaseline_next = True
+
+
+def _rebaseline() -> None:
+    for scene in bpy.data.scenes:
+        for obj in scene.objects:
+            if is_probe(obj) and obj.gs_ibl_probe.auto_update:
+                _baked[(scene.name, obj.name)] = bake_state(obj, auto_splats(scene, obj))
+
+
 def _moved_names(depsgraph) -> set[str]:
     return {u.id.original.name for u in depsgraph.updates
             if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
@@ -197,6 +287,12 @@ def _moved_names(depsgraph) -> set[str]:
 def on_depsgraph_update(scene, depsgraph) -> None:
     """Notes auto-updating probes whose probe or splat object really moved and (re)starts one debounce timer: the
     re-bake runs once the objects have stayed still for the probe's Update Delay, so a drag bakes once."""
+    global _rebaseline_next
+    clear_lost_splats(scene)
+    if _rebaseline_next:
+        _rebaseline_next = False
+        _rebaseline()
+        return
     moved = _moved_names(depsgraph)
     if not moved:
         return
@@ -204,8 +300,9 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     for obj in scene.objects:
         if not is_probe(obj) or not obj.gs_ibl_probe.auto_update:
             continue
-        splats = find_splats(scene, obj)
-        if obj.name not in moved and (splats is None or splats.name not in moved):
+        splats = auto_splats(scene, obj)
+        # a probe parented to a mesh ("follows" it) is reported moved with it
+        if splats is None or (obj.name not in moved and splats.name not in moved):
             continue
         key = (scene.name, obj.name)
         if bake_state(obj, splats) == _baked.get(key):
@@ -230,22 +327,25 @@ def run_pending() -> None:
         probe = scene.objects.get(probe_name) if scene is not None else None
         if probe is None or not is_probe(probe):
             continue
-        if bake_state(probe, find_splats(scene, probe)) == _baked.get((scene_name, probe_name)):
-            continue  # moved back to where it was baked
+        splats = auto_splats(scene, probe)
+        if splats is None or bake_state(probe, splats) == _baked.get((scene_name, probe_name)):
+            continue  # moved back to where it was baked, or its splats are gone
         try:
             auto_bakes += 1
-            _, text, warning = bake_into_world(scene, probe)
+            _, text, warning = bake_into_world(scene, probe, splats)
             last_auto_error = None
             print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
         except (ValueError, RuntimeError, OSError, MemoryError) as e:
             last_auto_error = f"{probe_name}: {e}"
-            probe.gs_ibl_probe.last_report = f"Automatic re-bake failed:\n{e}"
+            probe.gs_ibl_probe.last_report = f"{WARNING_PREFIX}automatic re-bake failed:\n{e}"
             print(f"GS-IBL (update when moved): {last_auto_error}")
     return None  # one-shot; the handler registers it again when something moves
 
 
 @persistent
 def on_load_pre(*_args) -> None:
+    global _rebaseline_next
+    _rebaseline_next = False
     _pending.clear()
     _baked.clear()  # names of another file's probes
 

@@ -50,7 +50,7 @@ def _is_spz(path: str) -> bool:
 class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
     """Import a 3D Gaussian Splatting file as a splat object (stored in the .blend)"""
     bl_idname = "gs_ibl.import_splats"
-    bl_label = "Import Gaussian Splatting"
+    bl_label = "Import Splats"  # the file browser's button: a longer label is cut ("Import Gaussian Spl...")
     bl_options = {"REGISTER", "UNDO", "PRESET"}
 
     filename_ext = ".ply"
@@ -86,6 +86,9 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         description="Blender 5.3 and later: make a Gaussian-splat Point Cloud that Blender draws in the viewport and "
                     "renders in EEVEE and Cycles itself; off: a mesh shown by the GS-IBL overlay and never rendered "
                     "(what older Blenders always get)")
+    show_splats: BoolProperty(name="Show Splats", default=True,
+                              description="Turn on the GS-IBL overlay so the imported splats are drawn in the "
+                                          "viewport (mesh objects only; Blender draws its own splats itself)")
     show_proxy: BoolProperty(name="Point Proxy", default=True,
                              description="Show a random subset of the splats as coloured points in the viewport "
                                          "(mesh objects only)")
@@ -103,6 +106,7 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
         if native_splats_supported():
             layout.prop(self, "native")
         if not self._native():
+            layout.prop(self, "show_splats")
             layout.prop(self, "show_proxy")
 
     def _native(self) -> bool:
@@ -145,6 +149,8 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
             kind = "Blender splats" if native else "a mesh for the GS-IBL overlay"
             self.report({"INFO"}, f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r} "
                         f"({kind})" + (f"; repaired {repaired}" if repaired else ""))
+        if scenes and not self._native() and self.show_splats:
+            context.scene.gs_ibl_overlay.show = True  # seen at once, not as a grey pin-cushion of proxy points
         return {"FINISHED"}
 
     def invoke(self, context, event):

@@ -17,7 +17,7 @@ from ..core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coeffici
 from ..core.probe.variation import Variation, box_points, variation_from_sh
 from . import local_light as ll
 from . import splat_cache
-from .bake import find_splats
+from .bake import find_splats, require_splats
 from .properties import is_probe
 from .splat_object import is_splat_object
 
@@ -56,9 +56,7 @@ def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: 
     ``need_world``, that it has been baked (local light corrects the light of its World)."""
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
-    splats = find_splats(scene, probe)
-    if splats is None:
-        raise ValueError("No splat object: import a splat file, then pick it in the probe's Splats field")
+    splats = require_splats(scene, probe)
     if need_world and probe.gs_ibl_probe.world is None:
         raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
     return splat_cache.get(splats).renderer

@@ -5,11 +5,12 @@ import os
 import textwrap
 
 import bpy
-from bpy.props import EnumProperty
+from bpy.props import BoolProperty, EnumProperty
 from mathutils import Vector
 
 from . import bake as gb
 from . import world as gw
+from .bake_undo import stale_images
 from .properties import PROBE_NAME, is_probe
 from .splat_object import is_native_splats, is_splat_object, splat_count
 
@@ -19,10 +20,6 @@ def find_probe(context) -> bpy.types.Object | None:
     if is_probe(obj):
         return obj
     return next((o for o in context.scene.objects if is_probe(o)), None)
-
-
-def find_splats(context, probe=None) -> bpy.types.Object | None:
-    return gb.find_splats(context.scene, probe, context.active_object)
 
 
 class GSIBL_OT_add_probe(bpy.types.Operator):
@@ -35,6 +32,9 @@ class GSIBL_OT_add_probe(bpy.types.Operator):
                         items=[("AUTO", "Auto", "At the selected mesh if there is one, else at the 3D cursor"),
                                ("CURSOR", "3D Cursor", "At the 3D cursor"),
                                ("SELECTED", "Selected Mesh", "At the centre of the selected mesh's bounds")])
+    follow: BoolProperty(name="Follow Mesh", default=True,
+                         description="Placed at a mesh: parent the probe to it, so it moves with the mesh (and "
+                                     "Update When Moved re-bakes when the mesh moves)")
 
     def execute(self, context):
         target = context.active_object if context.active_object and context.active_object.type == "MESH" \
@@ -47,13 +47,17 @@ class GSIBL_OT_add_probe(bpy.types.Operator):
             location = sum(corners, Vector()) / 8.0
         else:
             location = context.scene.cursor.location.copy()
-        splats = find_splats(context)
+        at_mesh = self.place != "CURSOR" and target is not None
         probe = bpy.data.objects.new(PROBE_NAME, None)
         probe.empty_display_type = "SPHERE"
         probe.empty_display_size = 0.25
+        if at_mesh and self.follow:
+            probe.parent = target
+            probe.matrix_parent_inverse = target.matrix_world.inverted()  # keeps the world place given below
         probe.location = location
         probe.gs_ibl_probe.is_probe = True
-        probe.gs_ibl_probe.splats = splats
+        # the splats the probe stands in (of several, the largest holding it); none: the bake asks for one
+        probe.gs_ibl_probe.splats = gb.enclosing_splats(context.scene, location)
         context.collection.objects.link(probe)
         for o in context.view_layer.objects.selected:
             o.select_set(False)
@@ -74,9 +78,10 @@ class GSIBL_OT_bake_probe(bpy.types.Operator):
 
     def execute(self, context):
         probe = find_probe(context)
-        splats = find_splats(context, probe)
-        if splats is None:
-            self.report({"ERROR"}, "No splat object: import a splat file, then pick it in the probe's Splats field")
+        try:  # a deleted, unlinked, missing or ambiguous splat object is refused before any work
+            splats = gb.require_splats(context.scene, probe, context.active_object)
+        except ValueError as e:
+            self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
         wm = context.window_manager
         wm.progress_begin(0, 100)
@@ -182,7 +187,11 @@ class GSIBL_PT_panel(bpy.types.Panel):
         # sliders carry their name inside, checkboxes beside.
         col = layout.column()
         col.label(text=probe.name, icon="EMPTY_DATA")
+        if probe.parent is not None:
+            col.label(text=f"Follows {probe.parent.name} (its parent)", icon="LINKED")
         col.prop(s, "splats")
+        if s.splats is not None and not gb.in_scene(context.scene, s.splats):
+            _label_block(col, context, f"{s.splats.name} is not in this scene: pick another", icon="ERROR")
         col.prop(s, "method")
         col.prop(s, "face_size")
         col.prop(s, "irradiance_size")
@@ -204,7 +213,11 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if s.last_report:
             col = layout.box().column(align=True)
             for line in s.last_report.split("\n"):
-                _label_block(col, context, line, icon="ERROR" if "holes" in line or "failed" in line else "NONE")
+                _label_block(col, context, line, icon="ERROR" if line.startswith(gb.WARNING_PREFIX) else "NONE")
+            stale = stale_images(probe)
+            if stale:  # undo brought back an earlier bake's World, but its image files hold the later bake
+                _label_block(col, context, f"{gb.WARNING_PREFIX}the image files ({', '.join(stale)}) hold a later "
+                             "bake than this report (undo cannot restore files): Bake / Refresh", icon="ERROR")
         if s.world is not None and scene_world_hidden(context):
             _label_block(layout.box(), context, "Material Preview shows the baked light only with Scene World on "
                          "(Viewport Shading popover), or in Rendered mode", icon="INFO")

@@ -108,8 +108,8 @@ def _overlay_display(self, context) -> None:
 class GSIBL_OverlaySettings(bpy.types.PropertyGroup):
     show: BoolProperty(name="Show Splats", default=False, update=_overlay_shown,
                        description="Draw the splats (rendered by GS-IBL's renderer from the view) in 3D Viewports, "
-                                   "in front of or behind meshes by depth; splat objects show as their bounds "
-                                   "meanwhile. Not part of F12 renders")
+                                   "in front of or behind meshes by depth; meanwhile splat objects draw no point "
+                                   "proxy of their own. Not part of F12 renders")
     resolution_scale: FloatProperty(name="Resolution", default=0.5, min=0.1, max=1.0, subtype="FACTOR",
                                     update=_overlay_display,
                                     description="Fraction of the viewport's resolution the splats are rendered at "

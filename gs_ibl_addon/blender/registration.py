@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import bake, importer, local_light_ui, overlay, panel, properties, splat_cache, webp_decoder
+from . import bake, bake_undo, importer, local_light_ui, overlay, panel, properties, splat_cache, webp_decoder
 
 _CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES, *local_light_ui.CLASSES)
 _MENUS = (*importer.MENUS, *panel.MENUS)
@@ -18,6 +18,7 @@ def register() -> None:
         menu.append(fn)
     splat_cache.register_handlers()
     bake.register_handlers()
+    bake_undo.register_handlers()
     overlay.register_overlay()
     webp_decoder.register()
 
@@ -25,6 +26,7 @@ def register() -> None:
 def unregister() -> None:
     webp_decoder.unregister()
     overlay.unregister_overlay()
+    bake_undo.unregister_handlers()
     bake.unregister_handlers()
     splat_cache.unregister_handlers()  # after the overlay: frees the renderers it drew with
     for menu, fn in reversed(_MENUS):

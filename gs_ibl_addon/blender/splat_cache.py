@@ -44,6 +44,8 @@ def slim(scene):
 _entries: dict[int, CachedSplats] = {}  # uid(object) -> entry
 _mesh_generation: dict[int, int] = {}  # uid(mesh) -> number of geometry edits seen
 _proxy_only: set[int] = set()  # uid(mesh) whose next geometry update only switched the object's point proxy
+_fingerprints: dict[int, bytes] = {}  # uid(mesh) -> fingerprint() of what its entry uploaded
+_after_undo = False  # the next geometry updates may be an undo putting back what is already uploaded
 uploads = 0  # entries built so far (tests and the console see how often the splats were uploaded)
 
 
@@ -76,11 +78,35 @@ def get(obj: bpy.types.Object) -> CachedSplats:
         entry = CachedSplats(key, SplatRenderer(scene), slim(scene))
         del scene  # the higher SH bands go with it
         _entries[uid(obj)] = entry
+        _fingerprints[uid(obj.data)] = fingerprint(obj.data)
         uploads += 1
     entry.renderer.colour_space = colour_space_of(obj)  # the colour rule: nothing uploaded again when it changes
     if entry.host.colour_space != entry.renderer.colour_space:  # the footprints weigh light by it
         entry.host = replace(entry.host, colour_space=entry.renderer.colour_space)
     return entry
+
+
+def fingerprint(data) -> bytes:
+    """A digest of a splat object's geometry (point count and positions, ~50 ms for 3M): tells an undo that put
+    back the same splats (Blender reports every restored mesh as updated) from one that undid an edit."""
+    import hashlib
+    if isinstance(data, bpy.types.Mesh):
+        co, n = data.vertices, len(data.vertices)
+        buf = np.empty(3 * n, np.float32)
+        co.foreach_get("co", buf)
+    else:  # a native splat Point Cloud
+        attr = data.attributes.get("position")
+        n = len(data.points)
+        buf = np.empty(3 * n, np.float32)
+        if attr is not None:
+            attr.data.foreach_get("vector", buf)
+    return hashlib.blake2b(buf.tobytes(), digest_size=16, person=n.to_bytes(8, "little")).digest()
+
+
+def undo_restored() -> None:
+    """Called after an undo or redo: geometry updates that follow are edits only where the splats differ."""
+    global _after_undo
+    _after_undo = True
 
 
 def proxy_switched(obj: bpy.types.Object) -> None:
@@ -99,17 +125,23 @@ def clear() -> None:
     for key in list(_entries):
         release(key)
     _mesh_generation.clear()
+    _fingerprints.clear()
 
 
 @persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
     """Counts geometry edits per mesh (they invalidate its entry) and frees entries of deleted objects."""
+    global _after_undo
     for u in depsgraph.updates:
         if u.is_updated_geometry and isinstance(u.id, _GEOMETRY):
             mesh = uid(u.id.original)
-            if mesh not in _proxy_only:
-                _mesh_generation[mesh] = _mesh_generation.get(mesh, 0) + 1
+            if mesh in _proxy_only:
+                continue
+            if _after_undo and mesh in _fingerprints and fingerprint(u.id.original) == _fingerprints[mesh]:
+                continue  # undo put back the splats already uploaded: no re-read, no re-upload, no re-bake
+            _mesh_generation[mesh] = _mesh_generation.get(mesh, 0) + 1
     _proxy_only.clear()  # the switch's update came with this evaluation; later ones are edits again
+    _after_undo = False
     if _entries:
         live = {uid(o) for o in bpy.data.objects}
         for gone in [k for k in _entries if k not in live]:
