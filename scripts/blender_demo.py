@@ -171,7 +171,9 @@ def main() -> None:
         print(f"splats as the viewport overlay draws them: {ms:.0f} ms -> {os.path.abspath(args.splats_png)}")
     blend = os.path.abspath(args.blend or os.path.splitext(args.out)[0] + ".blend")
     bpy.ops.wm.save_as_mainfile(filepath=blend)
-    print(f"scene {t_build:.1f} s ({len(splats.data.vertices):,} splats), bake {t_bake:.1f} s, "
+    data = splats.data  # a mesh, or in Blender 5.3+ a Gaussian-splat Point Cloud
+    n_splats = len(data.points) if isinstance(data, getattr(bpy.types, "PointCloud", ())) else len(data.vertices)
+    print(f"scene {t_build:.1f} s ({n_splats:,} splats), bake {t_bake:.1f} s, "
           f"Cycles {args.width}x{args.height} @ {args.samples} spp {t_render:.1f} s "
           f"(denoiser {'on' if bpy.context.scene.cycles.use_denoising else 'off'}), "
           f"total {time.perf_counter() - t_all:.1f} s")

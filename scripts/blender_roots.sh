@@ -70,9 +70,7 @@ unmount_root() {  # every bind mount first: deleting a root must never reach /de
 make_root() {  # make_root NAME SUITE PACKAGES: a changed package list tops the root up, a new suite remakes it
   local name=$1 suite=$2 packages=$3 r="$ROOTS/$1"
   if [ "$(cat "$r/.gs-ibl-base" 2>/dev/null)" != "$suite" ]; then
-    # the host's apt, locked: roots are made side by side, and two apt-get runs at once fail on apt's own lock
-    command -v debootstrap >/dev/null || $SUDO flock "$ROOTS/.host-apt.lock" sh -c \
-      'command -v debootstrap >/dev/null || { apt-get update -qq && apt-get install -y -qq debootstrap >/dev/null; }'
+    command -v debootstrap >/dev/null || { $SUDO apt-get update -qq; $SUDO apt-get install -y -qq debootstrap >/dev/null; }
     unmount_root "$r"
     $SUDO rm -rf "$r"
     echo "[roots] debootstrap $suite into $r"
