@@ -5,11 +5,10 @@
 # pip resolves the file on a real interpreter of each version, since environment markers are evaluated on the
 # running Python (not on --python-version): the machine's python3.11 ($PYTHON311), and the Debian 13 root of
 # scripts/blender_roots.sh (made when missing). Nothing is installed or downloaded beyond metadata: bpy's wheel
-# (~400 MB, no separate metadata on PyPI) is read by HTTP range requests (pip's fast-deps). ~30 s.
+# (~400 MB, no separate metadata on PyPI) is read by HTTP range requests (pip's fast-deps). About 1 min.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PIP_ARGS=(-m pip install --dry-run --ignore-installed --only-binary :all: --use-feature=fast-deps -q --report -)
-rc=0
 summarise() {  # the report on stdin: one line naming what would be installed
   python3 -c '
 import json, sys
@@ -18,21 +17,26 @@ pins = {i["metadata"]["name"].lower(): i["metadata"]["version"] for i in d["inst
 key = ", ".join("%s %s" % (n, pins[n]) for n in ("bpy", "numpy") if n in pins)
 print("wheels only, %d packages (%s)" % (len(pins), key or "no bpy"))'
 }
-check() {  # check LABEL CMD...: CMD runs the Python whose pip resolves requirements.txt (at REQ)
-  local label=$1 out; shift
-  if out=$("$@" "${PIP_ARGS[@]}" -r "$REQ" 2>"$tmp/err") && line=$(summarise <<<"$out" 2>>"$tmp/err"); then
-    echo "[requirements] Python $label: $line"
+check() {  # check LABEL REQ CMD...: CMD runs the Python whose pip resolves requirements.txt (at REQ there)
+  local label=$1 req=$2 out line err; shift 2
+  err=$(mktemp)
+  if out=$("$@" "${PIP_ARGS[@]}" -r "$req" 2>"$err") && line=$(summarise <<<"$out" 2>>"$err"); then
+    echo "[requirements] Python $label: $line"; rm -f "$err"
   else
     echo "[requirements] Python $label: requirements.txt does not resolve to wheels only:" >&2
-    grep -v -e 'is ignored: it is neither' -e 'fast-deps' "$tmp/err" | tail -n 15 >&2
-    rc=1
+    grep -v -e 'is ignored: it is neither' -e 'fast-deps' "$err" | tail -n 15 >&2; rm -f "$err"
+    return 1
   fi
 }
-tmp=$(mktemp -d); trap 'rm -rf "$tmp"' EXIT
 
-py311=${PYTHON311:-python3.11}
-REQ=requirements.txt check "3.11 ($py311)" "$py311"
 bash scripts/blender_roots.sh ready trixie || bash scripts/blender_roots.sh ensure trixie
-# the root sees this checkout at /src; its bpy venv's pip (the root's python3 is Debian's, without pip)
-REQ=/src/requirements.txt check "3.13 (the Debian 13 root)" bash scripts/blender_roots.sh chroot trixie /opt/bpy53/bin/python
+py311=${PYTHON311:-python3.11}
+# the two side by side (each mostly waits on PyPI); the root sees this checkout at /src, and its bpy venv's pip
+# resolves there (the root's python3 is Debian's, without pip)
+check "3.11 ($py311)" requirements.txt "$py311" & p311=$!
+check "3.13 (the Debian 13 root)" /src/requirements.txt \
+  bash scripts/blender_roots.sh chroot trixie /opt/bpy53/bin/python & p313=$!
+rc=0
+wait $p311 || rc=1
+wait $p313 || rc=1
 exit $rc
