@@ -24,6 +24,8 @@ from .probe.highlights import gain_clipped_splats, recover_highlights
 from .probe.holes import fill_holes
 from .probe.lights import extract_lights
 from .probe.near import near_splats
+from .probe.box import faces_to_size
+from .cubemap import FACE_NAMES
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
@@ -35,6 +37,11 @@ from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_HOLE_FILL, DEFAUL
 # From this face size on the six faces are rendered one at a time, each reporting progress: at 1024^2 and above a
 # face takes seconds to minutes on a CPU device, and six views in one batch would give no sign of life meanwhile.
 FACE_BY_FACE_FROM = 1024
+# Face size 0 sizes each face by itself from this size up (the search's second render), and writes a radiance cube
+# of at most RADIANCE_OUT_MAX (finer faces box-filtered down, keeping their light; coarser ones interpolated up).
+PER_FACE_BASE = 2 * AUTO_FIRST_FACE
+RADIANCE_OUT_MAX = 128
+PER_FACE_ROUNDS = 3  # plan, render, re-calibrate on what the finer faces changed: at most this many times
 
 
 class BadSetting(ValueError):
@@ -181,6 +188,50 @@ def choose_face(probe_at: Callable[[int, float], object], model, s: ProbeSetting
     return result, face, trials, plan, lod_k
 
 
+def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], dict],
+                      filter_cube: Callable[[np.ndarray], ProbeResult], model: ErrorModel, s: ProbeSettings,
+                      say: Callable[[str, float], None]) -> tuple[ProbeResult, list[int], list, dict]:
+    """Face size 0 with the splats' footprints: "model no more than the probe needs", per cube face.
+
+    The probe is rendered at 32^2 and 64^2 (the error model is calibrated on the change, as search_face does);
+    where that does not meet the tolerance, each face gets the size the model predicts it needs (a lamp's face
+    finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), only those faces are rendered again, and the model is
+    re-calibrated on the change they made. ``render_faces({face: size})`` returns {face: (size, size, 4) image};
+    ``filter_cube(cube)`` filters a host cube. Returns (the probe, per-face sizes, trials, the tolerance plan)."""
+    limit = int(s.max_face_size)
+    result, face, trials, est = search_face(probe_at, model, s.tolerance, AUTO_FIRST_FACE,
+                                            min(PER_FACE_BASE, limit), say)
+    sizes = [face] * 6
+    if est > s.tolerance and face < limit:
+        faces = list(probe_at.last_frame().read_cube())  # the base render's faces, still on the GPU
+        irradiance = result.irradiance
+        for _ in range(PER_FACE_ROUNDS):
+            plan, _planned = model.plan_faces(s.tolerance, face, limit)
+            todo = {f: plan[f] for f in range(6) if plan[f] > sizes[f]}
+            if not todo:
+                break
+            names = ", ".join(f"{FACE_NAMES[f]} {n}^2" for f, n in todo.items())
+            say(f"rendering faces {names}", min(0.8, 0.1 + 0.15 * len(trials)))
+            before = list(sizes)
+            for f, image in render_faces(todo).items():
+                faces[f], sizes[f] = image, todo[f]
+            out = min(max(sizes), RADIANCE_OUT_MAX)
+            cube = np.stack([faces_to_size(img[None], out)[0] for img in faces]).astype(np.float32)
+            finer = filter_cube(cube)
+            finer.radiance = cube
+            change = float(np.max(model.change(irradiance, finer.irradiance)))
+            model.calibrate_faces(before, sizes, change)
+            est = model.estimate_faces(sizes, face)
+            trials.append({"face_size": max(sizes), "face_sizes": list(sizes), "change": change, "estimate": est})
+            say(f"faces {'/'.join(map(str, sizes))}: irradiance moved {100 * change:.2f}%; estimated error "
+                f"{100 * est:.2f}% ({model.kind} model, per face)", min(0.8, 0.1 + 0.15 * len(trials)))
+            result, irradiance = finer, finer.irradiance
+            if est <= s.tolerance:
+                break
+    plan = {"model": model.kind, "estimated_error": est, "met": est <= s.tolerance, "face_sizes": list(sizes)}
+    return result, sizes, trials, plan
+
+
 def light_from_radiance(result: ProbeResult, s: ProbeSettings, colour_space: str,
                         hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
                         highlights_done: bool = False) -> bool:
@@ -228,12 +279,37 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                             sh_order=s.sh_order, roughness=None, timings_ms=timings, use_gpu=True, vk_context=r.ctx,
                             splat_count=splat_count, device=r.ctx.device_name, **s.extra)
 
+    def render_faces(todo: dict[int, int]) -> dict[int, np.ndarray]:
+        out = {}
+        for size in sorted(set(todo.values())):  # one render per size: the dilation is set per batch
+            chosen = [f for f in sorted(todo) if todo[f] == size]
+            cube = ViewBatch.cubemap(pos, size)
+            res = r.render(replace(cube, views=tuple(cube.views[f] for f in chosen)), timestamps=True)
+            out.update(zip(chosen, res.images))
+            for k, v in res.timings_ms.items():
+                extra_ms[f"render_{k}"] = extra_ms.get(f"render_{k}", 0.0) + v
+        return out
+
+    def filter_cube(cube: np.ndarray) -> ProbeResult:
+        return filter_probe(cube, irradiance_size=m_search, method=method, sh_order=s.sh_order, roughness=None,
+                            use_gpu=True, vk_context=r.ctx, splat_count=splat_count, device=r.ctx.device_name,
+                            **s.extra)
+
+    probe_at.last_frame = lambda: r.last_frame
+    extra_ms: dict[str, float] = {}  # renders of single faces (per-face sizes), added to the kept probe's
     trials: list[dict] = []
     plan: dict = {}
+    face_sizes = None
     if s.face_size:
         face = int(s.face_size)
         say(f"rendering a {face}x{face} cubemap", 0.2)
         result = probe_at(face)
+    elif lod_k == 0 and prints is not None and prints.face is not None:
+        result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube, ErrorModel(prints),
+                                                             s, say)
+        face = min(max(face_sizes), RADIANCE_OUT_MAX) if result.radiance is not None else max(face_sizes)
+        for k, v in extra_ms.items():
+            result.timings_ms[k] = result.timings_ms.get(k, 0.0) + v
     else:
         result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(prints), s, lod_k, say)
     frame = None
@@ -270,6 +346,8 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     if trials:
         plan.update(face_size=face, irradiance_size=m, method=method, sh_order=s.sh_order,
                     lod="auto" if lod_k > 0 else "off")
+    if face_sizes is not None:
+        result.settings["face_sizes"] = list(face_sizes)  # rendered per face; "face_size" is the cube written
     result.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
                             "irradiance_size": m, "face_size_trials": trials,
                             "converged": (not trials) or bool(plan.get("met")), "tolerance_plan": plan,

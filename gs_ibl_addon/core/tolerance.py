@@ -55,11 +55,23 @@ class Footprints:
     """What the dilation bias of a probe at one position depends on, per splat."""
     weight: np.ndarray  # (N,) share of the probe's light (sums to 1)
     variance: np.ndarray  # (N,) angular footprint variance seen from the probe, rad^2
+    face: np.ndarray | None = None  # (N,) the cube face (cubemap.FACE_NAMES order) each splat's centre lies in
 
     def excess(self, face: int) -> float:
         """S(face): the light-weighted share of each splat's footprint that the dilation adds at this face size."""
         d2 = DILATION_PX2 * (2.0 / float(face)) ** 2
         return float(np.sum(self.weight * d2 / (self.variance + d2)))
+
+    def face_excess(self, sizes) -> np.ndarray:
+        """(6,) S of each cube face's splats with that face rendered at ``sizes[f]``: a probe whose faces differ in
+        size has the error C x sum of these (the biases are of one sign: excess light of small splats)."""
+        d2 = DILATION_PX2 * (2.0 / np.asarray(sizes, np.float64)) ** 2
+        per = self.weight * d2[self.face] / (self.variance + d2[self.face])
+        return np.bincount(self.face, weights=per, minlength=6)
+
+    def face_light(self) -> np.ndarray:
+        """(6,) each cube face's share of the probe's light."""
+        return np.bincount(self.face, weights=self.weight, minlength=6)
 
 
 def footprints(scene: SplatScene, position) -> Footprints | None:
@@ -75,7 +87,8 @@ def footprints(scene: SplatScene, position) -> Footprints | None:
     total = float(w.sum())
     if not np.isfinite(total) or total <= 0:
         return None
-    return Footprints(w / total, ang)
+    from .cubemap import direction_to_face
+    return Footprints(w / total, ang, direction_to_face(p)[0].astype(np.intp))
 
 
 @dataclass
@@ -122,6 +135,45 @@ class ErrorModel:
     def change(self, coarse: np.ndarray, fine: np.ndarray) -> float:
         """The measured change between two sizes' irradiance that calibrate takes."""
         return relative_rms(coarse, fine)
+
+    def estimate_faces(self, sizes, base: int) -> float:
+        """The predicted error of a cube whose faces are rendered at ``sizes`` (6,), the footprint model calibrated
+        on uniform sizes up to ``base``; the Richardson floor falls per face with that face's share of light."""
+        sizes = np.asarray(sizes, np.float64)
+        f0, floor = self.last
+        fall = self.tail_ratio ** np.maximum(np.log2(sizes / f0), 0.0)
+        tail = floor * float(np.sum(self.prints.face_light() * fall))
+        scale = float(np.max(self.scale)) if self.scale is not None else 0.0
+        return float(max(self.safety * scale * float(np.sum(self.prints.face_excess(sizes))), tail))
+
+    def plan_faces(self, tolerance: float, base: int, largest: int) -> tuple[list[int], float]:
+        """Per-face sizes (powers of two from ``base`` up to ``largest``) predicted to meet the tolerance at the
+        least pixel cost: the face whose doubling removes the most predicted error per added pixel is doubled,
+        until the estimate meets it or no face can grow. Returns (sizes, their estimate)."""
+        sizes = [int(base)] * 6
+        est = self.estimate_faces(sizes, base)
+        while est > tolerance:
+            best, gain = None, 0.0
+            for f in range(6):
+                if sizes[f] * 2 > largest:
+                    continue
+                trial = list(sizes)
+                trial[f] *= 2
+                g = (est - self.estimate_faces(trial, base)) / (3.0 * sizes[f] ** 2)
+                if g > gain:
+                    best, gain = f, g
+            if best is None:
+                break
+            sizes[best] *= 2
+            est = self.estimate_faces(sizes, base)
+        return sizes, est
+
+    def calibrate_faces(self, before, after, change: float) -> None:
+        """Take the measured change between a cube at face sizes ``before`` and one at ``after`` (per face): the
+        footprint model's C from the drop it predicts."""
+        drop = float(np.sum(self.prints.face_excess(before) - self.prints.face_excess(after)))
+        if drop > 1e-9 and change > 0:
+            self.scale = float(change) / drop
 
     def next_face(self, tolerance: float, current: int, largest: int) -> int:
         """The smallest power-of-two multiple of ``current`` (up to ``largest``) predicted to meet the tolerance;
@@ -209,7 +261,14 @@ def plan_text(settings: dict) -> str:
     tol = settings.get("tolerance", 0.0)
     est = plan["estimated_error"]
     verdict = "meets" if plan.get("met") else "does NOT meet (largest face reached)"
-    parts = [f"tolerance {100 * tol:g}%: faces {plan['face_size']}^2, estimated error {100 * est:.2f}% "
+    sizes = plan.get("face_sizes")
+    if sizes and len(set(sizes)) > 1:
+        from .cubemap import FACE_NAMES
+        faces = "faces rendered at " + ", ".join(f"{n} {k}^2" for n, k in zip(FACE_NAMES, sizes)) + \
+            f" (written at {plan['face_size']}^2)"
+    else:
+        faces = f"faces {plan['face_size']}^2"
+    parts = [f"tolerance {100 * tol:g}%: {faces}, estimated error {100 * est:.2f}% "
              f"({plan['model']} model), {verdict} it"]
     between = plan.get("irradiance_between_texels")
     if between:

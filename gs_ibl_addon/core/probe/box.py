@@ -17,14 +17,31 @@ from .sampling import check_cube, sample_cube_bilinear
 
 def downsample_cube(cube: np.ndarray) -> np.ndarray:
     """(6, N, N, C) -> (6, N/2, N/2, C): each parent is the solid-angle-weighted mean of its 2x2 children."""
-    a = check_cube(cube)
-    n = a.shape[1]
+    return downsample_faces(check_cube(cube))
+
+
+def downsample_faces(faces: np.ndarray) -> np.ndarray:
+    """downsample_cube for any number of cube faces (K, N, N, C): the texel weights are the same on every face."""
+    a = np.asarray(faces)
+    k, n = a.shape[0], a.shape[1]
     if n % 2:
         raise ValueError(f"cannot halve a cube with odd face size {n}")
     w = cubemap.texel_solid_angles(n)[None, :, :, None]
-    num = (a * w).reshape(6, n // 2, 2, n // 2, 2, a.shape[3]).sum(axis=(2, 4))
+    num = (a * w).reshape(k, n // 2, 2, n // 2, 2, a.shape[3]).sum(axis=(2, 4))
     den = np.broadcast_to(w, (1, n, n, 1)).reshape(1, n // 2, 2, n // 2, 2, 1).sum(axis=(2, 4))
     return num / den
+
+
+def faces_to_size(faces: np.ndarray, target: int) -> np.ndarray:
+    """(K, N, N, C) faces at face size ``target`` (N and target powers of two): halved by downsample_faces (the
+    light of every target texel kept) or doubled by bilinear interpolation (no detail is made up)."""
+    from ..tolerance import upsample2
+    a = np.asarray(faces, np.float64)
+    while a.shape[1] > target:
+        a = downsample_faces(a)
+    while a.shape[1] < target:
+        a = upsample2(a)
+    return a
 
 
 def halving_sizes(size: int, target: int = 1) -> list[int]:
