@@ -129,6 +129,8 @@ class _Parser(argparse.ArgumentParser):
 
 OUTPUT_WRITERS = {".ply": ("ply", "write_ply"), ".spz": ("spz", "write_spz"), ".splat": ("splat", "write_splat"),
                   ".sog": ("sog", "write_sog"), ".glb": ("gltf", "write_glb"), ".ksplat": ("ksplat", "write_ksplat")}
+# The highest SH degree each writer keeps (docs/formats.md): a converted file says when bands are dropped.
+WRITER_SH_DEGREE = {".ply": 3, ".spz": 3, ".splat": 0, ".sog": 0, ".glb": 3, ".ksplat": 2}
 # Upper bound of bytes per splat each writer needs (standard PLY with SH degree 3: 62 floats), for the space check.
 OUTPUT_BYTES_PER_SPLAT = 62 * 4
 
@@ -329,6 +331,12 @@ def cmd_convert(a) -> int:
     with written_atomically(a.output) as tmp:
         writer(tmp, s)
     print(f"wrote {a.output}: {s.count:,} splats")
+    keeps = WRITER_SH_DEGREE[ext]
+    if s.sh_degree > keeps:
+        bands = f"band {keeps + 1}" if s.sh_degree == keeps + 1 else f"bands {keeps + 1}-{s.sh_degree}"
+        better = ", ".join(e for e, d in WRITER_SH_DEGREE.items() if d >= s.sh_degree)
+        print(f"note: {ext} keeps SH degree {keeps}: the input's SH {bands} (view-dependent colour) were dropped; "
+              f"{better} keep them", file=sys.stderr)
     return 0
 
 

@@ -131,6 +131,21 @@ def test_convert_refuses_an_unknown_output_before_reading(tmp_path, capsys):
     assert "cannot write '.obj'" in err and "no such file" not in err
 
 
+@pytest.mark.parametrize("ext,dropped", [(".sog", "bands 1-3"), (".splat", "bands 1-3"), (".ksplat", "band 3"),
+                                         (".spz", None), (".glb", None), (".ply", None)])
+def test_convert_says_which_sh_bands_a_format_drops(tmp_path, capsys, ext, dropped):
+    from gs_ibl_addon.core.synthetic import random_scene
+    src = tmp_path / "in.ply"
+    write_ply(src, random_scene(200, sh_degree=3))
+    capsys.readouterr()
+    assert main(["convert", str(src), str(tmp_path / f"out{ext}")]) == 0
+    err = capsys.readouterr().err
+    if dropped:
+        assert f"SH {dropped} (view-dependent colour) were dropped" in err and ".ply, .spz, .glb keep them" in err
+    else:
+        assert "dropped" not in err
+
+
 def test_core_refuses_bad_sizes():
     from gs_ibl_addon.core.render.views import ViewBatch
     with pytest.raises(ValueError, match="face size 0"):

@@ -305,6 +305,9 @@ def test_a_probe_inside_splats_is_measured_in_sigmas_and_warned(room, tmp_path, 
     rec = near_splats(room.scene, close)
     moved = near_splats(room.scene, (x0 + 0.01 + rec["move"] + 1e-6, 0.3, 1.4))
     assert rec["nearest_sigmas"] < NEAR_SIGMAS <= moved["nearest_sigmas"] + 1e-6
+    # near only splats so small that a few millimetres take it clear: no warning (every capture bake had one)
+    tiny = dict(rec, move=0.004, nearest_sigmas=2.0)
+    assert near_warning(tiny) is None and near_warning(dict(tiny, nearest_sigmas=0.5)) is not None
     path = tmp_path / "room.ply"
     write_ply(str(path), room.scene)
     assert main(["bake", str(path), "--probe", str(x0), "0.3", "1.4", "--face-size", "32",

@@ -18,6 +18,8 @@ import numpy as np
 
 NEAR_SIGMAS = 3.0
 MIN_OPACITY = 0.1
+MIN_MOVE = 0.01  # metres: a probe near only splats so small that under 1 cm takes it clear is not warned about
+# (a capture's millimetre splats put every default probe within 3 sigma of one), unless it is inside one
 _CHUNK = 1 << 20
 
 
@@ -79,8 +81,11 @@ def near_splats(scene, position) -> dict:
 
 
 def near_warning(record: dict | None) -> str | None:
-    """A warning when the probe is within NEAR_SIGMAS of splats; None otherwise."""
+    """A warning when the probe is within NEAR_SIGMAS of splats and must move at least MIN_MOVE to be clear of them
+    (or is inside one, under 1 sigma); None otherwise."""
     if not record or record.get("nearest_sigmas", np.inf) >= NEAR_SIGMAS:
+        return None
+    if record["move"] < MIN_MOVE and record["nearest_sigmas"] >= 1.0:
         return None
     where = ", ".join(f"{v:.2f}" for v in record["nearest"])
     inside = "inside" if record["nearest_sigmas"] < 1.0 else "close to"
