@@ -215,6 +215,28 @@ def test_error_truncated_ascii(tmp_path):
     expect_error(path, "truncated", "get the file again")
 
 
+def test_ascii_blocks_blank_lines_and_a_bad_line(tmp_path, monkeypatch):
+    """The numpy ASCII reader (block by block) gives what plyfile gives: across block ends, with blank lines and
+    no final line end; a bad value is refused naming its line."""
+    from gs_ibl_addon.core.formats import ply
+    path = tmp_path / "a.ply"
+    scene = random_scene(300, seed=4, sh_degree=1)
+    write_ply(path, scene, ascii=True)
+    want = read_ply(path)
+    monkeypatch.setattr(ply, "ASCII_BLOCK", 1000)  # many blocks, each cut at a line end
+    head, body = path.read_bytes().split(b"end_header\n")
+    lines = body.splitlines()
+    odd = tmp_path / "odd.ply"
+    odd.write_bytes(head + b"end_header\n" + b"\n".join(lines[:100]) + b"\n\n  \n" + b"\n".join(lines[100:]))
+    for p in (path, odd):
+        got = read_ply(p)
+        for f in ("positions", "scales", "rotations", "opacities", "sh"):
+            np.testing.assert_array_equal(getattr(got, f), getattr(want, f))
+    lines[150] = lines[150].replace(b" ", b" x ", 1)
+    odd.write_bytes(head + b"end_header\n" + b"\n".join(lines) + b"\n")
+    expect_error(odd, "line 151 after the header", "numbers")
+
+
 def test_error_truncated_header(tmp_path):
     path = tmp_path / "h.ply"
     write_ply(path, random_scene(20, seed=1, sh_degree=0))
