@@ -152,8 +152,9 @@ def filter_gpu_ms(timings: dict[str, float]) -> float:
     return sum(timings.get(k, 0.0) for k in FILTER_STAGES)
 
 
-def summary(result, seconds: float) -> tuple[list[str], str | None]:
-    """(lines saying what the bake did and how long each part took, hole warning or None)."""
+def summary(result, seconds: float, stages: dict[str, float] | None = None) -> tuple[list[str], str | None]:
+    """(lines saying what the bake did and how long each part took, hole warning or None). ``stages``: wall
+    seconds of the bake's parts, in order; with "other" (what they leave of ``seconds``) they add up to it."""
     t = result.timings_ms
     render_ms = t.get("render_total", sum(v for k, v in t.items() if k.startswith("render_")))
     filter_ms = filter_gpu_ms(t)
@@ -167,8 +168,11 @@ def summary(result, seconds: float) -> tuple[list[str], str | None]:
         verdict = "converged" if st.get("converged") else "NOT converged at the size limit"
         how = f"{method}; face size by irradiance change ({steps}) {verdict}"
     face = st.get("face_size", np.asarray(result.radiance).shape[1])
-    lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how,
-             f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"]
+    timing = f"render {render_ms:.0f} ms, filter {filter_ms:.0f} ms, total {seconds:.2f} s ({result.device})"
+    if stages:
+        parts = {**stages, "other": max(seconds - sum(stages.values()), 0.0)}
+        timing += "; the total: " + ", ".join(f"{k} {v:.2f} s" for k, v in parts.items())
+    lines = [f"Baked {result.splat_count:,} splats, {face}x{face} faces", how, timing]
     lines.append(hole_fill_text(result.hole_fill))
     if plan_text(st):  # what the tolerance chose and the estimated error (core/tolerance.py)
         lines.append(plan_text(st))
@@ -197,9 +201,18 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
         raise ValueError(f"{splats.name!r} is not in scene {scene.name!r}: a deleted or unlinked splat object is "
                          "never baked")
     t0 = time.perf_counter()
+    stages: dict[str, float] = {}  # wall seconds of the report's parts (they add up to its total)
+
+    def lap(name: str, since: float) -> float:
+        now = time.perf_counter()
+        stages[name] = stages.get(name, 0.0) + now - since
+        return now
+
     settings = probe_settings(probe.gs_ibl_probe)
     check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
+    t = time.perf_counter()
     cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
+    t = lap("reading and upload", t)
     check_fits_device(settings, cached.renderer.ctx, cached.renderer.scene_count)
     where = np.array(probe.matrix_world.translation, np.float64)
     if settings.highlight_gain != 1:  # the gain goes on the splats (exact), so this bake uploads its own copy
@@ -208,6 +221,7 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     else:
         result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress,
                             estimate_from=cached.host)
+    t = lap("bake", t)  # renders, filters and the host work between them
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]
     # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
@@ -215,10 +229,19 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
     apply_probe_images(scene, probe, radiance, irradiance)
     sync_lights(scene, probe, result.lights, probe.gs_ibl_probe.strength)
+    t = lap("writing", t)
     if probe.gs_ibl_probe.splats is None:
         probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
     _baked[(scene.name, probe.name)] = bake_state(probe, splats)
-    lines, warning = summary(result, time.perf_counter() - t0)
+    auto = None
+    if probe.gs_ibl_probe.lighting == "AUTO":
+        if progress:
+            progress("choosing each mesh's light", 0.95)
+        auto = _relight(scene, probe)
+        t = lap("each mesh's light", t)
+    lines, warning = summary(result, time.perf_counter() - t0, stages)
+    if auto:
+        lines.append(auto)
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([WARNING_PREFIX + warning] if warning else []))
     stamp(probe)
     return result, ", ".join(lines), warning
@@ -227,6 +250,10 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
 # ---------------------------------------------------------------------------------------------- update when moved
 
 _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
+_pending_meshes: dict[tuple[str, str], set[str]] = {}  # (scene, probe) -> lit meshes that moved (Lighting Auto)
+_lit_places: dict[tuple[str, str], dict[str, bytes]] = {}  # (scene, probe) -> {mesh: its matrix when its light
+# was chosen}
+auto_relights = 0  # automatic re-choices of moved meshes' light (tests see how often a move re-lit)
 _baked: dict[tuple[str, str], tuple] = {}  # (scene name, probe name) -> bake_state() of its last bake
 last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
 auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
@@ -260,6 +287,37 @@ def clear_lost_splats(scene: bpy.types.Scene) -> None:
                 obj.gs_ibl_probe.splats = None
 
 
+def _place(obj: bpy.types.Object) -> bytes:
+    return np.array(obj.matrix_world, np.float64).round(9).tobytes()
+
+
+def _relight(scene: bpy.types.Scene, probe: bpy.types.Object, meshes: list | None = None) -> str:
+    """Lighting Auto: choose the light of ``meshes`` (default: every lit mesh) and remember where they were."""
+    from .auto_light import auto_light  # imports object_probes, which imports this module
+    text, choices = auto_light(scene, probe, meshes)
+    places = _lit_places.setdefault((scene.name, probe.name), {})
+    for c in choices:
+        obj = scene.objects.get(c.name)
+        if obj is not None:
+            places[c.name] = _place(obj)
+    return text
+
+
+def _moved_lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, moved: set[str]) -> set[str]:
+    """The meshes among ``moved`` whose light a Lighting Auto probe should choose again."""
+    from .object_probes import is_lit_mesh  # imports this module
+    if probe.gs_ibl_probe.lighting != "AUTO":
+        return set()
+    places = _lit_places.get((scene.name, probe.name), {})
+    out = set()
+    for name in moved:
+        obj = scene.objects.get(name)
+        if obj is None or not is_lit_mesh(obj) or places.get(name) == _place(obj):
+            continue
+        out.add(name)
+    return out
+
+
 def rebaseline_after_undo() -> None:
     """After an undo or redo, which brings back the probe, its World and their report together, nothing has moved
     since their bake: waiting re-bakes are dropped, and the next depsgraph update (when the restored objects'
@@ -272,10 +330,16 @@ def rebaseline_after_undo() -> None:
 
 
 def _rebaseline() -> None:
+    _pending_meshes.clear()
     for scene in bpy.data.scenes:
         for obj in scene.objects:
             if is_probe(obj) and obj.gs_ibl_probe.auto_update:
                 _baked[(scene.name, obj.name)] = bake_state(obj, auto_splats(scene, obj))
+                places = _lit_places.get((scene.name, obj.name), {})
+                for name in places:
+                    mesh = scene.objects.get(name)
+                    if mesh is not None:
+                        places[name] = _place(mesh)
 
 
 def _moved_names(depsgraph) -> set[str]:
@@ -301,13 +365,18 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         if not is_probe(obj) or not obj.gs_ibl_probe.auto_update:
             continue
         splats = auto_splats(scene, obj)
-        # a probe parented to a mesh ("follows" it) is reported moved with it
-        if splats is None or (obj.name not in moved and splats.name not in moved):
+        if splats is None:
             continue
         key = (scene.name, obj.name)
-        if bake_state(obj, splats) == _baked.get(key):
-            continue
-        _pending.add(key)
+        meshes = _moved_lit_meshes(scene, obj, moved)
+        if meshes:
+            _pending_meshes.setdefault(key, set()).update(meshes)
+        # a probe parented to a mesh ("follows" it) is reported moved with it
+        if (obj.name not in moved and splats.name not in moved) or bake_state(obj, splats) == _baked.get(key):
+            if not meshes:
+                continue
+        else:
+            _pending.add(key)
         d = obj.gs_ibl_probe.update_interval
         delay = d if delay is None else min(delay, d)
     if delay is not None:
@@ -319,8 +388,9 @@ def on_depsgraph_update(scene, depsgraph) -> None:
 def run_pending() -> None:
     """Timer: re-bake every probe noted by on_depsgraph_update whose state still differs from its last bake.
     Errors go to the console and the probe's report."""
-    global last_auto_error, auto_bakes
-    jobs = sorted(_pending)
+    global last_auto_error, auto_bakes, auto_relights
+    jobs = sorted(_pending | set(_pending_meshes))
+    relight = {k: _pending_meshes.pop(k) for k in list(_pending_meshes)}
     _pending.clear()
     for scene_name, probe_name in jobs:
         scene = bpy.data.scenes.get(scene_name)
@@ -328,8 +398,20 @@ def run_pending() -> None:
         if probe is None or not is_probe(probe):
             continue
         splats = auto_splats(scene, probe)
-        if splats is None or bake_state(probe, splats) == _baked.get((scene_name, probe_name)):
-            continue  # moved back to where it was baked, or its splats are gone
+        if splats is None:
+            continue
+        if bake_state(probe, splats) == _baked.get((scene_name, probe_name)):
+            meshes = [scene.objects[n] for n in sorted(relight.get((scene_name, probe_name), ()))
+                      if n in scene.objects and probe.gs_ibl_probe.world is not None]
+            if meshes:  # only lit meshes moved: their light is chosen again, the World stays
+                try:
+                    auto_relights += 1
+                    text = _relight(scene, probe, meshes)
+                    print(f"GS-IBL (update when moved): {text}")
+                except (ValueError, RuntimeError, OSError, MemoryError) as e:
+                    last_auto_error = f"{probe_name}: {e}"
+                    print(f"GS-IBL (update when moved): {last_auto_error}")
+            continue  # the probe moved back to where it was baked, or only meshes moved
         try:
             auto_bakes += 1
             _, text, warning = bake_into_world(scene, probe, splats)
@@ -347,6 +429,8 @@ def on_load_pre(*_args) -> None:
     global _rebaseline_next
     _rebaseline_next = False
     _pending.clear()
+    _pending_meshes.clear()
+    _lit_places.clear()
     _baked.clear()  # names of another file's probes
 
 
