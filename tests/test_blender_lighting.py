@@ -229,6 +229,7 @@ def _baked_scene(engine: str, radiance_fn, albedo, res=RES):
         probe.gs_ibl_probe.splats = splats
         probe.gs_ibl_probe.face_size = 32
         probe.gs_ibl_probe.keep_background = False
+        probe.gs_ibl_probe.lighting = "WORLD"  # the World probe's own light is what is checked
         scene.collection.objects.link(probe)
         result, text, warning = bake_into_world(scene, probe)
         print("\n" + text)

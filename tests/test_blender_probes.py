@@ -152,6 +152,7 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     probe = bpy.context.active_object
     s = probe.gs_ibl_probe
     s.splats, s.face_size, s.irradiance_size = room, 32, 8
+    s.lighting = "WORLD"  # the operators are what is tested here (Lighting Auto: test_blender_auto_light.py)
     # local light needs the World it corrects
     with pytest.raises(RuntimeError, match="Bake 'GS-IBL Probe' first"):
         bpy.ops.gs_ibl.object_probes()

@@ -30,11 +30,16 @@ def world_box(obj: bpy.types.Object) -> tuple[np.ndarray, np.ndarray]:
     return corners.min(0), corners.max(0)
 
 
+def is_lit_mesh(o: bpy.types.Object) -> bool:
+    """A rendered mesh that is not splats; shadow catchers and holdouts show no light of their own."""
+    return (o.type == "MESH" and not is_splat_object(o) and not o.hide_render
+            and not getattr(o, "is_shadow_catcher", False) and not getattr(o, "is_holdout", False))
+
+
 def lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, selected=()) -> list[bpy.types.Object]:
-    """The meshes to look at: the selected ones, else every rendered mesh whose bounds centre lies inside the
-    probe's splats' bounds (a mesh in the captured room)."""
-    def mesh(o):
-        return o.type == "MESH" and not is_splat_object(o) and not o.hide_render
+    """The meshes to look at: the selected ones, else every lit mesh (is_lit_mesh) whose bounds centre lies inside
+    the probe's splats' bounds (a mesh in the captured room)."""
+    mesh = is_lit_mesh
     chosen = [o for o in selected if mesh(o)]
     if chosen:
         return chosen

@@ -190,6 +190,7 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if probe.parent is not None:
             col.label(text=f"Follows {probe.parent.name} (its parent)", icon="LINKED")
         col.prop(s, "splats")
+        col.prop(s, "lighting")
         if s.splats is not None and not gb.in_scene(context.scene, s.splats):
             _label_block(col, context, f"{s.splats.name} is not in this scene: pick another", icon="ERROR")
         col.prop(s, "method")

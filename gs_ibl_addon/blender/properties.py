@@ -75,7 +75,14 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     update_interval: FloatProperty(name="Update Delay", default=0.5, min=0.0, soft_max=10.0, unit="TIME_ABSOLUTE",
                                    description="Seconds the probe and its splats must stay still before the "
                                                "automatic re-bake (a drag bakes once, at its end)")
-    # More than one probe (blender/object_probes.py, probe_grid.py)
+    lighting: EnumProperty(
+        name="Lighting", default="AUTO",
+        items=[("AUTO", "Auto", "Each lit mesh (inside the splats' bounds) gets the light it needs, measured at every "
+                "bake and when it moves: this probe's World, a probe of its own, or a grid over it"),
+               ("WORLD", "World Probe", "Every mesh is lit by this probe through the World; per-object probes and "
+                "grids only where asked (More Than One Probe)")],
+        description="How lit meshes get their diffuse light")
+    # More than one probe (blender/object_probes.py, probe_grid.py, auto_light.py)
     variation_tolerance: FloatProperty(name="Variation Tolerance", default=0.05, min=0.005, max=1.0, precision=3,
                                        subtype="FACTOR",
                                        description="Check Light Variation warns about a mesh whose irradiance at "

@@ -150,6 +150,7 @@ def main() -> dict:
             s = probe.gs_ibl_probe
             s.is_probe, s.splats = True, splats
             s.method, s.face_size, s.irradiance_size = "EXACT", ARGS["face_size"], 16
+            s.lighting = "WORLD"  # the World probe against Cycles (Lighting Auto adds local light)
             t0 = time.perf_counter()
             result, rec["report"], rec["warning"] = gb.bake_into_world(bpy.context.scene, probe)
             rec["bake_s"] = time.perf_counter() - t0

@@ -158,6 +158,7 @@ def main() -> dict:
         s = probe.gs_ibl_probe
         s.is_probe, s.splats = True, splats
         s.method, s.face_size, s.irradiance_size, s.keep_background = "EXACT", ARGS["face_size"], 16, False
+        s.lighting = "WORLD"  # "one" is the World probe alone; local light is added below, by the operators
         t0 = time.perf_counter()
         _, rec["report"], rec["warning"] = gb.bake_into_world(bpy.context.scene, probe)
         rec["bake_s"] = time.perf_counter() - t0

@@ -49,6 +49,7 @@ def main() -> dict:
             s = probe.gs_ibl_probe
             s.is_probe, s.splats = True, obj
             s.method, s.face_size, s.irradiance_size = "EXACT", 64, 16
+            s.lighting = "WORLD"
             t0 = time.perf_counter()
             result, text, warning = gb.bake_into_world(bpy.context.scene, probe)
             rec["bake_s"] = time.perf_counter() - t0

@@ -1,0 +1,74 @@
+"""The light each mesh needs, chosen from probes around it: the World probe, a probe of its own, or a grid.
+
+One probe lights every mesh as if it stood at the probe. Whether that is enough for a mesh is measured, not asked:
+order-2 SH probes on a 3 x 3 x 3 grid over the mesh's box (shrunk towards its centre, so the nodes of a mesh resting
+on a floor or table stay off those splats), baked in the same batch as a probe at the World probe's place, give
+
+    offset    = max_n |E_centre(n) - E_world(n)| / mean_n E_centre(n)   (the mesh stands elsewhere in the light)
+    variation = max_node max_n |E_node(n) - E_centre(n)| / mean_n E_centre(n)   (the light changes across it)
+
+(luminance, over 64 normals: the light a diffuse surface sees). Within the tolerance on both the World is enough;
+else with a uniform light over the mesh its own probe at its centre; else the grid itself. "Model no more than a
+scene needs": a mesh by the probe costs nothing more, a mesh by the window gets eight more numbers than a probe.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .grid import GridSpec, eval_irradiance
+from .variation import LUMINANCE, NORMALS
+
+GRID_SHAPE = (3, 3, 3)
+SHRINK = 0.7  # the grid spans this fraction of the mesh's box about its centre
+MIN_SPAN = 0.05  # metres: a box thinner than this along an axis gets one node on it
+KINDS = ("world", "probe", "grid")
+
+
+def mesh_grid(lo, hi) -> GridSpec:
+    """The grid of probes that measures (and, if chosen, lights) a mesh with box lo..hi."""
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2 * SHRINK
+    shape = tuple(n if 2 * h >= MIN_SPAN else 1 for n, h in zip(GRID_SHAPE, half))
+    return GridSpec(tuple(map(float, centre - half)), tuple(map(float, centre + half)), shape)
+
+
+def centre_index(spec: GridSpec) -> tuple[int, int, int]:
+    return tuple(n // 2 for n in spec.shape)
+
+
+@dataclass(frozen=True)
+class LightChoice:
+    name: str
+    kind: str  # one of KINDS
+    offset: float  # relative difference of the mesh centre's light from the World probe's
+    variation: float  # relative change of the light across the mesh
+
+    def message(self) -> str:
+        o, v = 100 * self.offset, 100 * self.variation
+        if self.kind == "world":
+            return f"{self.name}: the World probe ({o:.0f}% off, {v:.0f}% across it)"
+        if self.kind == "probe":
+            return f"{self.name}: its own probe (the World's light is {o:.0f}% off; {v:.0f}% across it)"
+        return f"{self.name}: a grid over it (light varies {v:.0f}% across it)"
+
+
+def _luminance(d: np.ndarray) -> np.ndarray:
+    """Monomial coefficients (..., 9, 3) -> irradiance luminance over NORMALS (..., 64)."""
+    d = np.asarray(d, np.float64)
+    return eval_irradiance(d[..., None, :, :], NORMALS) @ LUMINANCE
+
+
+def choose_light(name: str, spec: GridSpec, d_world: np.ndarray, d_grid: np.ndarray,
+                 tolerance: float) -> LightChoice:
+    """The light ``name`` needs: ``d_world`` (9, 3) the World probe's monomial coefficients, ``d_grid``
+    (nx, ny, nz, 9, 3) those of ``spec``'s nodes."""
+    e_nodes = _luminance(np.asarray(d_grid).reshape(-1, *np.shape(d_world)))
+    e_centre = _luminance(np.asarray(d_grid)[centre_index(spec)])
+    e_world = _luminance(d_world)
+    scale = max(float(np.mean(np.maximum(e_centre, 0.0))), 1e-9)
+    offset = float(np.max(np.abs(e_centre - e_world)) / scale)
+    variation = float(np.max(np.abs(e_nodes - e_centre[None])) / scale)
+    kind = "grid" if variation > tolerance else "probe" if offset > tolerance else "world"
+    return LightChoice(name, kind, offset, variation)
