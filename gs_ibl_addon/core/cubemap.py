@@ -10,6 +10,8 @@ looks along +X, u = 0.25 along +Y, the top row is +Z:  u = 0.5 - atan2(y, x) / (
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 FACE_NAMES = ("+X", "-X", "+Y", "-Y", "+Z", "-Z")
@@ -45,12 +47,20 @@ def _corner_area(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.arctan2(x * y, np.sqrt(x * x + y * y + 1.0))
 
 
-def texel_solid_angles(size: int) -> np.ndarray:
-    """(size, size) exact solid angle of each texel (the same for every face; the six faces sum to 4 pi)."""
+@functools.lru_cache(maxsize=16)
+def _texel_solid_angles(size: int) -> np.ndarray:
     e = np.linspace(-1.0, 1.0, size + 1)
     x0, x1 = e[:-1][None, :], e[1:][None, :]
     y0, y1 = e[:-1][:, None], e[1:][:, None]
-    return _corner_area(x0, y0) - _corner_area(x0, y1) - _corner_area(x1, y0) + _corner_area(x1, y1)
+    w = _corner_area(x0, y0) - _corner_area(x0, y1) - _corner_area(x1, y0) + _corner_area(x1, y1)
+    w.flags.writeable = False  # shared by every caller
+    return w
+
+
+def texel_solid_angles(size: int) -> np.ndarray:
+    """(size, size) exact solid angle of each texel (the same for every face; the six faces sum to 4 pi). Cached
+    (read-only): filters and face resizes ask for the same few sizes on every bake."""
+    return _texel_solid_angles(int(size))
 
 
 def direction_to_face(dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -56,6 +56,7 @@ class Footprints:
     weight: np.ndarray  # (N,) share of the probe's light (sums to 1)
     variance: np.ndarray  # (N,) angular footprint variance seen from the probe, rad^2
     face: np.ndarray | None = None  # (N,) the cube face (cubemap.FACE_NAMES order) each splat's centre lies in
+    _per_face: dict = field(default_factory=dict, compare=False, repr=False)  # size -> (6,) S of each face there
 
     def excess(self, face: int) -> float:
         """S(face): the light-weighted share of each splat's footprint that the dilation adds at this face size."""
@@ -65,13 +66,21 @@ class Footprints:
     def face_excess(self, sizes) -> np.ndarray:
         """(6,) S of each cube face's splats with that face rendered at ``sizes[f]``: a probe whose faces differ in
         size has the error C x sum of these (the biases are of one sign: excess light of small splats)."""
-        d2 = DILATION_PX2 * (2.0 / np.asarray(sizes, np.float64)) ** 2
-        per = self.weight * d2[self.face] / (self.variance + d2[self.face])
-        return np.bincount(self.face, weights=per, minlength=6)
+        out = np.empty(6)
+        for f, n in enumerate(sizes):
+            n = int(n)
+            if n not in self._per_face:  # one pass over the splats per size, however many plans ask
+                d2 = DILATION_PX2 * (2.0 / n) ** 2
+                self._per_face[n] = np.bincount(self.face, weights=self.weight * d2 / (self.variance + d2),
+                                                minlength=6)
+            out[f] = self._per_face[n][f]
+        return out
 
     def face_light(self) -> np.ndarray:
         """(6,) each cube face's share of the probe's light."""
-        return np.bincount(self.face, weights=self.weight, minlength=6)
+        if "light" not in self._per_face:
+            self._per_face["light"] = np.bincount(self.face, weights=self.weight, minlength=6)
+        return self._per_face["light"]
 
 
 def footprints(scene: SplatScene, position) -> Footprints | None:

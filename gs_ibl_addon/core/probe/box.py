@@ -33,12 +33,19 @@ def downsample_faces(faces: np.ndarray) -> np.ndarray:
 
 
 def faces_to_size(faces: np.ndarray, target: int) -> np.ndarray:
-    """(K, N, N, C) faces at face size ``target`` (N and target powers of two): halved by downsample_faces (the
-    light of every target texel kept) or doubled by bilinear interpolation (no detail is made up)."""
+    """(K, N, N, C) faces at face size ``target`` (N and target powers of two): each target texel the
+    solid-angle-weighted mean of the texels it covers, in one step (what halving repeatedly gives: the parents'
+    weights are their children's sums), or doubled by bilinear interpolation (no detail is made up)."""
     from ..tolerance import upsample2
-    a = np.asarray(faces, np.float64)
-    while a.shape[1] > target:
-        a = downsample_faces(a)
+    a = np.asarray(faces)
+    k, n, c = a.shape[0], a.shape[1], a.shape[3]
+    if n > target:
+        f = n // target
+        w = cubemap.texel_solid_angles(n)
+        num = np.einsum("kiajbc,iajb->kijc", a.reshape(k, target, f, target, f, c),
+                        w.reshape(target, f, target, f), dtype=np.float64)
+        return num / w.reshape(target, f, target, f).sum(axis=(1, 3))[None, :, :, None]
+    a = np.asarray(a, np.float64)
     while a.shape[1] < target:
         a = upsample2(a)
     return a
