@@ -7,6 +7,7 @@ texture: the matrix conversion (against ViewBatch.pinhole and against Blender's 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -295,3 +296,186 @@ def test_panel_wraps_long_lines(blender):
     lines = wrapped_lines(report, 30)
     assert all(len(x) <= 30 for x in lines) and len(lines) >= 4
     assert " ".join(lines).split() == report.split()  # nothing lost, words kept whole
+
+
+# ------------------------------------------------------------------------- the composite and what the mouse hits
+
+from gs_ibl_addon.blender import overlay_math as om  # noqa: E402
+
+
+def _bytes(rgb_lin, alpha) -> np.ndarray:
+    """Overlay-layer pixels as Blender stores them: sRGB-encoded premultiplied colour, linear alpha, 8 bits."""
+    out = np.empty(np.shape(alpha) + (4,), np.uint8)
+    out[..., :3] = np.round(linear_to_srgb(np.asarray(rgb_lin, np.float64)) * 255)
+    out[..., 3] = np.round(np.asarray(alpha, np.float64) * 255)
+    return out
+
+
+def test_composite_keeps_mesh_edges_and_lines():
+    """overlay_math.composite, pixel by pixel on a 1 x 9 strip, against the compositing written out by hand: the
+    splats over the background; behind a mesh (kept); the part of a mesh edge pixel the mesh does not cover, with
+    and without its own depth (the nearest neighbour's then); a mesh edge behind the splats; a line without depth
+    (covered), one in the cursor disc (on top), one that writes depth in front of the splats (kept)."""
+    bg = np.array([0.05, 0.05, 0.05])
+    s_col, s_a, s_d = np.array([0.3, 0.2, 0.1]), 0.8, 0.9  # the splat layer: premultiplied colour, coverage, depth
+    cov = np.array([0.0, 1.0, 0.4, 0.4, 0.4, 0.0, 0.0, 0.0, 0.0])
+    depth = np.array([1.0, 0.5, 0.5, 1.0, 0.95, 1.0, 1.0, 1.0, 0.5])
+    line_a = np.array([0, 0, 0, 0, 0, 0.6, 0.6, 0, 0.6])
+    line_c = np.array([0.0, 0.0, 0.8])  # premultiplied blue
+    o_rgb = (1 - cov)[:, None] * bg
+    o_rgb = np.where(line_a[:, None] > 0, line_c * line_a[:, None] + (1 - line_a[:, None]) * o_rgb, o_rgb)
+    o8 = _bytes(o_rgb[None], line_a[None])
+    o_lin, o_alpha = om.decode_overlay(o8)
+    n = len(cov)
+    layer = (np.tile(s_col, (1, n, 1)), np.full((1, n), s_a), np.full((1, n), s_d))
+    out, written = om.composite(o8, depth[None], [layer], bg, discs=[(6.5, 0.5, 0.6)])
+    assert written.all()
+    over = s_col + (1 - s_a) * bg  # the splats over the background
+    c = 1 - o_lin[0, :, 2] / bg[2]  # the coverage as the layer's bytes tell it
+    want = [
+        (over, s_a),  # background
+        (np.zeros(3), 0.0),  # mesh in front, fully covering: nothing over the render
+        ((1 - c[2]) * over, 0.0),  # edge in front, own depth: the splats replace the part it does not cover
+        ((1 - c[3]) * over, 0.0),  # edge without own depth: its neighbour's (pixel 2, 0.5) says in front
+        (s_col + (1 - s_a) * (1 - c[4]) * bg, s_a),  # edge behind the splats: they cover it
+        (s_col + (1 - s_a) * o_lin[0, 5], s_a + (1 - s_a) * o_alpha[0, 5]),  # a line without depth: covered
+        (o_lin[0, 6] + (1 - o_alpha[0, 6]) * (s_col - s_a * bg), o_alpha[0, 6] + (1 - o_alpha[0, 6]) * s_a),  # disc
+        (over, s_a),  # background
+        (o_lin[0, 8], o_alpha[0, 8]),  # a line writing depth in front of the splats: kept
+    ]
+    for i, (rgb, a) in enumerate(want):
+        np.testing.assert_allclose(out[0, i, :3], rgb, atol=1e-9, err_msg=f"pixel {i}")
+        assert out[0, i, 3] == pytest.approx(a, abs=1e-9), f"pixel {i}"
+    assert 0.35 < c[2] < 0.45  # the edge's coverage comes back from the background bytes within an 8-bit step
+
+
+def test_composite_orders_layers_per_pixel_and_ignores_the_grid():
+    """Two splat layers composite nearest first whatever their order; a line pixel whose depth is a point of the
+    floor plane (the grid, which writes its depth) hides no splats, a line off the plane does."""
+    w, h = 6, 4
+    view = look_at_view_matrix((0.0, -4.0, 3.0), (0.0, 0.0, 0.0))
+    win = perspective_matrix(60.0, w, h, 0.1, 50.0)
+    # window depth of the floor (z = 0) at every pixel centre, and of a point 0.5 above it
+    inv = np.linalg.inv(win @ view)
+    eye = np.linalg.inv(view)[:3, 3]
+    floor, above = np.ones((h, w)), np.ones((h, w))
+    for r in range(h):
+        for cc in range(w):
+            far = inv @ np.array([(cc + 0.5) / w * 2 - 1, 1 - (r + 0.5) / h * 2, 1.0, 1.0])
+            ray = far[:3] / far[3] - eye
+            for target, z in ((floor, 0.0), (above, 0.5)):
+                p = eye + ray * ((z - eye[2]) / ray[2])
+                clip = win @ view @ np.array([*p, 1.0])
+                target[r, cc] = 0.5 * clip[2] / clip[3] + 0.5
+    line = np.full((h, w), 0.7)
+    o8 = _bytes(np.full((h, w, 3), 0.2), line)
+    mid = 0.5 * (floor + above)  # both layers between the two planes (z = 0.5 is the nearer)
+    near = (np.full((h, w, 3), [0.5, 0.0, 0.0]), np.full((h, w), 0.5), mid - 0.1 * (floor - above))
+    far_ = (np.full((h, w, 3), [0.0, 0.0, 0.4]), np.full((h, w), 0.5), mid + 0.1 * (floor - above))
+    for grid_depth, hidden in ((floor, False), (above, True)):
+        for layers in ([near, far_], [far_, near]):
+            out, _ = om.composite(o8, grid_depth, layers, np.zeros(3), grid=(view, win, (0, 0, 1)))
+            if hidden:  # a line at z = 0.5, nearer than both layers: drawn as is
+                np.testing.assert_allclose(out[..., :3], om.decode_overlay(o8)[0], atol=1e-9)
+            else:  # the grid: both layers over it, the nearer (red) first
+                np.testing.assert_allclose(out[0, 0, :3], [0.5, 0, 0] + 0.5 * np.array([0, 0, 0.4]) +
+                                           0.25 * om.decode_overlay(o8)[0][0, 0], atol=1e-9)
+    assert om.grid_pixels(floor, np.ones((h, w), bool), view, win, (0, 0, 1)).all()
+    assert not om.grid_pixels(above, np.ones((h, w), bool), view, win, (0, 0, 1)).any()
+
+
+def test_viewport_background_matches_blender_gradients():
+    hi, lo = np.array([0.2, 0.3, 0.4]), np.array([0.01, 0.02, 0.03])
+    np.testing.assert_allclose(om.viewport_background("SINGLE_COLOR", hi, lo, 3, 2), np.broadcast_to(hi, (2, 3, 3)))
+    lin = om.viewport_background("LINEAR", hi, lo, 1, 1000)
+    np.testing.assert_allclose(lin[0, 0], hi, rtol=0.01)  # top row: high
+    np.testing.assert_allclose(lin[-1, 0], lo, rtol=0.05)  # bottom row: low
+    mid = np.power(0.5 * (hi ** (1 / 2.2) + lo ** (1 / 2.2)), 2.2)
+    np.testing.assert_allclose(lin[500, 0], mid, rtol=0.01)  # interpolated in a 1/2.2 power space
+    rad = om.viewport_background("RADIAL", hi, lo, 101, 101)
+    np.testing.assert_allclose(rad[50, 50], hi, rtol=1e-3)  # centre high, corners low
+    np.testing.assert_allclose(rad[0, 0], lo, rtol=0.1)
+
+
+@pytest.mark.parametrize("projection", ["perspective", "shifted", "orthographic"])
+def test_mouse_ray_is_the_pixel_ray_of_the_viewport_matrices(projection):
+    """mouse_ray(x, y) goes through the NDC point (2x/w - 1, 2y/h - 1) at every depth, as Blender's operators
+    take event.mval (no half-pixel offset)."""
+    w, h = 64, 40
+    v = look_at_view_matrix(POS, TARGET)
+    p = {"perspective": perspective_matrix(50.0, w, h, near=0.1, far=40.0),
+         "shifted": perspective_matrix(50.0, w, h, near=0.1, far=40.0, shift_x=0.1, shift_y=-0.05),
+         "orthographic": _ortho()}[projection]
+    for x, y in ((0, 0), (17, 33), (63, 5)):
+        o, d = om.mouse_ray(v, p, w, h, x, y)
+        assert np.linalg.norm(d) == pytest.approx(1.0)
+        for t in (0.5, 2.0, 7.0):
+            clip = p @ v @ np.array([*(o + t * d), 1.0])
+            np.testing.assert_allclose(clip[:2] / clip[3], [2 * x / w - 1, 2 * y / h - 1], atol=1e-9)
+
+
+def test_splat_hit_lands_on_the_sample_floor():
+    """The splats under a pixel of the overlay's image (its depth, bilinear between the pixels with splats) land on
+    the sample room's floor (z = 0, thin splats) within 2 cm, the tolerance of the GUI check's Shift+right-click,
+    at full and at half resolution; an uncovered pixel hits nothing."""
+    from gs_ibl_addon.core.formats import read_scene
+    scene = read_scene(str(Path(__file__).resolve().parents[1] / "samples" / "room.ply"))
+    w, h = 400, 250
+    v = look_at_view_matrix((0.6, -0.6, 1.7), (-0.8, 1.2, 0.0))
+    p = perspective_matrix(70.0, w, h, 0.05, 100.0)
+    ovl = SplatOverlay(scene)
+    try:
+        for scale in (1.0, 0.5):
+            img = ovl.image(v, p, w, h, scale)
+            errors = []
+            for x, y in ((200, 125), (175, 112), (237, 100), (150, 75), (250, 50)):
+                hit = om.splat_hit(img, v, p, w, h, x, y)
+                assert hit is not None
+                o, d = om.mouse_ray(v, p, w, h, x, y)
+                np.testing.assert_allclose(hit.point, o + hit.distance * d, atol=1e-9)  # on the mouse ray
+                errors.append(hit.point[2] / -d[2])  # along the ray from the floor (> 0: beyond it)
+            print(f"scale {scale}: floor hits along the ray from z = 0 (m): {np.round(errors, 4)}")
+            assert max(map(abs, errors)) < 0.02, (scale, errors)
+        sky_view = look_at_view_matrix((0, 0, 60.0), (1.0, 0, 100.0))  # above the room, looking up: nothing
+        assert om.splat_hit(ovl.image(sky_view, p, 32, 20, slot="sky"), sky_view, p, 32, 20, 16, 10) is None
+    finally:
+        ovl.close()
+
+
+def test_splats_win_uses_the_draw_rule():
+    assert om.splats_win(3.0, None)
+    assert om.splats_win(3.0, 3.5)  # the mesh is behind
+    assert om.splats_win(3.0, 3.0 * (1 - om.DEPTH_PULL))  # within DEPTH_PULL: the splats are drawn over it
+    assert not om.splats_win(3.0, 2.5)
+
+
+@bpy_only
+def test_click_selection_rules(blender):
+    """picking.select_object selects as view3d.select does (click, Shift toggles, extend, deselect), and
+    _picked tells which object view3d.select acted on from the selection before and after it."""
+    bpy = blender
+    from gs_ibl_addon.blender import picking
+    objs = []
+    for name in ("A", "B", "C"):
+        o = bpy.data.objects.new(name, None)
+        bpy.context.scene.collection.objects.link(o)
+        objs.append(o)
+    a, b, c = objs
+    layer = bpy.context.view_layer
+    a.select_set(True)
+    layer.objects.active = a
+    picking.select_object(bpy.context, b)  # a click: b only
+    assert [o.name for o in bpy.context.selected_objects] == ["B"] and layer.objects.active == b
+    picking.select_object(bpy.context, c, toggle=True)  # Shift+click adds and makes active
+    assert {o.name for o in bpy.context.selected_objects} == {"B", "C"} and layer.objects.active == c
+    picking.select_object(bpy.context, c, toggle=True)  # Shift+click on the active one deselects it
+    assert [o.name for o in bpy.context.selected_objects] == ["B"]
+    picking.select_object(bpy.context, a, extend=True)
+    picking.select_object(bpy.context, b, deselect=True)
+    assert [o.name for o in bpy.context.selected_objects] == ["A"]
+    before = ({a: True, b: False, c: False}, a)
+    assert picking._picked(before, ({a: False, b: True, c: False}, b)) == b
+    assert picking._picked(before, ({a: False, b: False, c: False}, a)) is None  # clicked nothing: deselected all
+    assert picking._picked(({a: True, b: True, c: False}, a), ({a: True, b: False, c: False}, a)) == b  # toggle off
+    # the operators are registered with the extension; keymap items only where a window manager has keyconfigs
+    assert bpy.ops.gs_ibl.cursor3d.poll() is False and bpy.ops.gs_ibl.select.poll() is False  # no 3D View here

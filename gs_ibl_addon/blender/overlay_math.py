@@ -10,6 +10,12 @@ The renderer's depth image (distance along the view axis) becomes the window dep
 (window_depth), so the draw handler can write it as fragment depth and meshes and splats occlude each other.
 While a view keeps changing it is rendered at a lower resolution and refined once it has been still a moment
 (ViewMotion). Everything here takes plain 4x4 numpy matrices, so it is tested without a window.
+
+The draw handler composites the splats into Blender's overlay layer in one pass of its own shader (composite is
+that shader's numpy reference, see its docstring): it reads what Blender drew there and the scene depth, so mesh
+silhouettes keep their anti-aliasing against the splats, the floor grid never shows through them, and the 3D cursor
+and object origins stay on top. The viewport operators that put the 3D cursor on the splats and select splat
+objects by clicking them find the splats under the mouse in the last image drawn (mouse_ray, splat_hit).
 """
 from __future__ import annotations
 
@@ -18,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.colour import linear_to_srgb
+from ..core.colour import linear_to_srgb, srgb_to_linear
 from ..core.render.views import View, ViewBatch
 from ..core.scene import SplatScene
 
@@ -245,3 +251,266 @@ def look_at_view_matrix(position, look_at, up=(0.0, 0.0, 1.0)) -> np.ndarray:
     c = np.identity(4)
     c[:3, 0], c[:3, 1], c[:3, 2], c[:3, 3] = r, u, -f, o
     return np.linalg.inv(c)
+
+
+# ---------------------------------------------------------------------------------- compositing into the overlay layer
+# Blender draws a 3D View into two layers: the render (the engine's meshes, premultiplied, alpha = coverage, no
+# background) and the overlay layer (background, grid, wires, outlines, origins, the 3D cursor: sRGB-encoded 8-bit,
+# premultiplied), then shows overlay + (1 - overlay alpha) * render. A POST_VIEW handler draws into the overlay
+# layer, with the scene depth bound, after all of Blender's overlays. There the background is stored as
+# background * (1 - render coverage) with alpha 0 (Blender's "alpha under" background pass), so a mesh edge pixel
+# tells its coverage; lines and dots have alpha > 0 and write depth (wires, the grid at its plane) or not (the
+# cursor, origins, outlines).
+
+LINE_CUT = 1.5 / 255.0  # overlay alpha above this: Blender drew lines, dots or text at the pixel
+COVERAGE_EPS = 1.0 / 64.0  # a render coverage this close to 0 or 1 counts as none or full
+MAX_LAYERS = 4  # splat objects composited per pixel in one pass (more: the plain depth-tested quads)
+GRID_TOLERANCE = 1e-2  # a line pixel whose depth is a point of the grid plane within this fraction of its distance
+# (Blender writes the grid's depth slightly behind its plane: 1.5-2 cm at 4-7 m, 0.4% of the distance)
+EDGE_REACH = 1  # a partly covered pixel without depth takes the nearest depth this many pixels around
+LINE_REACH = 2  # a line pixel without depth (an outline) likewise: outlines lie up to two pixels off the mesh
+
+
+def decode_overlay(overlay8: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """8-bit overlay-layer pixels (sRGB-encoded premultiplied colour, linear alpha) -> (linear rgb, alpha)."""
+    o = np.asarray(overlay8, np.float64) / 255.0
+    return srgb_to_linear(o[..., :3]), o[..., 3]
+
+
+def layer_colour(rgba: np.ndarray, exposure: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The renderer's premultiplied linear RGBA -> (premultiplied linear colour with exposure, clipped at the
+    coverage, i.e. colour <= 1 before premultiplying; coverage clipped to [0, 1]). What the shader composites: the
+    overlay layer is sRGB, the GPU encodes on write."""
+    img = np.asarray(rgba, np.float64)
+    a = np.clip(img[..., 3], 0.0, 1.0)
+    rgb = np.clip(img[..., :3] * 2.0 ** exposure, 0.0, np.maximum(img[..., 3:4], 0.0))
+    return rgb, a
+
+
+def background_coverage(o_rgb: np.ndarray, background) -> np.ndarray:
+    """The render's coverage at pixels where the overlay layer holds only the background, o = bg (1 - c), from the
+    blue channel (what the draw handler reads back besides alpha; viewport_background says when blue is too dark)."""
+    bg = np.broadcast_to(np.asarray(background, np.float64), o_rgb.shape)
+    c = np.clip(1.0 - o_rgb[..., 2] / np.maximum(bg[..., 2], 1e-6), 0.0, 1.0)
+    c = np.where(c < COVERAGE_EPS, 0.0, np.where(c > 1.0 - COVERAGE_EPS, 1.0, c))
+    if np.ptp(bg[..., 2]) == 0.0:  # one colour: its own stored byte is no coverage, however it rounded
+        stored = np.round(linear_to_srgb(bg[..., 2]) * 255.0)
+        c = np.where(np.round(linear_to_srgb(o_rgb[..., 2]) * 255.0) == stored, 0.0, c)
+    return c
+
+
+def depth_to_world(depth: np.ndarray, view_matrix, window_matrix) -> np.ndarray:
+    """Window depths of a region's pixels (rows top first, pixel centres) -> world points: view-space z from the
+    projection's depth row (ndc_z = (P22 z + P23) / (P32 z + P33)), x and y from its first two rows, then through the
+    inverse view matrix (a rigid transform: no loss of precision near the far plane)."""
+    d = np.asarray(depth, np.float64)
+    h, w = d.shape
+    p = np.asarray(window_matrix, np.float64)
+    nx = ((np.arange(w) + 0.5) / w * 2.0 - 1.0)[None, :]
+    ny = (1.0 - (np.arange(h) + 0.5) / h * 2.0)[:, None]
+    nz = 2.0 * d - 1.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (p[2, 3] - nz * p[3, 3]) / (nz * p[3, 2] - p[2, 2])
+        wc = p[3, 2] * z + p[3, 3]
+        x = (nx * wc - p[0, 2] * z - p[0, 3]) / p[0, 0]
+        y = (ny * wc - p[1, 2] * z - p[1, 3]) / p[1, 1]
+    inv = np.linalg.inv(np.asarray(view_matrix, np.float64))
+    pts = np.stack([x, y, z], -1)
+    return pts @ inv[:3, :3].T + inv[:3, 3]
+
+
+def grid_pixels(depth: np.ndarray, line: np.ndarray, view_matrix, window_matrix, normal) -> np.ndarray:
+    """Line pixels whose depth is a point of the grid plane (through the origin, ``normal``): the floor grid, which
+    writes its depth (rows top first)."""
+    pts = depth_to_world(depth, view_matrix, window_matrix)
+    eye = np.linalg.inv(np.asarray(view_matrix, np.float64))[:3, 3]
+    dist = np.linalg.norm(pts - eye, axis=-1)
+    off = np.abs(pts @ np.asarray(normal, np.float64))
+    with np.errstate(invalid="ignore"):
+        return line & (np.asarray(depth) < 1.0) & (off <= GRID_TOLERANCE * dist + 1e-5)
+
+
+def disc_mask(width: int, height: int, discs) -> np.ndarray:
+    """Pixels (rows top first) whose centre lies within any disc (x, y, r) of region pixel coordinates (x right,
+    y up from the bottom edge): where the 3D cursor and object origins are drawn."""
+    m = np.zeros((height, width), bool)
+    xs = np.arange(width) + 0.5
+    ys = height - (np.arange(height) + 0.5)
+    for cx, cy, r in discs:
+        m |= (xs[None, :] - cx) ** 2 + (ys[:, None] - cy) ** 2 <= r * r
+    return m
+
+
+BACKGROUND_KINDS = {"SINGLE_COLOR": 0, "LINEAR": 1, "RADIAL": 2}
+
+
+def viewport_background(kind: str, high, low, width: int, height: int) -> np.ndarray:
+    """The background Blender's overlay draws in a 3D View region (rows top first, linear): one colour, or its
+    theme gradient interpolated in a 1/2.2 power space, bottom (low) to top (high) or centre (high) to corner (low).
+    Blender adds a dither of under half an 8-bit step, which is left out."""
+    hi, lo = np.asarray(high, np.float64), np.asarray(low, np.float64)
+    if kind == "SINGLE_COLOR":
+        return np.broadcast_to(hi, (height, width, 3)).copy()
+    v = 1.0 - (np.arange(height) + 0.5) / height  # uv.y, 0 at the bottom
+    u = (np.arange(width) + 0.5) / width
+    ph, pl = np.power(hi, 1 / 2.2), np.power(lo, 1 / 2.2)
+    if kind == "LINEAR":
+        t = np.broadcast_to(v[:, None], (height, width))[..., None]
+        return np.power(pl + (ph - pl) * t, 2.2)
+    r = np.hypot(u[None, :] - 0.5, v[:, None] - 0.5)[..., None] * math.sqrt(2.0)
+    return np.power(ph + (pl - ph) * r, 2.2)
+
+
+def _over(layers, order, select):
+    """Front-to-back "over" of the selected layers, nearest first: (premultiplied colour, alpha)."""
+    h, w = order.shape[1:]
+    p = np.zeros((h, w, 3))
+    t = np.ones((h, w))
+    for i in range(order.shape[0]):
+        k = order[i]
+        c = np.take_along_axis(layers[0], k[None, ..., None], 0)[0]
+        a = np.take_along_axis(layers[1], k[None], 0)[0]
+        s = np.take_along_axis(select, k[None], 0)[0]
+        p += np.where(s[..., None], t[..., None] * c, 0.0)
+        t *= np.where(s, 1.0 - a, 1.0)
+    return p, 1.0 - t
+
+
+def composite(overlay8: np.ndarray, scene_depth: np.ndarray, layers, background, *, use_coverage: bool = True,
+              grid=None, discs=(), alpha_cut: float = 1.0 / 255.0) -> tuple[np.ndarray, np.ndarray]:
+    """What the overlay layer holds after the splats are drawn into it: numpy reference of the draw shader.
+
+    ``overlay8``: the layer as Blender left it (H, W, 4 uint8, rows top first); ``scene_depth``: the window depth
+    there (1: nothing); ``layers``: per splat object (premultiplied linear colour (H, W, 3), coverage (H, W),
+    window depth (H, W), 1 where it has none), from layer_colour and window_depth; ``background``: the viewport's
+    linear background colour ((3,) or (H, W, 3)), with ``use_coverage`` (Solid and Wireframe shading: the
+    background is in the overlay layer, so a pixel's render coverage is known); ``grid``: (view matrix, window
+    matrix, plane normal) when the floor grid shows; ``discs``: (x, y, r) where the 3D cursor and origins are drawn.
+    Returns (linear premultiplied RGBA to write, written mask: pixels some splats cover at ``alpha_cut``; the others
+    keep the layer's bytes).
+
+    Per pixel: the grid's depth does not hide splats (the grid stays under them): Blender writes its plane's depth
+    at its lines and where they fade out, so a pixel whose depth is on that plane counts as grid if it has lines or
+    no render coverage (a mesh on the floor plane still hides splats). Where the layer holds only the
+    background, the render covers c = 1 - o / background of the pixel (blue channel) (a mesh edge: its anti-aliased coverage);
+    splats nearer than that mesh are drawn over it, and those behind it replace the background in the uncovered
+    part, so the mesh edge keeps its anti-aliasing against the splats (out = front + (1 - A_front) (1 - c)
+    (behind + (1 - A_behind) background), alpha A_front: the render's c M shows through as before). A partly covered
+    pixel whose own depth missed the mesh takes the nearest depth of its 3x3 neighbours (EDGE_REACH). Where Blender
+    drew lines (alpha > 0), splats nearer than the lines' depth (or the nearest within LINE_REACH, for lines that
+    write none, as outlines; none if a grid pixel is that near: a grid line's faint edge) are drawn over them; inside the cursor and origin discs those lines stay on top of the splats instead.
+    """
+    o8 = np.asarray(overlay8)
+    h, w = o8.shape[:2]
+    o_rgb, o_a = decode_overlay(o8)
+    depth = np.asarray(scene_depth, np.float64)
+    line = o_a >= LINE_CUT
+    bg = np.broadcast_to(np.asarray(background, np.float64), (h, w, 3))
+    cov = background_coverage(o_rgb, bg) if use_coverage else np.ones((h, w))
+    if grid is not None:  # the grid writes its plane's depth also where its lines fade out: not under a mesh
+        is_grid = grid_pixels(depth, line | (use_coverage & (cov <= 0.0)), *grid)
+    else:
+        is_grid = np.zeros((h, w), bool)
+    d_p = np.where(is_grid, 1.0, depth)
+
+    def nearest(reach):
+        pad = np.pad(d_p, reach, mode="edge")
+        return np.min([pad[reach + dy:reach + dy + h, reach + dx:reach + dx + w]
+                       for dy in range(-reach, reach + 1) for dx in range(-reach, reach + 1)], 0)
+    d_edge, d_line_n = nearest(EDGE_REACH), nearest(LINE_REACH)
+    pad_g = np.pad(is_grid, LINE_REACH, mode="edge")
+    near_grid = np.any([pad_g[LINE_REACH + dy:LINE_REACH + dy + h, LINE_REACH + dx:LINE_REACH + dx + w]
+                        for dy in range(-LINE_REACH, LINE_REACH + 1) for dx in range(-LINE_REACH, LINE_REACH + 1)], 0)
+    d_line_n = np.where(near_grid, 1.0, d_line_n)  # the faint edge of a grid line, not an outline
+    on_top = disc_mask(w, h, discs) & line & ~is_grid
+
+    cols = np.stack([np.asarray(c, np.float64) for c, _a, _d in layers]) if layers else np.zeros((0, h, w, 3))
+    alphas = np.stack([np.asarray(a, np.float64) for _c, a, _d in layers]) if layers else np.zeros((0, h, w))
+    depths = np.stack([np.asarray(d, np.float64) for _c, _a, d in layers]) if layers else np.zeros((0, h, w))
+    present = alphas >= alpha_cut
+    order = np.argsort(np.where(present, depths, 2.0), axis=0, kind="stable")
+
+    d_mesh = np.where(cov <= 0.0, 1.0, np.where((d_p < 1.0) | (cov >= 1.0), d_p, d_edge))
+    d_line = np.where(on_top, d_p, np.where(d_p < 1.0, d_p, d_line_n))
+    split = np.where(line, d_line, d_mesh)
+    front = present & (depths < split[None])
+    behind = present & ~front
+    p_f, a_f = _over((cols, alphas), order, front)
+    p_b, a_b = _over((cols, alphas), order, behind)
+
+    out = np.empty((h, w, 4))
+    plain = p_f + (1.0 - a_f)[..., None] * (1.0 - cov)[..., None] * (p_b + (1.0 - a_b)[..., None] * bg)
+    lines = p_f + (1.0 - a_f)[..., None] * o_rgb
+    x_bg = np.where((d_p < 1.0)[..., None], 0.0, bg)
+    top = o_rgb + (1.0 - o_a)[..., None] * (p_f - a_f[..., None] * x_bg)
+    out[..., :3] = np.where(line[..., None], np.where(on_top[..., None], top, lines), plain)
+    out[..., 3] = np.where(line, o_a + (1.0 - o_a) * a_f, a_f)
+    return out, present.any(0)
+
+
+# ------------------------------------------------------------------------------------- what is under the mouse
+
+def mouse_ray(view_matrix, window_matrix, width: int, height: int, x: float, y: float):
+    """The world ray (origin, unit direction) of region pixel coordinates (x, y), as Blender's view3d operators
+    take event.mval (no half-pixel offset): the eye for a perspective view, the near plane for an orthographic one."""
+    v = np.asarray(view_matrix, np.float64)
+    p = np.asarray(window_matrix, np.float64)
+    inv = np.linalg.inv(p @ v)
+    nx, ny = 2.0 * x / width - 1.0, 2.0 * y / height - 1.0
+    near = inv @ np.array([nx, ny, -1.0, 1.0])
+    far = inv @ np.array([nx, ny, 1.0, 1.0])
+    near, far = near[:3] / near[3], far[:3] / far[3]
+    d = far - near
+    d /= np.linalg.norm(d)
+    origin = np.linalg.inv(v)[:3, 3] if abs(p[3, 3]) < 1e-9 else near
+    return origin, d
+
+
+@dataclass(frozen=True)
+class SplatHit:
+    point: np.ndarray  # world position of the splat surface under the mouse
+    distance: float  # along the mouse ray from its origin
+    coverage: float  # the image's coverage there
+
+
+def splat_hit(img: OverlayImage, view_matrix, window_matrix, width: int, height: int, x: float, y: float,
+              cut: float = 0.5) -> SplatHit | None:
+    """The splat surface under region pixel (x, y) in an overlay image of that view: its depth (distance along the
+    render camera's axis) interpolated bilinearly over the neighbouring pixels that hold a splat, None where the
+    image's coverage is below ``cut`` (what the overlay counts as opaque)."""
+    if img.depth is None:
+        return None
+    x0, y0, x1, y1 = img.view.ndc_rect
+    ih, iw = img.depth.shape
+    nx, ny = 2.0 * x / width - 1.0, 2.0 * y / height - 1.0
+    u = (nx - x0) / (x1 - x0) * iw - 0.5  # image pixel coordinates of the point, pixel centres at integers
+    v = (y1 - ny) / (y1 - y0) * ih - 0.5
+    if not (-0.5 <= u <= iw - 0.5 and -0.5 <= v <= ih - 0.5):
+        return None
+    c0, r0 = int(math.floor(u)), int(math.floor(v))
+    fu, fv = u - c0, v - r0
+    acc_d = acc_w = acc_a = 0.0
+    for dr, dc, wgt in ((0, 0, (1 - fu) * (1 - fv)), (0, 1, fu * (1 - fv)), (1, 0, (1 - fu) * fv), (1, 1, fu * fv)):
+        r, c = min(max(r0 + dr, 0), ih - 1), min(max(c0 + dc, 0), iw - 1)
+        a = float(img.rgba[r, c, 3])
+        acc_a += wgt * a
+        d = float(img.depth[r, c])
+        if d > 0.0 and a >= cut and wgt > 0.0:
+            acc_d += wgt * d
+            acc_w += wgt
+    if acc_a < cut or acc_w <= 0.0:
+        return None
+    depth = acc_d / acc_w
+    origin, direction = mouse_ray(view_matrix, window_matrix, width, height, x, y)
+    view = img.view.batch.views[0]
+    along = float(direction @ view.forward)
+    if along <= 1e-9:
+        return None
+    t = (depth - float((origin - img.view.batch.origin) @ view.forward)) / along
+    return SplatHit(origin + t * direction, float(t), float(acc_a))
+
+
+def splats_win(splat_distance: float, mesh_distance: float | None, pull: float = DEPTH_PULL) -> bool:
+    """Whether the splats under the mouse are what it points at: no mesh, or a mesh not nearer than the draw lets
+    hide them (within DEPTH_PULL of the splat distance the splats win, as drawn)."""
+    return mesh_distance is None or mesh_distance >= (1.0 - pull) * splat_distance

@@ -12,11 +12,21 @@ images under Xvfb), with steps scheduled by bpy.app.timers so the window draws b
   <view>_plain       Show Splats off, Blender's overlays on (grid, helpers)
   <view>_splats      Show Splats on, Blender's overlays on (what a user sees by default)
   <view>_clean       Show Splats on, Blender's overlays off (no grid, no helper geometry can be drawn)
+  w_quads            view w (the room's wall from outside) drawn by the plain depth-tested quads (the old draw)
 
-and writes DIR/shots.json: per shot the 3D region's place on the screen, the view's matrices, the projected
+Then real clicks, sent to the X server by xdotool (the window focused first): Shift+right-click on the floor splats
+with Show Splats on and off (where the 3D cursor lands against the floor plane z = 0 under that pixel), left clicks
+on the splat wall, the red splat ball, a cube and Shift+click on the wall (what gets selected), with screenshots of
+the cursor and of the selected ball's origin dot over the splats; a slanted plane in front of the wall shot against
+the splats (composite, plain quads) and alone (the room hidden) for its edge; the composite shader checked against
+overlay_math.composite on the real overlay layer; File > Import of the room (Show Splats turns on); Update When
+Moved: a probe added at a selected sphere, baked, the sphere moved with G and a click, then Ctrl+Z.
+
+It writes DIR/shots.json: per shot the 3D region's place on the screen, the view's matrices, the projected
 centres of the test objects, the splat object's bounds corners and the overlay's own coverage image, which the
-pytest driver uses to find the splat region. --pictures also writes the pictures for docs/img (panel, lit mesh,
-EEVEE and Cycles renders lit and unlit). Failures are written to DIR/error.txt; Blender quits at the end.
+pytest driver uses to find the splat region; and what each check measured. --pictures also writes the pictures
+for docs/img (panel, lit mesh, EEVEE and Cycles renders lit and unlit, cursor, edge, wall). Failures are written
+to DIR/error.txt; Blender quits at the end.
 """
 from __future__ import annotations
 
@@ -47,9 +57,14 @@ PICTURES = "--pictures" in ARGS
 SETTLE = float(_arg("--settle", "6"))  # seconds the window gets to draw before a screenshot (llvmpipe is slow)
 os.makedirs(OUT, exist_ok=True)
 
-# The two views: eye, target. A looks into the room past the Occluder and at the Blob in front of the Backdrop;
-# B looks at both from the side, across the floor (where the grid would show).
-VIEWS = {"a": ((0.2, -2.1, 1.45), (0.35, 1.2, 0.75)), "b": ((-2.3, 1.6, 1.9), (0.7, -0.4, 0.6))}
+# The views: eye, target. A looks into the room past the Occluder and at the Blob in front of the Backdrop;
+# B looks at both from the side, across the floor (where the grid would show); W at the room's wall from outside.
+VIEWS = {"a": ((0.2, -2.1, 1.45), (0.35, 1.2, 0.75)), "b": ((-2.3, 1.6, 1.9), (0.7, -0.4, 0.6)),
+         "w": ((0.0, -6.0, 1.5), (0.0, 0.5, 1.0))}
+FLOOR_VIEW = ((0.6, -0.6, 1.7), (-0.8, 1.2, 0.0))  # the floor point of issue 21 in the middle, clear of the table
+FLOOR_POINT = (-0.8, 1.2, 0.0)
+WALL_POINT = (-1.2, 2.5, 1.6)  # on the back wall, no test object in front of it in view a
+EDGE_CENTRE, EDGE_SIZE, EDGE_ROLL = (-0.45, 0.6, 1.35), 0.5, 12.0  # a plane facing view a, its edges slanted
 OCCLUDER = (0.15, 0.75, 0.3)
 BLOB, BACKDROP = (0.95, 0.1, 0.8), (1.15, 1.3, 0.8)
 BLOB_RGB = (0.9, 0.08, 0.06)
@@ -176,10 +191,10 @@ def nudge(k: int) -> None:
 def record_motion(pkg: str) -> None:
     _w, _a, _s, region = view3d()
     slot = region.as_pointer()
-    log_ = [(t, s, ms) for t, sl, s, ms in mod(pkg, "blender.overlay").draw_log if sl == slot]
+    log_ = [(t, s, ms, dms) for t, sl, s, ms, dms in mod(pkg, "blender.overlay").draw_log if sl == slot]
     state["motion"] = {"draws": log_, "last_nudge": state["last_nudge"],
                        "resolution": bpy.context.scene.gs_ibl_overlay.resolution_scale}
-    log(f"motion: last nudge {state['last_nudge']:.2f}, draws {[(round(t, 2), s) for t, s, _ in log_[-8:]]}")
+    log(f"motion: last nudge {state['last_nudge']:.2f}, draws {[(round(t, 2), s) for t, s, _m, _d in log_[-8:]]}")
 
 
 def record(shot: str, pkg: str) -> None:
@@ -208,11 +223,39 @@ def record(shot: str, pkg: str) -> None:
     log(f"shot {shot}: {info['last_draw']} error={info['error']}")
 
 
+def _fill(fb_size, rgba_lin: np.ndarray) -> None:
+    """Write linear RGBA (rows top first) into the bound framebuffer as it is (blend off): what Blender left in the
+    overlay layer, for the offscreen composite check."""
+    import gpu
+    from gpu_extras.batch import batch_for_shader
+    overlay = state["overlay_mod"]
+    info = gpu.types.GPUShaderCreateInfo()
+    iface = gpu.types.GPUStageInterfaceInfo("gui_fill_iface")
+    iface.smooth("VEC2", "uv")
+    info.vertex_in(0, "VEC2", "pos")
+    info.vertex_in(1, "VEC2", "texCoord")
+    info.vertex_out(iface)
+    info.sampler(0, "FLOAT_2D", "image")
+    info.fragment_out(0, "VEC4", "fragColor")
+    info.vertex_source("void main() { uv = texCoord; gl_Position = vec4(pos, 0.0, 1.0); }")
+    info.fragment_source("void main() { fragColor = texelFetch(image, ivec2(gl_FragCoord.xy), 0); }")
+    sh = gpu.shader.create_from_info(info)
+    tex = overlay._float_texture(rgba_lin.astype(np.float32), "RGBA32F")
+    batch = batch_for_shader(sh, "TRI_FAN", {"pos": ((-1, -1), (1, -1), (1, 1), (-1, 1)),
+                                             "texCoord": ((0, 0), (1, 0), (1, 1), (0, 1))})
+    gpu.state.blend_set("NONE")
+    sh.bind()
+    sh.uniform_sampler("image", tex)
+    batch.draw(sh)
+
+
 def shader_check(pkg: str) -> None:
-    """The overlay's shader against its numpy reference (overlay_math.to_display, window_depth): random colour,
-    coverage and distances drawn into an offscreen buffer exactly as the draw handler draws, read back."""
+    """The overlay's shaders against their numpy references, drawn into an offscreen buffer exactly as the draw
+    handler draws and read back: the plain quads (overlay_math.layer_colour, window_depth) and the composite
+    (overlay_math.composite: every branch, on synthetic inputs; the layer given as Blender leaves it)."""
     import gpu
     overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
+    state["overlay_mod"], state["om"] = overlay, om
     w, h = 96, 64
     rng = np.random.default_rng(7)
     rgba = rng.random((h, w, 4)).astype(np.float32) * np.float32(1.5)
@@ -235,18 +278,419 @@ def shader_check(pkg: str) -> None:
         got_depth = np.array(fb.read_depth(0, 0, w, h).to_list(), np.float32).reshape(h, w)[::-1]
     off.free()
     a = rgba[..., 3]
-    want = np.where((a >= overlay.ALPHA_CUT)[..., None], om.to_display(rgba, exposure), 0.0)
+    lc, la = om.layer_colour(rgba, exposure)
+    want = np.where((a >= overlay.ALPHA_CUT)[..., None], np.concatenate([lc, la[..., None]], -1), 0.0)
     want_depth = np.where(a >= overlay.OPAQUE_CUT, om.window_depth(depth, view, om.DEPTH_PULL), 1.0)
     state["shader_check"] = {"colour_max_error": float(np.abs(got - want).max()),
                              "depth_max_error": float(np.abs(got_depth - want_depth).max()),
                              "pixels": w * h}
     log(f"shader check: {state['shader_check']}")
+    state["composite_check"] = {n: composite_offscreen_check(pkg, n_layers=n) for n in (1, 2, 4)}
+    log(f"composite check: {state['composite_check']}")
+
+
+def composite_offscreen_check(pkg: str, w: int = 80, h: int = 56, n_layers: int = 2) -> dict:
+    import gpu
+    overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
+    srgb = mod(pkg, "core.colour").linear_to_srgb
+    rng = np.random.default_rng(11)
+    view_m = om.look_at_view_matrix((0.3, -4.0, 2.0), (0.0, 0.0, 0.0))
+    win_m = om.perspective_matrix(60.0, w, h, 0.1, 50.0)
+    bg = np.array([0.046, 0.047, 0.048])
+    # the floor plane's window depth per pixel, through the same inverse the shader uses
+    inv = np.linalg.inv(win_m @ view_m)
+    eye = np.linalg.inv(view_m)[:3, 3]
+    xs = (np.arange(w) + 0.5) / w * 2 - 1
+    ys = 1 - (np.arange(h) + 0.5) / h * 2
+    far = np.einsum("ij,hwj->hwi", inv, np.stack(np.broadcast_arrays(xs[None, :], ys[:, None], 1.0, 1.0), -1))
+    ray = far[..., :3] / far[..., 3:] - eye
+    t = np.where(ray[..., 2] < -1e-6, -eye[2] / np.minimum(ray[..., 2], -1e-6), np.inf)
+    pts = eye + ray * np.where(np.isfinite(t), t, 0.0)[..., None]
+    clip = np.einsum("ij,hwj->hwi", win_m @ view_m, np.concatenate([pts, np.ones((h, w, 1))], -1))
+    floor = np.where(np.isfinite(t), 0.5 * clip[..., 2] / clip[..., 3] + 0.5, 1.0)
+    kind = rng.integers(0, 6, (h, w))  # 0 background, 1 mesh, 2 mesh edge, 3 grid line, 4 line, 5 line, no depth
+    kind[floor >= 1.0] = np.where(kind[floor >= 1.0] == 3, 0, kind[floor >= 1.0])
+    cov = np.where(kind == 1, 1.0, np.where(kind == 2, rng.uniform(0.15, 0.85, (h, w)), 0.0))
+    depth = np.where(kind == 1, rng.uniform(0.95, 0.99, (h, w)), 1.0)
+    depth = np.where((kind == 2) & (rng.random((h, w)) < 0.5), rng.uniform(0.95, 0.99, (h, w)), depth)
+    depth = np.where(kind == 3, floor, depth)
+    depth = np.where(kind == 4, rng.uniform(0.95, 0.99, (h, w)), depth)
+    line = kind >= 3
+    la = rng.uniform(0.3, 1.0, (h, w))
+    lc = rng.uniform(0.0, 1.0, (h, w, 3))
+    o_lin = np.zeros((h, w, 4))
+    o_lin[..., :3] = (1.0 - cov)[..., None] * bg
+    o_lin[..., :3] = np.where(line[..., None], la[..., None] * lc + (1 - la[..., None]) * o_lin[..., :3],
+                              o_lin[..., :3])
+    o_lin[..., 3] = np.where(line, la, 0.0)
+    o8 = np.empty((h, w, 4), np.uint8)  # as stored: sRGB-encoded colour, linear alpha
+    o8[..., :3] = np.round(srgb(o_lin[..., :3]) * 255)
+    o8[..., 3] = np.round(o_lin[..., 3] * 255)
+    o_dec = np.concatenate([om.decode_overlay(o8)[0], om.decode_overlay(o8)[1][..., None]], -1)
+    # two splat layers: window depths around the meshes' (some in front, some behind), coverages of all kinds
+    ov_view = om.overlay_view(view_m, win_m, w, h, 1.0)
+    layers_px, layers_ref = [], []
+    for k in range(n_layers):
+        a = rng.choice([0.0, 0.4, 0.8, 1.0], (h, w)).astype(np.float32)
+        rgba = np.zeros((h, w, 4), np.float32)
+        rgba[..., 3] = a
+        rgba[..., :3] = rng.uniform(0, 1.2, (h, w, 3)).astype(np.float32) * a[..., None]
+        dist = rng.choice([0.6, 1.5, 3.0, 8.0], (h, w)).astype(np.float32) + np.float32(0.01 * k)
+        wd = om.window_depth(dist, ov_view, om.DEPTH_PULL)
+        rgb, al = om.layer_colour(rgba, 0.0)
+        layers_px.append(overlay.textures(rgba, dist))
+        layers_ref.append((rgb, al, wd))
+    discs = [(20.5, 30.5, 9.0), (60.0, 12.0, 5.0)]
+    ref, written = om.composite(o8, depth, layers_ref, bg, use_coverage=True, grid=(view_m, win_m, (0, 0, 1)),
+                                discs=discs)
+    want = np.where(written[..., None], ref, o_dec)
+    params = overlay.composite_params(win_m, view_m, w, h, {"kind": "SINGLE_COLOR", "high": tuple(bg),
+                                                            "low": tuple(bg), "use_coverage": True},
+                                      (0.0, 0.0, 1.0), discs)
+    snap = []
+    for lo, hi in ((0, 1), (2, 3)):  # as the draw handler packs them: r + 256 g, b + 256 a (rows bottom first)
+        v = np.ascontiguousarray((o8[::-1, :, lo].astype(np.float32) + 256.0 * o8[::-1, :, hi]).ravel(), np.float32)
+        snap.append(gpu.types.GPUTexture((w, h), format="R32F", data=gpu.types.Buffer("FLOAT", v.size, v)))
+    dtex = overlay._float_texture(depth.astype(np.float32), "R32F")
+    off = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
+    with off.bind():
+        fb = gpu.state.active_framebuffer_get()
+        fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        _fill((w, h), o_dec)
+        overlay.draw_composite(tuple(snap), dtex, layers_px, (-1.0, -1.0, 1.0, 1.0),
+                               overlay.shader_params(ov_view, 0.0), params)
+        got = np.array(fb.read_color(0, 0, w, h, 4, 0, "FLOAT").to_list(), np.float32).reshape(h, w, 4)[::-1]
+    off.free()
+    err = np.abs(got - want).max(-1)
+    np.savez(os.path.join(OUT, "composite_offscreen.npz"), got=got, want=want, kind=kind, written=written)
+    kinds = {name: int(((kind == i) & written).sum()) for i, name in
+             enumerate(("background", "mesh", "edge", "grid", "line", "line_no_depth"))}
+    return {"max_error": float(err.max()), "over_1e-3": int((err > 1e-3).sum()), "pixels": w * h,
+            "written": int(written.sum()), "kinds_written": kinds,
+            "in_discs": int((om.disc_mask(w, h, discs) & line).sum())}
+
+
+def _focus() -> None:
+    if "xwin" not in state:
+        r = subprocess.run(["xdotool", "search", "--name", "Blender"], capture_output=True, text=True)
+        ids = r.stdout.split()
+        if not ids:
+            raise RuntimeError(f"xdotool finds no Blender window: {r.stdout} {r.stderr}")
+        state["xwin"] = ids[-1]
+    subprocess.run(["xdotool", "windowfocus", "--sync", state["xwin"]], check=True)
+
+
+def _xdo(*args) -> None:
+    subprocess.run(["xdotool", *map(str, args)], check=True)
+
+
+def _pixel(point) -> tuple[int, int]:
+    """The region pixel a world point projects to, rounded (the mouse lands on whole pixels)."""
+    window, _a, space, region = view3d()
+    x, y, _z = project(space.region_3d, region, point)
+    return int(round(x)), int(round(y))
+
+
+def click(x: int, y: int, button: int = 1, shift: bool = False) -> None:
+    """A real click at region pixel (x, y): xdotool moves the X pointer there and presses the button."""
+    window, _a, _s, region = view3d()
+    _focus()
+    _xdo("mousemove", "--sync", region.x + x, window.height - 1 - (region.y + y))
+    if shift:
+        _xdo("keydown", "shift")
+    _xdo("click", button)
+    if shift:
+        _xdo("keyup", "shift")
+    state["last_click"] = (x, y)
+
+
+def floor_truth(x: int, y: int) -> list[float]:
+    """Where the ray of region pixel (x, y) (Blender's convention, event.mval) meets the floor plane z = 0."""
+    om = state["om"]
+    _w, _a, space, region = view3d()
+    r3d = space.region_3d
+    o, d = om.mouse_ray(np.array(r3d.view_matrix), np.array(r3d.window_matrix), region.width, region.height, x, y)
+    return list(map(float, o + d * (-o[2] / d[2])))
+
+
+def cursor_click(tag: str, pkg: str) -> None:
+    bpy.context.scene.cursor.location = (0.0, -30.0, 0.0)  # away from the floor point: where a fall-back lands
+    x, y = _pixel(FLOOR_POINT)
+    state.setdefault("clicks", {})[tag] = {"pixel": [x, y], "truth": floor_truth(x, y)}
+    click(x, y, button=3, shift=True)
+
+
+def cursor_record(tag: str, pkg: str) -> None:
+    c = state["clicks"][tag]
+    c["cursor"] = list(map(float, bpy.context.scene.cursor.location))
+    c["error_m"] = float(np.linalg.norm(np.array(c["cursor"]) - np.array(c["truth"])))
+    c["pick"] = dict(mod(pkg, "blender.picking").last_pick)
+    log(f"cursor {tag}: {c}")
+
+
+def select_click(tag: str, point, shift: bool = False) -> None:
+    x, y = _pixel(point)
+    state.setdefault("selects", {})[tag] = {"pixel": [x, y], "shift": shift}
+    click(x, y, button=1, shift=shift)
+
+
+def select_record(tag: str, pkg: str) -> None:
+    active = bpy.context.view_layer.objects.active
+    rec = state["selects"][tag]
+    rec.update(selected=sorted(o.name for o in bpy.context.selected_objects),
+               active=active.name if active else None, pick=dict(mod(pkg, "blender.picking").last_pick))
+    log(f"select {tag}: {rec}")
+
+
+def deselect_all() -> None:
+    for obj in bpy.context.view_layer.objects:
+        obj.select_set(False)
+    bpy.context.view_layer.objects.active = None
+
+
+def theme_info(pkg: str) -> None:
+    prefs = bpy.context.preferences
+    t = prefs.themes[0].view_3d
+    state["theme"] = {"object_active": list(t.object_active), "object_selected": list(t.object_selected),
+                      "origin_size": t.object_origin_size,
+                      "widget_unit": round(18.0 * prefs.system.ui_scale) + 2 * prefs.system.pixel_size}
+
+
+def _look(eye, target) -> None:
+    _w, _a, space, _r = view3d()
+    r3d = space.region_3d
+    r3d.view_perspective = "PERSP"
+    d = Vector(target) - Vector(eye)
+    r3d.view_rotation = d.to_track_quat("-Z", "Y")
+    r3d.view_location = Vector(target)
+    r3d.view_distance = d.length
+    space.lens = 35.0
+
+
+def edge_plane(pkg: str) -> None:
+    """A plane facing view a, rolled by EDGE_ROLL degrees: straight slanted edges in front of the splat wall."""
+    eye = Vector(VIEWS["a"][0])
+    bpy.ops.mesh.primitive_plane_add(size=EDGE_SIZE, location=EDGE_CENTRE)
+    plane = bpy.context.active_object
+    plane.name = "Edge"
+    facing = (eye - Vector(EDGE_CENTRE)).to_track_quat("Z", "Y")
+    from mathutils import Quaternion
+    plane.rotation_mode = "QUATERNION"
+    plane.rotation_quaternion = facing @ Quaternion((0.0, 0.0, 1.0), math.radians(EDGE_ROLL))
+    deselect_all()
+    bpy.context.view_layer.update()
+    state["edge"] = plane
+
+
+def edge_record(shot: str, pkg: str) -> None:
+    """Screenshot plus the plane's corners in region pixels."""
+    record(shot, pkg)
+    _w, _a, space, region = view3d()
+    plane = state["edge"]
+    corners = [plane.matrix_world @ Vector((sx * EDGE_SIZE / 2, sy * EDGE_SIZE / 2, 0.0))
+               for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    state["shots"][shot]["edge_corners"] = [project(space.region_3d, region, c)[:2] for c in corners]
+    state["shots"][shot]["draw"] = {str(k): v for k, v in mod(pkg, "blender.overlay").last_draw.items()}
+
+
+def composite_capture(pkg: str) -> None:
+    overlay = mod(pkg, "blender.overlay")
+    overlay.capture.clear()
+    overlay.capture["next"] = True
+    view3d()[1].tag_redraw()
+
+
+def composite_real_check(pkg: str) -> None:
+    """The composite as drawn in the viewport against overlay_math.composite on the same overlay layer, depth and
+    splat image (Resolution 1: the image's pixels are the region's)."""
+    overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
+    srgb = mod(pkg, "core.colour").linear_to_srgb
+    cap = overlay.capture
+    if "out" not in cap:
+        state["composite_real"] = {"error": "no capture (the composite did not run)"}
+        return
+    _w, _a, space, region = view3d()
+    r3d = space.region_3d
+    w, h = cap["size"]
+    p = cap["params"]
+    layers = []
+    for name in cap["objects"]:
+        img = overlay.splat_image(bpy.data.objects[name], r3d, w, h, 1.0, region.as_pointer())
+        rgb, a = om.layer_colour(img.rgba, bpy.context.scene.gs_ibl_overlay.exposure)
+        layers.append((rgb, a, om.window_depth(img.depth, img.view, om.DEPTH_PULL)))
+    view_m, win_m = np.array(r3d.view_matrix), np.array(r3d.window_matrix)
+    grid = (view_m, win_m, p["grid_normal"][:3]) if p["grid_normal"][3] > 0 else None
+    colour, depth, out = cap["colour"][::-1], cap["depth"][::-1], cap["out"][::-1]
+    bg = om.viewport_background("SINGLE_COLOR" if p["bg_high"][3] == 0 else
+                                ("LINEAR" if p["bg_high"][3] == 1 else "RADIAL"), p["bg_high"][:3], p["bg_low"][:3],
+                                w, h)
+    ref, written = om.composite(colour, depth, layers, bg, use_coverage=p["use_coverage"] > 0.5, grid=grid,
+                                discs=p["discs"])
+    ref8 = np.concatenate([srgb(ref[..., :3]) * 255.0, np.clip(ref[..., 3:], 0, 1) * 255.0], -1)
+    ref8 = np.where(written[..., None], ref8, colour.astype(np.float64))
+    diff = np.abs(ref8 - out.astype(np.float64)).max(-1)
+    line = colour[..., 3] >= 2
+    state["composite_real"] = {"max_diff_8bit": float(diff.max()), "over_2": int((diff > 2).sum()),
+                               "pixels": int(w * h), "written": int(written.sum()), "line_pixels": int(line.sum()),
+                               "discs": len(p["discs"]), "grid": grid is not None, "objects": cap["objects"],
+                               "use_coverage": p["use_coverage"] > 0.5}
+    log(f"composite in the viewport: {state['composite_real']}")
+
+
+def import_check(pkg: str):
+    """File > Import of a splat file turns Show Splats on: the imported splats are drawn at once."""
+    settings = bpy.context.scene.gs_ibl_overlay
+
+    def run():
+        settings.show = False
+        before = set(bpy.data.objects)
+        r = bpy.ops.gs_ibl.import_splats(filepath=ROOM or os.path.join(SRC, "samples", "room.ply"))
+        new = [o for o in bpy.data.objects if o not in before]
+        state["import"] = {"result": sorted(r), "show_after": bool(settings.show), "new": [o.name for o in new]}
+        view3d()[1].tag_redraw()
+
+    def drawn():
+        overlay = mod(pkg, "blender.overlay")
+        _w, _a, _s, region = view3d()
+        d = overlay.last_draw.get(region.as_pointer(), {})
+        state["import"]["drawn"] = d.get("objects_drawn", [])
+        log(f"import: {state['import']}")
+    yield 0.5, run
+    yield SETTLE, drawn
+
+
+def _pixels(img) -> np.ndarray:
+    px = np.empty(len(img.pixels), np.float32)
+    img.pixels.foreach_get(px)
+    return px
+
+
+def auto_update_check(pkg: str):
+    """Update When Moved: a probe added at a selected mesh follows it; moving the mesh in the GUI (G, mouse, click)
+    re-bakes once, and Ctrl+Z after it re-bakes nothing and leaves the report of the World in use."""
+    bake = mod(pkg, "blender.bake")
+    rec = state.setdefault("auto", {})
+    settings = bpy.context.scene.gs_ibl_overlay
+
+    def setup():
+        settings.show = True
+        _look(*VIEWS["a"])
+        deselect_all()
+        bpy.ops.mesh.primitive_uv_sphere_add(radius=0.2, location=(-0.5, 0.3, 0.45))
+        sphere = bpy.context.active_object
+        sphere.name = "Moved"
+        state["moved"] = sphere
+        r = bpy.ops.gs_ibl.add_probe()
+        probe = bpy.context.active_object
+        s = probe.gs_ibl_probe
+        s.splats = state["room"]
+        s.face_size = 32
+        s.irradiance_size = 16
+        s.auto_update = True
+        s.update_interval = 0.5
+        if hasattr(s, "lighting"):
+            s.lighting = "WORLD"  # the World probe only: no per-mesh probes or grids to bake on llvmpipe
+        rec.update(add=sorted(r), parent=probe.parent.name if probe.parent else None)
+        state["probe"] = probe
+        state["probe_name"] = probe.name
+        rec["bake"] = sorted(bpy.ops.gs_ibl.bake_probe())
+        rec["report_1"] = s.last_report
+        rec["auto_bakes_0"] = bake.auto_bakes
+        img = s.irradiance_image
+        state["pixels_1"] = _pixels(img) if img is not None else None
+        deselect_all()
+        sphere.select_set(True)
+        bpy.context.view_layer.objects.active = sphere
+        rec["location_0"] = list(map(float, sphere.location))
+        # what the script made so far is one undo step (operators run from a script push none), so Ctrl+Z
+        # after the move goes back to here, not to the startup file
+        bpy.ops.ed.undo_push(message="GUI check: probe baked")
+
+    def move():
+        _window, _a, _s, region = view3d()
+        x, y = _pixel(bpy.data.objects["Moved"].location)
+        _focus()
+        window = view3d()[0]
+        sx, sy = region.x + x, window.height - 1 - (region.y + y)
+        _xdo("mousemove", "--sync", sx, sy)
+        _xdo("key", "g")
+        state["g_at"] = (sx, sy)
+
+    def drag():
+        sx, sy = state["g_at"]
+        for k in range(1, 7):
+            _xdo("mousemove", "--sync", sx + 12 * k, sy)
+        _xdo("click", 1)
+
+    def after_move():
+        probe = bpy.data.objects[state["probe_name"]]
+        s = probe.gs_ibl_probe
+        rec.update(location_1=list(map(float, bpy.data.objects["Moved"].location)), auto_bakes_1=bake.auto_bakes,
+                   report_2=s.last_report, probe_world_1=list(map(float, probe.matrix_world.translation)))
+        log(f"auto update after the move: {rec}")
+
+    def undo():
+        _focus()
+        _xdo("key", "ctrl+z")
+
+    def after_undo():
+        probe = bpy.data.objects.get(state["probe_name"])  # undo replaced every datablock: look them up again
+        s = probe.gs_ibl_probe if probe is not None else None
+        img = s.irradiance_image if s is not None else None
+        world = s.world if s is not None else None
+        stamps = {"world": world.get("gs_ibl_bake") if world is not None else None,
+                  "irradiance": img.get("gs_ibl_bake") if img is not None else None,
+                  "radiance": s.radiance_image.get("gs_ibl_bake") if s is not None and s.radiance_image else None}
+        px = _pixels(img) if img is not None else None
+        p1 = state.get("pixels_1")
+        moved = bpy.data.objects.get("Moved")
+        rec.update(location_2=list(map(float, moved.location)) if moved else None, auto_bakes_2=bake.auto_bakes,
+                   report_3=s.last_report if s is not None else None, stamps=stamps,
+                   scene_world_is_probe_world=bool(world is not None and bpy.context.scene.world == world),
+                   pixels_equal_bake_1=bool(px is not None and p1 is not None and px.shape == p1.shape
+                                            and np.array_equal(px, p1)))
+        log(f"auto update after Ctrl+Z: {rec}")
+
+    yield 0.5, setup
+    yield SETTLE, move
+    yield 1.5, drag
+    yield 8.0, after_move
+    yield 0.5, undo
+    yield 8.0, after_undo
+
+
+def set_composite(on: bool, pkg: str) -> None:
+    mod(pkg, "blender.overlay").use_composite = on
+    view3d()[1].tag_redraw()
+
+
+def _burst() -> float | None:
+    if not state.get("burst"):
+        return None
+    view3d()[1].tag_redraw()
+    return 0.02
+
+
+def redraw_burst(on: bool) -> None:
+    state["burst"] = on
+    if on and not bpy.app.timers.is_registered(_burst):
+        bpy.app.timers.register(_burst, first_interval=0.02)
+
+
+def keep_draw_log(pkg: str, tag: str) -> None:
+    """The overlay's recent draws (time, scale, render ms, draw ms) of the 3D region, under a tag."""
+    _w, _a, _s, region = view3d()
+    slot = region.as_pointer()
+    entries = [(t, s, ms, dms) for t, sl, s, ms, dms in mod(pkg, "blender.overlay").draw_log if sl == slot]
+    state.setdefault("draw_log", {})[tag] = entries
+    mod(pkg, "blender.overlay").draw_log.clear()
 
 
 def steps(pkg: str):
     """The script: (seconds to wait before it, what to do), one after the other."""
     yield 1.0, lambda: shader_check(pkg)
     yield 1.0, lambda: build(pkg)
+    yield 0.5, lambda: theme_info(pkg)
     for name in VIEWS:
         yield 1.0, lambda name=name: (set_view(name), set_overlay(False, True))
         yield SETTLE, lambda name=name: record(f"{name}_plain", pkg)
@@ -254,12 +698,56 @@ def steps(pkg: str):
         yield SETTLE * 2, lambda name=name: record(f"{name}_splats", pkg)
         yield 0.5, lambda: set_overlay(True, False)
         yield SETTLE, lambda name=name: record(f"{name}_clean", pkg)
-    yield 0.5, lambda: set_overlay(True, True)
+    yield 0.5, lambda: (set_overlay(True, True), set_composite(False, pkg))
+    yield SETTLE, lambda: record("w_quads", pkg)  # the old draw: grid lines in the wall's lower band
+    yield 0.5, lambda: set_composite(True, pkg)
     # orbit a little (a view change every 0.3 s), then keep still: coarse frames while moving, then one timed
     # redraw at the full Resolution with no event at all
+    yield 0.5, lambda: set_view("a")
     for k in range(5):
         yield 0.3, lambda k=k: nudge(k)
     yield 2.5 + SETTLE, lambda: record_motion(pkg)
+    # what a redraw of an unchanged view costs, the composite and the plain quads: the draw handler's own time,
+    # and redraws per second while a timer asks for one every 20 ms (the window's whole redraw on llvmpipe)
+    yield 0.5, lambda: keep_draw_log(pkg, "before")
+    for tag in ("composite", "quads"):
+        yield 0.5, lambda tag=tag: (set_composite(tag == "composite", pkg), redraw_burst(True))
+        yield 12.0, lambda tag=tag: (redraw_burst(False), keep_draw_log(pkg, tag))
+    yield 0.5, lambda: set_composite(True, pkg)
+    # the 3D cursor on the floor splats by a real Shift+right-click, then the same with Show Splats off
+    yield 0.5, lambda: (_look(*FLOOR_VIEW), set_overlay(True, True))
+    yield SETTLE * 2, lambda: cursor_click("splats", pkg)
+    yield 2.0 + SETTLE, lambda: (cursor_record("splats", pkg), record("cursor_splats", pkg))
+    yield 0.5, lambda: set_overlay(False, True)
+    yield SETTLE, lambda: record("cursor_plain", pkg)  # Blender's own cursor at the same place, no splats
+    yield 0.5, lambda: cursor_click("plain", pkg)
+    yield 2.0 + SETTLE, lambda: cursor_record("plain", pkg)
+    # clicks that select: the wall (the room), the red ball (the Blob, in front of a cube), a cube, Shift+wall
+    yield 0.5, lambda: (set_view("a"), set_overlay(True, True), deselect_all())
+    yield SETTLE * 2, lambda: select_click("wall", WALL_POINT)
+    yield 3.0, lambda: (select_record("wall", pkg), select_click("blob", BLOB))
+    yield 3.0, lambda: select_record("blob", pkg)
+    yield SETTLE, lambda: record("origin_splats", pkg)
+    yield 0.5, lambda: select_click("occluder", OCCLUDER)
+    yield 3.0, lambda: (select_record("occluder", pkg), select_click("wall_shift", WALL_POINT, shift=True))
+    yield 3.0, lambda: select_record("wall_shift", pkg)
+    # a straight slanted edge in front of the wall: composite, plain quads, and the plane alone (room hidden)
+    yield 0.5, lambda: (deselect_all(), edge_plane(pkg), set_overlay(True, False))
+    yield SETTLE * 2, lambda: edge_record("edge_splats", pkg)
+    yield 0.5, lambda: set_composite(False, pkg)
+    yield SETTLE, lambda: edge_record("edge_quads", pkg)
+    yield 0.5, lambda: (set_composite(True, pkg), set_overlay(False, False),
+                        [state[k].hide_set(True) for k in ("room", "blob")])
+    yield SETTLE, lambda: edge_record("edge_alone", pkg)
+    yield 0.5, lambda: ([state[k].hide_set(False) for k in ("room", "blob")], set_overlay(True, True),
+                        setattr(bpy.context.scene.gs_ibl_overlay, "resolution_scale", 1.0),
+                        state["blob"].select_set(True))
+    # the composite in the viewport against its numpy reference (grid, outline, origins and cursor in view)
+    yield SETTLE * 2, lambda: composite_capture(pkg)
+    yield SETTLE, lambda: composite_real_check(pkg)
+    yield 0.5, lambda: setattr(bpy.context.scene.gs_ibl_overlay, "resolution_scale", 0.5)
+    yield from auto_update_check(pkg)
+    yield from import_check(pkg)
     if PICTURES:
         yield from pictures(pkg)
 
@@ -448,7 +936,10 @@ def finish(error: str | None = None) -> None:
     state["error"] = error
     with open(os.path.join(OUT, "shots.json"), "w") as f:
         json.dump({"shots": state["shots"], "log": state["log"], "proxy": state.get("proxy"),
-                   "shader_check": state.get("shader_check"),
+                   "shader_check": state.get("shader_check"), "composite_check": state.get("composite_check"),
+                   "composite_real": state.get("composite_real"), "clicks": state.get("clicks"),
+                   "selects": state.get("selects"), "theme": state.get("theme"), "import": state.get("import"),
+                   "auto": state.get("auto"), "draw_log": state.get("draw_log"),
                    "motion": state.get("motion"),
                    "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error}, f, indent=1)
     if error:
