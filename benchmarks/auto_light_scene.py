@@ -1,0 +1,236 @@
+"""The Blender side of benchmarks/auto_light_bench.py (issue 22 goal 2): run inside the bpy 5.3 root, with the
+built zip installed by Blender's own installer, never by this repository's Python:
+    python auto_light_scene.py ARGS.json
+The sample room (its PLY encoded for Blender's sRGB rule, as tests/real_blender/local_light_reference.py does) is
+imported by Blender's own PLY importer (a native Gaussian-splat Point Cloud) and hidden from the camera (film
+transparent: alpha masks the mesh). A white diffuse UV sphere and a Suzanne (albedo ARGS["albedo"], smooth shaded,
+one material) stand at each of ARGS["places"]; each is rendered alone (every other mesh hidden from the render) from
+its own camera:
+  native_<mesh>_<place>          Cycles, World black, lit only by the native splats (the reference);
+  world_<engine>_<mesh>_<place>  our probe at ARGS["probe"] with Lighting "World Probe", Cycles and EEVEE;
+  auto_<engine>_<mesh>_<place>   the same probe with Lighting "Auto" (each mesh measured and given its light).
+Each render is saved as NAME.npy (H, W, 4, top row first); one line RESULT_TAG + JSON gives times, the bake
+reports, Auto's choice per mesh and what a World-Probe bake after an Auto one leaves on the meshes. It uses the
+extension as Blender installed it, never this repository's.
+"""
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+import sys
+import time
+import traceback
+
+import bpy
+import numpy as np
+from mathutils import Vector
+
+RESULT_TAG = "GSIBL-AUTO-BENCH "
+MODULE = "bl_ext.user_default.gs_ibl"
+ARGS = json.load(open(sys.argv[1]))
+
+
+def _setup() -> None:
+    scene = bpy.context.scene
+    for coll in (bpy.data.objects, bpy.data.meshes, bpy.data.cameras, bpy.data.materials):
+        for block in list(coll):
+            coll.remove(block)
+    world = bpy.data.worlds.new("Black")
+    world.use_nodes = True
+    bg = world.node_tree.nodes.get("Background")
+    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bg.inputs["Strength"].default_value = 0.0
+    scene.world = world
+    r = scene.render
+    r.resolution_x = r.resolution_y = ARGS["size"]
+    r.resolution_percentage = 100
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    r.threads_mode, r.threads = "FIXED", ARGS["threads"]
+    r.film_transparent = True
+    scene.view_settings.view_transform = "Standard"
+    c = scene.cycles
+    c.device, c.use_denoising, c.use_adaptive_sampling, c.seed = "CPU", False, False, 0
+    c.max_bounces = c.diffuse_bounces = 4
+    c.glossy_bounces = c.transmission_bounces = c.volume_bounces = 0
+    c.transparent_max_bounces = 256
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.filter_width = 0.01
+
+
+def _material() -> bpy.types.Material:
+    mat = bpy.data.materials.new("White")
+    mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
+    bsdf.inputs["Color"].default_value = (*(ARGS["albedo"],) * 3, 1.0)
+    bsdf.inputs["Roughness"].default_value = 0.0
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def _mesh(kind: str, place: str, mat: bpy.types.Material) -> bpy.types.Object:
+    p = ARGS["places"][place]
+    centre = Vector(p["centre"])
+    if kind == "sphere":
+        bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=ARGS["radius"], location=centre)
+    else:
+        bpy.ops.mesh.primitive_monkey_add(size=ARGS["suzanne_size"], location=centre)
+    obj = bpy.context.active_object
+    obj.name = f"{kind}_{place}"
+    bpy.ops.object.shade_smooth()
+    if kind == "suzanne":
+        to_cam = Vector(p["camera"]) - centre
+        obj.rotation_euler = (0.0, 0.0, math.atan2(to_cam.y, to_cam.x) + math.pi / 2)  # its face (-Y) to the camera
+        mod = obj.modifiers.new("Subdivision", "SUBSURF")
+        mod.levels = mod.render_levels = 1
+    bpy.context.view_layer.update()
+    if p.get("rest_on") is not None:  # resting on a surface at this height (the table top)
+        zmin = min((obj.matrix_world @ Vector(c)).z for c in obj.bound_box)
+        obj.location.z += p["rest_on"] + 0.005 - zmin
+        bpy.context.view_layer.update()
+    obj.data.materials.append(mat)
+    return obj
+
+
+def _camera(place: str) -> None:
+    p = ARGS["places"][place]
+    name = f"cam_{place}"
+    obj = bpy.data.objects.get(name)
+    if obj is None:
+        data = bpy.data.cameras.new(name)
+        data.sensor_fit, data.angle, data.clip_start = "HORIZONTAL", math.radians(ARGS["fov_deg"]), 1e-3
+        obj = bpy.data.objects.new(name, data)
+        bpy.context.collection.objects.link(obj)
+        obj.location = p["camera"]
+        obj.rotation_mode = "QUATERNION"
+        obj.rotation_quaternion = (Vector(p["centre"]) - Vector(p["camera"])).to_track_quat("-Z", "Y")
+    bpy.context.scene.camera = obj
+
+
+def _engine(name: str) -> str:
+    ids = {i.identifier for i in bpy.context.scene.render.bl_rna.properties["engine"].enum_items}
+    if name == "CYCLES":
+        return "CYCLES"
+    return next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE") if e in ids)
+
+
+def _render(name: str, engine: str, samples: int) -> float:
+    scene = bpy.context.scene
+    scene.render.engine = _engine(engine)
+    if engine == "CYCLES":
+        scene.cycles.samples = samples
+    else:
+        scene.eevee.taa_render_samples = samples
+    path = os.path.join(ARGS["work"], f"{name}.exr")
+    scene.render.filepath = path
+    t0 = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    seconds = time.perf_counter() - t0
+    img = bpy.data.images.load(path)
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    bpy.data.images.remove(img)
+    os.remove(path)
+    np.save(os.path.join(ARGS["work"], f"{name}.npy"), px.reshape(h, w, 4)[::-1])
+    print(f"[auto-bench] {name}: {seconds:.1f} s", flush=True)
+    return seconds
+
+
+def _each(meshes: dict, fn) -> None:
+    """fn(key) with the mesh ``key`` alone in the render (every other mesh hidden: no shadow, no bounce)."""
+    for key, obj in meshes.items():
+        for other in meshes.values():
+            other.hide_render = other is not obj
+        _camera(key[1])
+        fn(key)
+    for other in meshes.values():
+        other.hide_render = False
+
+
+def main() -> dict:
+    import addon_utils
+    if not addon_utils.check(MODULE)[1]:
+        bpy.ops.preferences.addon_enable(module=MODULE)
+    gb = importlib.import_module(f"{MODULE}.blender.bake")
+    so = importlib.import_module(f"{MODULE}.blender.splat_object")
+    ll = importlib.import_module(f"{MODULE}.blender.local_light")
+    rec: dict = {"blender": bpy.app.version_string, "times": {}}
+    times = rec["times"]
+    steps = ARGS["steps"]
+    try:
+        _setup()
+        bpy.ops.wm.ply_import(filepath=ARGS["ply"])
+        splats = bpy.context.active_object
+        rec["native"] = so.is_native_splats(splats)
+        splats.gs_ibl_splats.colour_space = "SRGB"
+        splats.visible_camera = False  # the mesh alone in the picture; bounce and shadow rays still see the splats
+        rec["positions_head"] = so.scene_from_object(splats).positions[:64].tolist()
+        mat = _material()
+        meshes = {(kind, place): _mesh(kind, place, mat) for place in ARGS["places"] for kind in ARGS["meshes"]}
+        rec["boxes"] = {f"{k[0]}_{k[1]}": [list(map(float, o.matrix_world @ Vector(c))) for c in o.bound_box]
+                        for k, o in meshes.items()}
+
+        def name(tag, key):
+            return f"{tag}_{key[0]}_{key[1]}"
+
+        if "native" in steps:
+            _each(meshes, lambda k: times.__setitem__(name("native", k), _render(name("native", k), "CYCLES",
+                                                                                 ARGS["native_samples"])))
+        if "world" not in steps and "auto" not in steps:
+            rec["ok"] = True
+            return rec
+        bpy.ops.object.empty_add(location=ARGS["probe"])
+        probe = bpy.context.active_object
+        probe.name = "GS-IBL Probe"
+        s = probe.gs_ibl_probe
+        s.is_probe, s.splats, s.keep_background = True, splats, False  # the panel's defaults otherwise
+
+        def ours(tag: str) -> None:
+            def one(k):
+                times[name(f"{tag}_cycles", k)] = _render(name(f"{tag}_cycles", k), "CYCLES", ARGS["samples"])
+                times[name(f"{tag}_eevee", k)] = _render(name(f"{tag}_eevee", k), "EEVEE", ARGS["eevee_samples"])
+            if "eevee_first_s" not in times:  # EEVEE's first frame compiles its shaders: not a frame's cost
+                _camera(next(iter(meshes))[1])
+                times["eevee_first_s"] = _render("eevee_warmup", "EEVEE", 1)
+            _each(meshes, one)
+
+        if "world" in steps:
+            s.lighting = "WORLD"
+            t0 = time.perf_counter()
+            _, rec["world_report"], rec["world_warning"] = gb.bake_into_world(bpy.context.scene, probe)
+            times["world_bake_s"] = time.perf_counter() - t0
+            splats.visible_camera = False
+            ours("world")
+        if "auto" in steps:
+            s.lighting = "AUTO"
+            t0 = time.perf_counter()
+            _, rec["auto_report"], rec["auto_warning"] = gb.bake_into_world(bpy.context.scene, probe)
+            times["auto_bake_s"] = time.perf_counter() - t0
+            splats.visible_camera = False
+            rec["local_report"] = s.local_report.splitlines()
+            rec["last_report"] = s.last_report.splitlines()
+            rec["choice"] = {f"{k[0]}_{k[1]}": ll.has_local_light(o) or "world" for k, o in meshes.items()}
+            ours("auto")
+            # the EEVEE warm-up compiled the World Probe's material; Auto's adds the local-light group: its
+            # first frame compiles again, so the first auto EEVEE frame's time holds that
+            # Lighting back to World Probe and baked again (warm): what stays on the meshes?
+            s.lighting = "WORLD"
+            t0 = time.perf_counter()
+            gb.bake_into_world(bpy.context.scene, probe)
+            times["world_rebake_warm_s"] = time.perf_counter() - t0
+            rec["after_world_rebake"] = {f"{k[0]}_{k[1]}": ll.has_local_light(o) for k, o in meshes.items()}
+            rec["after_world_rebake_group_in_material"] = ll.in_material(mat)
+        rec["ok"] = True
+    except Exception:  # noqa: BLE001 (reported to the driver)
+        rec.update(ok=False, error=traceback.format_exc())
+    return rec
+
+
+if __name__ == "__main__":
+    print(RESULT_TAG + json.dumps(main()), flush=True)
