@@ -79,6 +79,10 @@ def test_each_mesh_gets_the_light_it_needs(room):
     bpy.app.timers.unregister(gb.run_pending)
     gb.run_pending()
     assert ll.has_local_light(meshes["near"]) is None
+    # World Probe takes Auto's light off again (what the operators gave stays: test_blender_probes.py)
+    probe.gs_ibl_probe.lighting = "WORLD"
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert all(ll.has_local_light(o) is None for o in meshes.values())
 
 
 def test_world_probe_lighting_adds_nothing(room):

@@ -1,20 +1,34 @@
 """Lighting "Auto": every lit mesh gets the light it needs (core/probe/auto_light.py), without being asked.
 
-After the World probe's bake, probes on a small grid over each lit mesh are baked in one batched submission with
-one at the World probe's place; each mesh then keeps the World's light, or gets its own probe or its grid through
-the local-light group (blender/local_light.py), which adds the difference to the World's light. Re-decided when a
-lit mesh moves (Update When Moved) and at every bake.
+After the World probe's bake, probes at each lit mesh's centre and box corners are baked in one batch with one at
+the World probe's place (the measurement); a mesh whose light differs from the World's gets its centre's probe, and
+one whose light varies across it a grid (a second batch), through the local-light group (blender/local_light.py),
+which adds the difference to the World's light. A mesh the World lights well enough costs its nine probes. Re-decided when a lit mesh moves (Update When Moved) and at every bake.
 """
 from __future__ import annotations
 
 import bpy
 import numpy as np
 
-from ..core.probe.auto_light import LightChoice, centre_index, choose_light, mesh_grid
+from ..core.probe.auto_light import MEASURE_FACE, LightChoice, choose_light, measure_points, mesh_grid
 from . import local_light as ll
 from .object_probes import Progress, coefficients_with_world, lit_meshes, probe_renderer, world_box
 
 REPORT_PREFIX = "Auto lighting: "
+AUTO_KEY = "gs_ibl_auto_light"  # on a mesh Lighting Auto lit: the probe that did (its light is that probe's to undo)
+
+
+def remove_auto_light(scene: bpy.types.Scene, probe: bpy.types.Object) -> int:
+    """Take the light Lighting Auto gave meshes off them (the probe is set to World Probe); what the local-light
+    operators gave stays. Returns how many meshes changed."""
+    n = 0
+    for obj in scene.objects:
+        if obj.get(AUTO_KEY) == probe.name:
+            if ll.has_local_light(obj):
+                ll.unlight_object(obj)
+            del obj[AUTO_KEY]
+            n += 1
+    return n
 
 
 def auto_light(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object] | None = None,
@@ -25,28 +39,36 @@ def auto_light(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bp
     if not meshes:
         return "", []
     r = probe_renderer(scene, probe, need_world=True)
-    specs = [mesh_grid(*world_box(o)) for o in meshes]
-    points = np.concatenate([spec.points().reshape(-1, 3) for spec in specs])
-    d_world, d = coefficients_with_world(probe, r, points, progress)  # one batch: the World's place and every node
+    boxes = [world_box(o) for o in meshes]
+    points = np.concatenate([measure_points(*box) for box in boxes])
+    d_world, d = coefficients_with_world(probe, r, points, progress, MEASURE_FACE)  # the measurement: one batch
     tol = float(probe.gs_ibl_probe.variation_tolerance)
-    tiles, choices, start = {}, [], 0
-    for obj, spec in zip(meshes, specs):
-        d_grid = d[start:start + spec.count].reshape(*spec.shape, *d.shape[1:])
-        start += spec.count
-        choice = choose_light(obj.name, spec, d_world, d_grid, tol)
-        choices.append(choice)
-        if choice.kind == "world":
+    choices = [choose_light(o.name, d_world, d[9 * i:9 * i + 9], tol) for i, o in enumerate(meshes)]
+    # light of their own, at the operators' size, for the meshes that need it: one more batch
+    keys, tiles, grids = {}, {}, {}
+    for i, (obj, box, c) in enumerate(zip(meshes, boxes, choices)):
+        if c.kind == "probe":  # its centre's measurement is its probe
+            keys[obj.name] = f"probe:{obj.name}"
+            tiles[keys[obj.name]] = ll.probe_tile(points[9 * i], d[9 * i] - d_world)
+        elif c.kind == "grid":
+            keys[obj.name] = f"object:{obj.name}"
+            grids[keys[obj.name]] = mesh_grid(*box)
+    if grids:  # the grids' nodes: one more batch, baked alike with the World's place
+        pts = np.concatenate([spec.points().reshape(-1, 3) for spec in grids.values()])
+        d_world_g, dg = coefficients_with_world(probe, r, pts, progress, MEASURE_FACE)
+        start = 0
+        for key, spec in grids.items():
+            tiles[key] = (spec, dg[start:start + spec.count].reshape(*spec.shape, *dg.shape[1:]) - d_world_g)
+            start += spec.count
+    for obj, c in zip(meshes, choices):
+        if c.kind == "world":
             if ll.has_local_light(obj):
                 ll.unlight_object(obj)
+            obj.pop(AUTO_KEY, None)
             continue
-        if choice.kind == "probe":
-            key = f"probe:{obj.name}"
-            tiles[key] = ll.probe_tile(spec.points()[centre_index(spec)], d_grid[centre_index(spec)] - d_world)
-        else:
-            key = f"object:{obj.name}"
-            tiles[key] = (spec, d_grid - d_world)
-        ll.set_object_grid(obj, key)
+        ll.set_object_grid(obj, keys[obj.name])
         ll.light_object(obj, float(probe.gs_ibl_probe.strength))
+        obj[AUTO_KEY] = probe.name
     if tiles:
         ll.store_grids(tiles)
     if objects is None:  # a whole bake: the More Than One Probe panel lists why each mesh got what it got

@@ -239,6 +239,9 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
             progress("choosing each mesh's light", 0.95)
         auto = _relight(scene, probe)
         t = lap("each mesh's light", t)
+    else:
+        from .auto_light import remove_auto_light  # imports object_probes, which imports this module
+        remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
     lines, warning = summary(result, time.perf_counter() - t0, stages)
     if auto:
         lines.append(auto)

@@ -90,12 +90,14 @@ def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
 
 
 def coefficients_with_world(probe: bpy.types.Object, renderer, points: np.ndarray,
-                            progress: Progress | None = None) -> tuple[np.ndarray, np.ndarray]:
+                            progress: Progress | None = None,
+                            face_size: int = POINT_FACE_SIZE) -> tuple[np.ndarray, np.ndarray]:
     """Monomial coefficients of the World probe's light (9, 3) and of probes at ``points`` (P, 9, 3), baked in one
     batch the same way (so their difference carries no difference of method)."""
     pos = np.array(probe.matrix_world.translation, np.float64)
     try:
-        d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), progress=progress))
+        d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), face_size,
+                                                 progress=progress))
     finally:
         renderer.trim()  # as check_variation: a batch's buffers are not kept in the splat cache
     return d[0], d[1:]

@@ -1,15 +1,17 @@
 """The light each mesh needs, chosen from probes around it: the World probe, a probe of its own, or a grid.
 
 One probe lights every mesh as if it stood at the probe. Whether that is enough for a mesh is measured, not asked:
-order-2 SH probes on a 3 x 3 x 3 grid over the mesh's box (shrunk towards its centre, so the nodes of a mesh resting
-on a floor or table stay off those splats), baked in the same batch as a probe at the World probe's place, give
+order-2 SH probes (MEASURE_FACE^2 faces) at the centre and the 8 corners of the mesh's box (shrunk towards its
+centre, so a mesh resting on a floor or table keeps its probes off those splats), baked in the same batch as one at
+the World probe's place, give
 
     offset    = max_n |E_centre(n) - E_world(n)| / mean_n E_centre(n)   (the mesh stands elsewhere in the light)
-    variation = max_node max_n |E_node(n) - E_centre(n)| / mean_n E_centre(n)   (the light changes across it)
+    variation = max_corner max_n |E_corner(n) - E_centre(n)| / mean_n E_centre(n)   (the light changes across it)
 
 (luminance, over 64 normals: the light a diffuse surface sees). Within the tolerance on both the World is enough;
-else with a uniform light over the mesh its own probe at its centre; else the grid itself. "Model no more than a
-scene needs": a mesh by the probe costs nothing more, a mesh by the window gets eight more numbers than a probe.
+else with a uniform light over the mesh its own probe at its centre (the centre's measurement); else a 3 x 3 x 3
+grid over it. "Model no more than a scene needs": the measurement costs 9 small probes a mesh, and only the meshes
+whose light varies across them get a grid baked (a second batch).
 """
 from __future__ import annotations
 
@@ -21,13 +23,22 @@ from .grid import GridSpec, eval_irradiance
 from .variation import LUMINANCE, NORMALS
 
 GRID_SHAPE = (3, 3, 3)
+MEASURE_FACE = 32  # face size of the measuring probes (the local-light operators' size: a mesh's own probe is its
+# centre's measurement). At 16^2 a 5 cm sphere beside the World probe read 6% across it: render noise, not light.
 SHRINK = 0.7  # the grid spans this fraction of the mesh's box about its centre
 MIN_SPAN = 0.05  # metres: a box thinner than this along an axis gets one node on it
 KINDS = ("world", "probe", "grid")
 
 
+def measure_points(lo, hi) -> np.ndarray:
+    """(9, 3): the centre, then the 8 corners, of the mesh's shrunk box (the points its light is measured at)."""
+    from .variation import box_points
+    spec = mesh_grid(lo, hi)
+    return box_points(spec.lo, spec.hi)
+
+
 def mesh_grid(lo, hi) -> GridSpec:
-    """The grid of probes that measures (and, if chosen, lights) a mesh with box lo..hi."""
+    """The grid of probes that lights a mesh with box lo..hi whose light varies across it."""
     lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
     centre, half = (lo + hi) / 2, (hi - lo) / 2 * SHRINK
     shape = tuple(n if 2 * h >= MIN_SPAN else 1 for n, h in zip(GRID_SHAPE, half))
@@ -60,12 +71,11 @@ def _luminance(d: np.ndarray) -> np.ndarray:
     return eval_irradiance(d[..., None, :, :], NORMALS) @ LUMINANCE
 
 
-def choose_light(name: str, spec: GridSpec, d_world: np.ndarray, d_grid: np.ndarray,
-                 tolerance: float) -> LightChoice:
-    """The light ``name`` needs: ``d_world`` (9, 3) the World probe's monomial coefficients, ``d_grid``
-    (nx, ny, nz, 9, 3) those of ``spec``'s nodes."""
-    e_nodes = _luminance(np.asarray(d_grid).reshape(-1, *np.shape(d_world)))
-    e_centre = _luminance(np.asarray(d_grid)[centre_index(spec)])
+def choose_light(name: str, d_world: np.ndarray, d_points: np.ndarray, tolerance: float) -> LightChoice:
+    """The light ``name`` needs: ``d_world`` (9, 3) the World probe's monomial coefficients, ``d_points`` (9, 9, 3)
+    those at measure_points (centre first), baked alike."""
+    e_nodes = _luminance(np.asarray(d_points)[1:])
+    e_centre = _luminance(np.asarray(d_points)[0])
     e_world = _luminance(d_world)
     scale = max(float(np.mean(np.maximum(e_centre, 0.0))), 1e-9)
     offset = float(np.max(np.abs(e_centre - e_world)) / scale)

@@ -1,0 +1,33 @@
+"""The rule of Lighting Auto (core/probe/auto_light.py), on monomial coefficients with known answers."""
+import numpy as np
+
+from gs_ibl_addon.core.probe.auto_light import choose_light, measure_points, mesh_grid
+
+
+def _uniform(level: float) -> np.ndarray:
+    """Monomial coefficients (9, 3) of a light whose irradiance is ``level`` in every direction."""
+    d = np.zeros((9, 3))
+    d[0] = level
+    return d
+
+
+def test_the_world_a_probe_or_a_grid():
+    world = _uniform(1.0)
+    same = np.stack([_uniform(1.0)] * 9)
+    assert choose_light("a", world, same, 0.05).kind == "world"
+    brighter = np.stack([_uniform(1.3)] * 9)  # uniform across the mesh, 30% above the World's
+    c = choose_light("b", world, brighter, 0.05)
+    assert c.kind == "probe" and abs(c.offset - 0.3 / 1.3) < 1e-9 and c.variation < 1e-12
+    varying = np.stack([_uniform(1.0)] + [_uniform(1.0 + 0.1 * i) for i in range(8)])
+    c = choose_light("c", world, varying, 0.05)
+    assert c.kind == "grid" and abs(c.variation - 0.7) < 1e-9
+    assert "grid" in c.message() and "70%" in c.message()
+
+
+def test_measure_points_and_grid_keep_off_the_floor():
+    lo, hi = np.array([0.0, 0.0, 0.0]), np.array([1.0, 2.0, 0.5])  # a mesh resting on the floor at z = 0
+    pts = measure_points(lo, hi)
+    assert pts.shape == (9, 3) and np.allclose(pts[0], (lo + hi) / 2)
+    assert pts[1:, 2].min() > 0.05  # its lowest probes stand above the floor's splats
+    flat = mesh_grid([0, 0, 0], [1, 1, 0.01])  # a thin plate gets one node across its thickness
+    assert flat.shape == (3, 3, 1)
