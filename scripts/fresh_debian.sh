@@ -56,6 +56,7 @@ grep -h -e '^\[setup\] WARNING' -e '^\[demo\] skipping' -e '^\[node_tools\].*ski
   | sort -u | sed 's/^/[fresh]   /' | tee -a "$logs/summary.txt" || true
 summary=$(grep -E '^(=+ )?[0-9]+ (passed|failed|error)' "$logs/test.log" | tail -n 1 || true)
 say "pytest: ${summary:-no summary line (see $logs/test.log)}"
+grep '^FAILED' "$logs/test.log" | cut -d' ' -f2 | sed 's/^/[fresh]   /' | tee -a "$logs/summary.txt" || true
 versions=$(in_root "$r" /root/gs-ibl/.venv/bin/python -c '
 import sys, numpy
 try:
