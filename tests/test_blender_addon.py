@@ -80,7 +80,7 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
     src = random_scene(500, sh_degree=2)
     path = tmp_path / "garden.ply"
     write_3dgs_ply(path, src)
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path)) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path)) == {"FINISHED"}
     obj = bpy.context.active_object
     assert obj.name == "garden" and obj.select_get() and obj.name in bpy.context.scene.objects
     assert obj["gs_ibl"]["source"] == str(path) and obj["gs_ibl"]["sh_degree"] == 2
@@ -128,10 +128,10 @@ def test_scene_from_object_applies_world_transform(blender):
 def test_custom_axes_and_scale(blender, tmp_path, write_3dgs_ply):
     path = tmp_path / "s.ply"
     write_3dgs_ply(path, random_scene(10, sh_degree=1))
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", global_scale=3.0) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", global_scale=3.0) == {"FINISHED"}
     np.testing.assert_allclose(np.array(bpy.context.active_object.matrix_world), np.diag([3.0, 3.0, 3.0, 1.0]),
                                atol=1e-6)
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="CUSTOM", axis_forward="-Z",
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="CUSTOM", axis_forward="-Z",
                                         axis_up="Y") == {"FINISHED"}
     m = np.array(bpy.context.active_object.matrix_world)
     np.testing.assert_allclose(m[:3, :3] @ [0, 1, 0], [0, 0, 1], atol=1e-6)
@@ -144,12 +144,12 @@ def test_default_orientation_brings_the_sample_upright(blender, tmp_path, write_
     from gs_ibl_addon.core.formats.axes import declared_axes
     sample = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "samples", "room.ply")
     assert declared_axes(sample) == ("Y", "Z")
-    assert bpy.ops.gs_ibl.import_splats(filepath=sample, show_proxy=False) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=sample, show_proxy=False) == {"FINISHED"}
     np.testing.assert_allclose(np.array(bpy.context.active_object.matrix_world), np.identity(4), atol=1e-6)
     plain = tmp_path / "capture.ply"
     write_3dgs_ply(plain, random_scene(10, sh_degree=0))
     assert declared_axes(plain) is None
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(plain), show_proxy=False) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(plain), show_proxy=False) == {"FINISHED"}
     m = np.array(bpy.context.active_object.matrix_world)
     np.testing.assert_allclose(m, import_matrix("OPENCV", "Z", "-Y", 1.0), atol=1e-6)
     np.testing.assert_allclose(m[:3, :3] @ [0, -1, 0], [0, 0, 1], atol=1e-6)  # the file's -Y is up
@@ -164,7 +164,7 @@ def test_bad_file_reports_error_and_leaves_nothing(blender, tmp_path, content, e
     path.write_bytes(content)
     counts = (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.node_groups), len(bpy.data.materials))
     with pytest.raises(RuntimeError) as e:  # bpy.ops turns an ERROR report into RuntimeError in background mode
-        bpy.ops.gs_ibl.import_splats(filepath=str(path))
+        bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path))
     msg = str(e.value)
     assert expect in msg and str(path) in msg and "Traceback" not in msg
     assert (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.node_groups), len(bpy.data.materials)) == counts
@@ -176,7 +176,7 @@ def test_truncated_ply_reports_error(blender, tmp_path, write_3dgs_ply):
     data = path.read_bytes()
     path.write_bytes(data[: len(data) // 2])
     with pytest.raises(RuntimeError, match="cut.ply"):
-        bpy.ops.gs_ibl.import_splats(filepath=str(path))
+        bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path))
     assert len(bpy.data.objects) == 0 and len(bpy.data.meshes) == 0
 
 

@@ -27,7 +27,7 @@ def _mesh(kind: str, location, size: float):
 
 @pytest.fixture
 def room(blender):
-    assert bpy.ops.gs_ibl.import_splats(filepath=SAMPLE, show_proxy=False) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=SAMPLE, show_proxy=False) == {"FINISHED"}
     splats = bpy.context.active_object
     near = _mesh("sphere", (0.0, 0.0, 1.0), 0.05)  # at the probe: the World's light is its light
     far = _mesh("sphere", (-2.2, -1.8, 0.6), 0.02)  # the far corner, tiny: light of its own, uniform across it

@@ -32,7 +32,7 @@ def _world_images():
 def _import_shell(tmp_path, write_3dgs_ply, center=(0.0, 0.0, 0.0)):
     path = tmp_path / "shell.ply"
     write_3dgs_ply(path, shell_scene(SKY, SHELL_N, SHELL_R, center))
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
     obj = bpy.context.active_object
     assert obj.gs_ibl_splats.colour_space == "SRGB"  # the file declares nothing: Blender's rule
     obj.gs_ibl_splats.colour_space = "LINEAR"  # the shell's colours are linear radiance

@@ -16,7 +16,7 @@ SKY = SkyGradient()
 def _import(tmp_path, write_3dgs_ply, name="shell", n=3000, radius=5.0, center=(0.0, 0.0, 0.0), **kw):
     path = tmp_path / f"{name}.ply"
     write_3dgs_ply(path, shell_scene(SKY, n, radius, center))
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False, **kw) \
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", show_proxy=False, **kw) \
         == {"FINISHED"}
     obj = bpy.context.active_object
     obj.gs_ibl_splats.colour_space = "LINEAR"

@@ -95,7 +95,7 @@ def test_import_each_format(blender, tmp_path, fmt):
     scene = make_scene()
     path = tmp_path / f"scene_{fmt}{FORMATS[fmt]}"
     pos, opac, pos_tol, opac_tol, degree = _write(fmt, path, scene)
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path)) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path)) == {"FINISHED"}
     obj = bpy.context.active_object
     assert obj.name == path.stem and obj["gs_ibl"]["sh_degree"] == degree
     assert len(obj.data.vertices) == N
@@ -155,7 +155,7 @@ def test_damaged_file_reports_core_error_and_imports_nothing(blender, tmp_path, 
         read_scene(path)
     before = _datablock_counts()
     with pytest.raises(RuntimeError) as e:  # bpy.ops turns the operator's ERROR report into RuntimeError
-        bpy.ops.gs_ibl.import_splats(filepath=str(path))
+        bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path))
     msg = str(e.value)
     assert str(core.value) in msg and str(path) in msg, msg
     assert "Traceback" not in msg, msg  # reported, not crashed
@@ -169,9 +169,9 @@ def test_one_bad_file_among_several_imports_none(blender, tmp_path):
     before = _datablock_counts()
     files = [{"name": n} for n in ("a.spz", "b.ply", "c.splat")]
     with pytest.raises(RuntimeError, match="c.splat"):
-        bpy.ops.gs_ibl.import_splats(directory=str(tmp_path), files=files)
+        bpy.ops.gs_ibl.import_splats(native=False, directory=str(tmp_path), files=files)
     assert _datablock_counts() == before
-    assert bpy.ops.gs_ibl.import_splats(directory=str(tmp_path), files=files[:2]) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, directory=str(tmp_path), files=files[:2]) == {"FINISHED"}
     assert _datablock_counts()["objects"] == before["objects"] + 2
 
 
@@ -187,7 +187,7 @@ def test_spz_axes_option_reads_supersplat_rdf_files(blender, tmp_path):
     tol = SPZ_STEP + 1e-6
 
     def imported(path, **kw):
-        assert bpy.ops.gs_ibl.import_splats(filepath=str(path), **kw) == {"FINISHED"}
+        assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), **kw) == {"FINISHED"}
         return bpy.context.active_object
 
     obj = imported(rdf, spz_axes="RDF")
@@ -213,7 +213,7 @@ def test_spz_axes_default_keeps_a_v4_coordinate_record(blender, tmp_path):
     tagged = tmp_path / "tagged.spz"
     tagged.write_bytes(bytes(header) + record + blob[32:])
     assert np.abs(read_spz(tagged).positions - scene.positions).max() <= SPZ_STEP + 1e-6  # the core agrees
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(tagged)) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(tagged)) == {"FINISHED"}
     assert np.abs(_local_positions(bpy.context.active_object) - scene.positions).max() <= SPZ_STEP + 1e-6
 
 
@@ -221,7 +221,7 @@ def test_spz_axes_is_ignored_for_other_formats(blender, tmp_path):
     scene = make_scene(seed=8)
     path = tmp_path / "s.ply"
     write_ply(path, scene)
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path), spz_axes="RDF") == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), spz_axes="RDF") == {"FINISHED"}
     np.testing.assert_array_equal(_local_positions(bpy.context.active_object), scene.positions)
 
 
@@ -249,7 +249,7 @@ def test_sog_imports_with_blenders_own_webp_decoder(blender, tmp_path, monkeypat
     by_blender = read_sog(path)
     for field in ("positions", "scales", "rotations", "opacities", "sh"):
         np.testing.assert_array_equal(getattr(by_blender, field), getattr(by_library, field), err_msg=field)
-    assert bpy.ops.gs_ibl.import_splats(filepath=str(path)) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path)) == {"FINISHED"}
     assert len(bpy.context.active_object.data.vertices) == scene.count
     import gs_ibl_addon
     gs_ibl_addon.unregister()

@@ -130,7 +130,7 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     from gs_ibl_addon.blender import local_light as ll
     from gs_ibl_addon.blender import splat_cache
     from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients
-    assert bpy.ops.gs_ibl.import_splats(filepath=ROOM, axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=ROOM, axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
     room = bpy.context.active_object
     assert room.gs_ibl_splats.colour_space == "LINEAR"
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(2.2, 0.0, 1.4))

@@ -336,7 +336,7 @@ def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_
     from gs_ibl_addon.blender.lights_from_probe import COLLECTION, lights_of
     path = tmp_path / "sun.ply"
     write_3dgs_ply(path, sun_shells["float"])
-    assert blender.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    assert blender.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
     blender.context.active_object.gs_ibl_splats.colour_space = "LINEAR"
     blender.ops.gs_ibl.add_probe(place="CURSOR")
     probe = blender.context.active_object
@@ -364,7 +364,7 @@ def test_blender_highlight_gain_lights_the_clipped_capture_like_the_float_one(bl
     from gs_ibl_addon.blender import world as gw
     path = tmp_path / "clipped.ply"
     write_3dgs_ply(path, sun_shells["clipped"])
-    assert blender.ops.gs_ibl.import_splats(filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
+    assert blender.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
     blender.context.active_object.gs_ibl_splats.colour_space = "LINEAR"
     blender.ops.gs_ibl.add_probe(place="CURSOR")
     s = blender.context.active_object.gs_ibl_probe
@@ -396,6 +396,7 @@ def test_cycles_sun_from_the_probe_lights_like_the_light_it_replaces(sun_shells,
             probe = bpy.data.objects.new("GS-IBL Probe", None)
             s = probe.gs_ibl_probe
             s.is_probe, s.splats, s.face_size, s.keep_background, s.lights = True, splats, 64, False, lights
+            s.lighting = "WORLD"  # the World's sun against the sun light: no local light on the sphere
             scene.collection.objects.link(probe)
             bake_into_world(scene, probe)
         finally:
