@@ -1,25 +1,30 @@
 """The material node group through which a mesh gets light of its own: a per-object probe or a probe grid.
 
 The World (one probe) keeps lighting every mesh: background, specular and diffuse. A mesh whose light differs
-from the World probe's gets the difference added to its material's surface shader:
+from the World probe's gets it through its material:
 
-    surface = the user's shader + Emission(albedo x strength x (E_here(n) - E_world(n)))
+    surface = s x the user's shader + Emission(albedo x strength x (H(n) - s B(n))),  H = W + D
 
-so its diffuse part sees E_here (its own probe, or its grid at the shading point) and everything else of the
-user's material stays as it was. E is order-2 SH irradiance, kept as the nine monomial coefficients of
-core/probe/grid.py, so the group is a sum of nine colours times polynomials of the world normal.
+where W is the World probe's light, D the mesh's difference (its own probe, or its grid at the shading point), B
+what the user's shader gets from the World in this engine and s the largest scale in 0..1 that keeps the emission
+non-negative (EEVEE clamps negative emission): core/probe/local_mix.py is the numpy twin and says why. The group
+has two outputs, one per engine (B = W for Cycles, the World's order-1 part for EEVEE), read by the user's Material
+Output and by an EEVEE-only output of ours. E is order-2 SH irradiance, kept as the nine monomial coefficients of
+core/probe/grid.py, so each of W and D is a sum of nine colours times polynomials of the world normal.
 
 Every kind of local light is a grid (a per-object probe is a 1 x 1 x 1 grid at the mesh's centre), and every grid
 is a tile (core/probe/grid.py ``pack_grid``) of one float image per file, the atlas, stacked from the bottom
 row up. A mesh says which tile and where its box is through four custom properties (GRID_ATTRS), read by
 Attribute nodes of type Object (EEVEE reads at most 8 such attributes per material: these are 4), so one
 material serves meshes with different grids, and a mesh without them (sharing the material) reads 0 and keeps
-the World's light. Per coefficient the 8 texels around the point, blended trilinearly.
+the World's light. Per coefficient the 8 texels around the point, blended trilinearly. W lives on the atlas
+(WORLD_COEFFS) and in the group as constants.
 
-One group per file (rebuilt when the atlas changes size); inserting it into a material puts one group node
-between the user's shader and the Material Output; ``remove_from_material`` links them directly again and
-deletes only our node, so nothing of the user's material is lost. The state lives in datablocks (custom
-properties, the packed atlas and its tile list, the group), so it follows undo and save/reload.
+One group per file (rebuilt when the atlas changes); inserting it into a material puts one group node between
+the user's shader and the Material Output, and one EEVEE Material Output of ours beside it;
+``remove_from_material`` links them directly again and deletes only our nodes, so nothing of the user's material
+is lost. The state lives in datablocks (custom properties, the packed atlas and its tile list, the group), so it
+follows undo and save/reload.
 """
 from __future__ import annotations
 
@@ -29,6 +34,7 @@ import bpy
 import numpy as np
 
 from ..core.probe.grid import COEFFS, GridSpec
+from ..core.probe.local_mix import EPS, L1_TERMS
 from .compat import node_tree
 from .datablocks import MARKER, find_ours, is_ours
 
@@ -39,6 +45,8 @@ GRID_KEY = "gs_ibl_grid_key"  # object custom property: its tile of the atlas ("
 GRID_ATTRS = {"lo": "gs_ibl_grid_lo", "scale": "gs_ibl_grid_scale", "max": "gs_ibl_grid_max",
               "tile": "gs_ibl_grid_tile"}
 TILES = "gs_ibl_tiles"  # atlas custom property: JSON {key: {"lo", "hi", "shape", "row0"}}
+WORLD_COEFFS = "gs_ibl_world"  # atlas custom property: JSON (9, 3) monomial coefficients of the World probe's light
+EEVEE_OUTPUT = "GS-IBL EEVEE Output"  # our Material Output (target EEVEE) in a lit material
 GRID_IMAGE = "GS-IBL Grid"
 DEFAULT_MATERIAL_ROLE = "local_material"
 
@@ -82,10 +90,11 @@ def _tile_pixels(img: bpy.types.Image, tile: dict) -> np.ndarray:
     return buf.reshape(h, w, 4)[tile["row0"]:tile["row0"] + nz * ny, :COEFFS * nx, :3].copy()
 
 
-def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]]) -> bpy.types.Image:
+def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray | None = None) -> bpy.types.Image:
     """Put grids {key: (spec, coefficients (nx, ny, nz, 9, 3))} into the file's atlas, replacing tiles of the same
     key and dropping tiles no object points at (call set_object_grid first); then every object lit by a tile gets
-    its numbers, and the group is rebuilt for the atlas's size."""
+    its numbers, and the group is rebuilt for the atlas's size. ``world``: the (9, 3) coefficients of the World
+    probe's light the tiles are differences to (kept from the last call when None; black at first)."""
     from ..core.probe.grid import pack_grid
     img, tiles = _atlas()
     used = {o.get(GRID_KEY) for o in bpy.data.objects}
@@ -100,8 +109,13 @@ def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]]) -> bpy.types.Imag
         atlas[row:row + px.shape[0], :px.shape[1]] = px
         tiles[k] = {**t, "row0": row}
         row += px.shape[0]
+    old_world = img.get(WORLD_COEFFS) if img is not None else None
     img = _atlas_image(atlas, img)
     img[TILES] = json.dumps(tiles)
+    if world is not None:
+        img[WORLD_COEFFS] = json.dumps(np.asarray(world, np.float64).reshape(COEFFS, 3).tolist())
+    elif old_world is not None:
+        img[WORLD_COEFFS] = old_world
     for o in bpy.data.objects:
         t = tiles.get(o.get(GRID_KEY))
         if t is None:
@@ -146,6 +160,9 @@ def local_light_group(atlas: bpy.types.Image | None = None) -> bpy.types.ShaderN
         tree[MARKER] = ROLE
         _interface(tree)
         _build(tree, None)
+    elif "EEVEE" not in tree.interface.items_tree:  # a file from before the EEVEE output
+        tree.interface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
+        _build(tree, None)
     if atlas is not None:
         _build(tree, atlas)
     return tree
@@ -159,6 +176,13 @@ def _interface(tree) -> None:
     st = iface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
     st.default_value, st.min_value = 1.0, 0.0
     iface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
+    iface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
+
+
+def _world_coefficients(atlas) -> np.ndarray:
+    """The (9, 3) World coefficients kept on the atlas (zeros: a black World)."""
+    raw = atlas.get(WORLD_COEFFS) if atlas is not None else None
+    return np.asarray(json.loads(raw), np.float64) if raw else np.zeros((COEFFS, 3))
 
 
 class _Nodes:
@@ -200,6 +224,12 @@ class _Nodes:
         self.L.new(v, sep.inputs[0])
         return sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
 
+    def const(self, v):
+        c = self.N.new("ShaderNodeCombineXYZ")
+        for i, x in enumerate(v):
+            c.inputs[i].default_value = float(x)
+        return c.outputs[0]
+
     def attribute(self, name):
         a = self.N.new("ShaderNodeAttribute")
         a.attribute_type, a.attribute_name = "OBJECT", name
@@ -207,31 +237,49 @@ class _Nodes:
 
 
 def _build(tree, atlas) -> None:
-    """(Re)build the group's nodes: w sum_k c_k(P) P_k(n), emitted times albedo x strength (nothing without an
-    atlas)."""
+    """(Re)build the group's nodes (core/probe/local_mix.py in nodes): H = W + w D with D = sum_k c_k(P) P_k(n),
+    then per engine s x shader + Emission(albedo x strength x (H - s B)). Without an atlas both outputs pass the
+    shader through."""
     tree.nodes.clear()
     b = _Nodes(tree)
     N, L = b.N, b.L
     gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
-    add = N.new("ShaderNodeAddShader")
-    L.new(gin.outputs["Shader"], add.inputs[0])
-    L.new(add.outputs[0], gout.inputs["Shader"])
     if atlas is None:
+        L.new(gin.outputs["Shader"], gout.inputs["Shader"])
+        L.new(gin.outputs["Shader"], gout.inputs["EEVEE"])
         return
     geo = N.new("ShaderNodeNewGeometry")
     x, y, z = b.separate(geo.outputs["Normal"])
     poly = [None, y, z, x, b.math("MULTIPLY", x, y), b.math("MULTIPLY", y, z),
             b.math("MULTIPLY_ADD", b.math("MULTIPLY", z, z), 3.0, -1.0), b.math("MULTIPLY", x, z),
             b.math("SUBTRACT", b.math("MULTIPLY", x, x), b.math("MULTIPLY", y, y))]
+
+    def poly_sum(coeffs):
+        total = None
+        for k, c in enumerate(coeffs):
+            term = c if poly[k] is None else b.scale(c, poly[k])
+            total = term if total is None else b.vec("ADD", total, term)
+        return total
     coeffs, weight = _grid_lookups(b, geo.outputs["Position"], atlas)
-    total = None
-    for k in range(COEFFS):
-        term = coeffs[k] if poly[k] is None else b.scale(coeffs[k], poly[k])
-        total = term if total is None else b.vec("ADD", total, term)
-    lit = b.vec("MULTIPLY", b.scale(b.scale(total, weight), gin.outputs["Strength"]), gin.outputs["Albedo"])
-    emit = N.new("ShaderNodeEmission")
-    L.new(lit, emit.inputs["Color"])
-    L.new(emit.outputs[0], add.inputs[1])
+    world = [b.const(c) for c in _world_coefficients(atlas)]
+    w_light = poly_sum(world)
+    here = b.vec("ADD", w_light, b.scale(poly_sum(coeffs), weight))
+    bases = {"Shader": w_light, "EEVEE": b.vec("MAXIMUM", poly_sum(world[:L1_TERMS]), (0.0, 0.0, 0.0))}
+    for out_name, base in bases.items():
+        rx, ry, rz = b.separate(b.vec("DIVIDE", here, b.vec("MAXIMUM", base, (EPS, EPS, EPS))))
+        s = b.math("MINIMUM", b.math("MINIMUM", rx, ry), rz)
+        s.node.use_clamp = True  # 0..1
+        mixer = N.new("ShaderNodeMixShader")  # Fac 1 - s: s x the shader, the rest nothing (no second shader)
+        L.new(b.math("SUBTRACT", 1.0, s), mixer.inputs["Fac"])
+        L.new(gin.outputs["Shader"], mixer.inputs[1])
+        rest = b.vec("SUBTRACT", here, b.scale(base, s))
+        lit = b.vec("MULTIPLY", b.scale(rest, gin.outputs["Strength"]), gin.outputs["Albedo"])
+        emit = N.new("ShaderNodeEmission")
+        L.new(lit, emit.inputs["Color"])
+        add = N.new("ShaderNodeAddShader")
+        L.new(mixer.outputs[0], add.inputs[0])
+        L.new(emit.outputs[0], add.inputs[1])
+        L.new(add.outputs[0], gout.inputs[out_name])
     for i, node in enumerate(N):  # a readable layout is not needed to work; a column per creation order will do
         node.location = (200 * (i // 12), -150 * (i % 12))
 
@@ -320,6 +368,9 @@ def insert_into_material(mat: bpy.types.Material, strength: float = 1.0) -> bool
     node = _our_node(nt)
     if node is not None:
         node.inputs["Strength"].default_value = strength
+        out = _output(nt)
+        if out is not None and "EEVEE" in node.outputs and not node.outputs["EEVEE"].links:
+            _eevee_output(nt, node, out)  # a material lit before the EEVEE output existed
         return False
     out = _output(nt)
     if out is None:
@@ -341,8 +392,26 @@ def insert_into_material(mat: bpy.types.Material, strength: float = 1.0) -> bool
                 metal = src.node.inputs.get("Metallic")
                 keep = 1.0 - float(metal.default_value) if metal is not None and not metal.links else 1.0
                 node.inputs["Albedo"].default_value = (*[c * keep for c in rgb], 1.0)
-    nt.links.new(node.outputs["Shader"], out.inputs["Surface"])
+    nt.links.new(node.outputs["EEVEE" if out.target == "EEVEE" else "Shader"], out.inputs["Surface"])
+    if out.target == "ALL":
+        _eevee_output(nt, node, out)
     return True
+
+
+def _eevee_output(nt, node, out) -> None:
+    """Our Material Output for EEVEE (EEVEE prefers an output of its own target to one for all engines), fed by
+    the group's EEVEE output and, for everything else (volume, displacement, thickness), by what feeds ``out``.
+    None when the user has an EEVEE output of their own: that one is theirs to keep."""
+    if any(n.bl_idname == "ShaderNodeOutputMaterial" and n.target == "EEVEE" for n in nt.nodes):
+        return
+    ev = nt.nodes.new("ShaderNodeOutputMaterial")
+    ev.name = ev.label = EEVEE_OUTPUT
+    ev.target = "EEVEE"
+    ev.location = (out.location.x, out.location.y - 220)
+    nt.links.new(node.outputs["EEVEE"], ev.inputs["Surface"])
+    for sock in out.inputs:
+        if sock.name != "Surface" and sock.links and sock.name in ev.inputs:
+            nt.links.new(sock.links[0].from_socket, ev.inputs[sock.name])
 
 
 def remove_from_material(mat: bpy.types.Material) -> bool:
@@ -352,7 +421,10 @@ def remove_from_material(mat: bpy.types.Material) -> bool:
     if node is None:
         return False
     src = node.inputs["Shader"].links[0].from_socket if node.inputs["Shader"].links else None
-    targets = [link.to_socket for link in node.outputs["Shader"].links]
+    targets = [link.to_socket for out in node.outputs for link in out.links
+               if link.to_node.name != EEVEE_OUTPUT]
+    for n in [n for n in nt.nodes if n.name == EEVEE_OUTPUT and n.bl_idname == "ShaderNodeOutputMaterial"]:
+        nt.nodes.remove(n)
     nt.nodes.remove(node)
     if src is not None:
         for sock in targets:

@@ -163,6 +163,11 @@ def build_world(radiance: bpy.types.Image, strength: float = 1.0, keep_backgroun
         if background_from is not None:
             world.color = background_from.color
     world[MARKER] = "world"
+    if hasattr(world, "sun_threshold"):  # EEVEE 4.2+
+        # no sun split off the probe's lamp and window: EEVEE then lights from the order-1 SH of the whole World,
+        # which the local-light group models and corrects (core/probe/local_mix.py); a sun of the pixels above 10
+        # lit our meshes from between the lamp and the window (measured 0.92-1.22 of Cycles' World light)
+        world.sun_threshold = 0.0
     nt = node_tree(world)
     out, prev_shader = _background_output(world)
     if out is None:
