@@ -1,19 +1,26 @@
-"""Speed against Blender's native splats (issue 16, part 5): time against per-pixel error for a lit mesh in the sample
-room, Blender 5.3's Cycles path-tracing the native splats (16-4096 samples, denoiser off and on) against our bake + a
-Cycles render and our bake + EEVEE. Same machine, same run, one Blender (bpy 5.3 in the trixie root, with the built
-zip installed by Blender's own installer, as tests/real_blender/ does).
+"""Speed against Blender's native splats at users' working points (issue 16 part 5, issue 22 goal 3): time against
+per-pixel error for a lit mesh in the sample room, Blender 5.3's Cycles path-tracing the native splats (denoiser off
+and on) against our bake (Lighting Auto, the panel's defaults) + Cycles and + EEVEE, for a 48x48, a 320x180 and a
+960x540 frame and a 24-frame camera move at 320x180 (baked once, rendered as one animation job with persistent
+data, native too). Same machine, same run, one Blender (bpy 5.3 in the trixie root, with the built zip installed by
+Blender's own installer, as tests/real_blender/ does). The GPU machine's bake of the same settings
+(benchmarks/auto_bake_core.py, core, clock held; docs/bench/auto_bake_core_nvidia-h200.csv) is drawn as its own
+series: that bake's time + our EEVEE render's time here.
 
-Run:  python benchmarks/native_bench.py [--size 48] [--reference 8192] [--samples 16,64,256,1024,4096]
-Needs the trixie root (scripts/blender_roots.sh ensure trixie). Writes docs/bench/native_<device>.csv and
-docs/native-vs-ours.png, and prints a markdown table.
+Run:  python benchmarks/native_bench.py [--frames 48x48,320x180,960x540] [--no-move] [--quick]
+      python benchmarks/native_bench.py --plot-only docs/bench/native_lavapipe.csv
+Needs the trixie root (scripts/blender_roots.sh ensure trixie). Writes docs/bench/native_<device>.csv (+ .json:
+references, bake report) and docs/native-vs-ours.png, and prints markdown tables: every point, then per frame our
+fastest point and native's time to the same error.
 
 The scene: samples/room.ply imported by our importer (on 5.3 a native Gaussian-splat Point Cloud), a white diffuse
-sphere (albedo 0.8, radius 0.3 m) where the matrix puts it, the matrix's camera. The splats are hidden from the camera
-(film transparent) so every error is the sphere's light. Reference: native Cycles at --reference samples, denoiser
-off, another seed. Error: RMS over the sphere's pixels of (render - reference), over the reference's RMS, RGB pooled;
-it holds the reference's own noise (about 1/sqrt(reference / samples) of a run's) and, for ours, the bias of one probe
-for a whole sphere. Time: wall seconds of the render call; ours adds the bake (the first bake of the session, Vulkan
-start included, and a warm re-bake, both recorded).
+sphere (albedo 0.8, radius 0.3 m; 33, 70 and 210 px wide in the three frames), the splats hidden from the camera
+(film transparent) so every error is the sphere's light. Reference per frame: two native Cycles renders of
+independent seeds inside the sphere's region (Render Region), denoiser off; a render's error is the RMS over the
+sphere's pixels (one pixel in from the outline) of (render - their mean), less the mean's own noise (a quarter of
+var(R1 - R2), which is independent of the render measured), over the mean's RMS, RGB pooled. The raw RMS is kept
+too. The move's error pools its first and last frames, each against its own reference. Time: wall seconds of the
+render call; ours adds the warm re-bake (the first bake of the session, Vulkan start included, is recorded).
 
 Inside Blender this same file runs with --in-blender ARGS.json.
 """
@@ -27,6 +34,8 @@ import subprocess
 import sys
 import time
 
+import numpy as np
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.abspath(os.path.join(HERE, ".."))
 RESULT_TAG = "GSIBL-NATIVE-BENCH "
@@ -35,13 +44,22 @@ MODULE = "bl_ext.user_default.gs_ibl"
 
 # ---------------------------------------------------------------------------------------------------- in Blender
 
+# name: (width, height, camera offset from the sphere (m), lens (mm)); the sphere is 33, 70 and 210 px wide
+FRAMES = {"48x48": (48, 48, (0.0, -1.2, 0.25), 50.0),
+          "320x180": (320, 180, (0.0, -1.86, 0.39), 25.0),
+          "960x540": (960, 540, (0.0, -1.86, 0.39), 25.0)}
+MOVE = {"frame": "320x180", "frames": 24, "turn_deg": 40.0}  # an orbit about the sphere, bake once
+
+
 def _in_blender(args: dict) -> dict:
     import importlib
+    import math
 
     import bpy
     import addon_utils  # noqa: I001 (importable once bpy is)
     import numpy as np
-    from mathutils import Vector
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Matrix, Vector
 
     if not addon_utils.check(MODULE)[1]:
         bpy.ops.preferences.addon_enable(module=MODULE)
@@ -56,7 +74,7 @@ def _in_blender(args: dict) -> dict:
     scene.world = world
     assert bpy.ops.gs_ibl.import_splats(filepath=args["room"]) == {"FINISHED"}
     room = bpy.context.active_object
-    out = {"blender": bpy.app.version_string, "native": so.is_native_splats(room), "rows": []}
+    out = {"blender": bpy.app.version_string, "native": so.is_native_splats(room), "rows": [], "frames": {}}
     at = room.matrix_world @ Vector(args["probe_in_room"])
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=at, segments=64, ring_count=32)
     sphere = bpy.context.active_object
@@ -71,17 +89,14 @@ def _in_blender(args: dict) -> dict:
     sphere.data.materials.append(mat)
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(cam)
-    cam.location = at + Vector((0.0, -1.2, 0.25))
-    cam.rotation_euler = (at - cam.location).to_track_quat("-Z", "Y").to_euler()
-    cam.data.lens = 50.0
     scene.camera = cam
     r = scene.render
-    r.resolution_x = r.resolution_y = args["size"]
     r.resolution_percentage = 100
     r.film_transparent = True
     r.image_settings.file_format = "OPEN_EXR"
     r.threads_mode = "FIXED"
     r.threads = args["threads"]
+    r.use_persistent_data = True  # the move renders as one job: each engine keeps its scene between frames
     room.visible_camera = False  # the sphere alone in the picture: every error is its light
     scene.view_settings.view_transform = "Standard"
     c = scene.cycles
@@ -89,8 +104,18 @@ def _in_blender(args: dict) -> dict:
     c.use_adaptive_sampling = False
     c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
     c.transparent_max_bounces = 64
+    eevee = next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
+                 if e in {i.identifier for i in r.bl_rna.properties["engine"].enum_items})
+    work = args["work"]
 
-    def render(engine: str, samples: int, denoise: bool = False, seed: int = 0):
+    def place_camera(frame: str, turn: float = 0.0) -> None:
+        w, h, offset, lens = FRAMES[frame]
+        r.resolution_x, r.resolution_y = w, h
+        cam.location = at + Matrix.Rotation(turn, 3, "Z") @ Vector(offset)
+        cam.rotation_euler = (at - cam.location).to_track_quat("-Z", "Y").to_euler()
+        cam.data.lens = lens
+
+    def setup(engine: str, samples: int, denoise: bool = False, seed: int = 0) -> None:
         r.engine = engine
         if engine == "CYCLES":
             c.samples, c.use_denoising, c.seed = samples, denoise, seed
@@ -98,42 +123,135 @@ def _in_blender(args: dict) -> dict:
                 c.denoiser = "OPENIMAGEDENOISE"
         else:
             scene.eevee.taa_render_samples = samples
-        path = os.path.join(args["work"], "frame.exr")
+
+    def load(path: str) -> np.ndarray:
+        img = bpy.data.images.load(path)
+        px = np.empty(len(img.pixels), np.float32)
+        img.pixels.foreach_get(px)
+        shape = (img.size[1], img.size[0], 4)
+        bpy.data.images.remove(img)
+        return px.reshape(shape)
+
+    def render(engine: str, samples: int, denoise: bool = False, seed: int = 0, border=None):
+        setup(engine, samples, denoise, seed)
+        r.use_border = border is not None
+        if border is not None:
+            r.use_crop_to_border = False
+            r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = border
+        path = os.path.join(work, "frame.exr")
         r.filepath = path
         t0 = time.perf_counter()
         bpy.ops.render.render(write_still=True)
         seconds = time.perf_counter() - t0
-        img = bpy.data.images.load(path)
-        px = np.empty(len(img.pixels), np.float32)
-        img.pixels.foreach_get(px)
-        bpy.data.images.remove(img)
-        return px.reshape(args["size"], args["size"], 4), seconds
+        r.use_border = False
+        return load(path), seconds
 
-    ref, ref_s = render("CYCLES", args["reference"], seed=1)
-    mask = ref[..., 3] > 0.99
-    out.update(reference_samples=args["reference"], reference_s=ref_s, sphere_pixels=int(mask.sum()))
-    ref_rgb = ref[mask][:, :3].astype(np.float64)
+    def render_move(engine: str, samples: int, denoise: bool = False):
+        """The 24-frame move as one animation job: (frame 1, frame 24), seconds for all."""
+        setup(engine, samples, denoise)
+        place_camera(MOVE["frame"])  # its resolution (the move's camera is keyed)
+        r.filepath = os.path.join(work, "move_####")
+        scene.frame_start, scene.frame_end = 1, MOVE["frames"]
+        scene.camera = move_cam
+        t0 = time.perf_counter()
+        bpy.ops.render.render(animation=True)
+        seconds = time.perf_counter() - t0
+        scene.camera = cam
+        return (load(os.path.join(work, "move_0001.exr")),
+                load(os.path.join(work, f"move_{MOVE['frames']:04d}.exr"))), seconds
 
-    def error(px) -> float:
-        d = px[mask][:, :3].astype(np.float64) - ref_rgb
-        return float(np.sqrt(np.mean(d ** 2)) / np.sqrt(np.mean(ref_rgb ** 2)))
+    def sphere_border() -> tuple:
+        """The sphere's box in the frame, 4 px wider: the references render there alone (Render Region)."""
+        pts = [world_to_camera_view(scene, scene.camera, sphere.matrix_world @ Vector(v)) for v in sphere.bound_box]
+        mx, my = 4.0 / r.resolution_x, 4.0 / r.resolution_y
+        return (max(0.0, min(p.x for p in pts) - mx), min(1.0, max(p.x for p in pts) + mx),
+                max(0.0, min(p.y for p in pts) - my), min(1.0, max(p.y for p in pts) + my))
 
-    def row(method: str, samples: int, render_s: float, px, bake_s: float = 0.0) -> None:
-        out["rows"].append({"method": method, "samples": samples, "render_s": round(render_s, 3),
+    class Reference:
+        """Two native renders of independent seeds at ``samples``, inside the sphere's region. Errors are
+        against their mean, less its own noise (var(R1 - R2) / 4 per pixel, independent of what is measured):
+        err^2 = mean((X - Rm)^2) - var_pixel(Rm), over mean(Rm^2)."""
+
+        def __init__(self, label: str, samples: int):
+            border = sphere_border()
+            (a, sa), (b, sb) = (render("CYCLES", samples, seed=s, border=border) for s in (101, 102))
+            m = (a[..., 3] > 0.999) & (b[..., 3] > 0.999)
+            for _ in range(1):  # one pixel in from the outline: edges are each engine's own filter
+                e = m.copy()
+                e[1:] &= m[:-1]
+                e[:-1] &= m[1:]
+                e[:, 1:] &= m[:, :-1]
+                e[:, :-1] &= m[:, 1:]
+                m = e
+            self.mask = m
+            self.a, self.b = a[m][:, :3].astype(np.float64), b[m][:, :3].astype(np.float64)
+            self.mean = 0.5 * (self.a + self.b)
+            self.noise_var = float(np.mean((self.a - self.b) ** 2)) / 4.0  # of the mean's pixels
+            self.norm = float(np.mean(self.mean ** 2))
+            out["frames"][label] = {"reference_samples": samples, "reference_s": round(sa + sb, 2),
+                                    "sphere_pixels": int(m.sum()),
+                                    "reference_noise": round((self.noise_var / self.norm) ** 0.5, 5),
+                                    "border": [round(x, 4) for x in border]}
+            print(label, out["frames"][label], flush=True)
+
+        def error(self, px) -> tuple[float, float]:
+            d2 = float(np.mean((px[self.mask][:, :3].astype(np.float64) - self.mean) ** 2))
+            return max(d2 - self.noise_var, 0.0) ** 0.5 / self.norm ** 0.5, (d2 / self.norm) ** 0.5
+
+        def ratio(self, px) -> float:
+            return float(px[self.mask][:, :3].mean() / self.mean.mean())
+
+    def row(frame: str, ref, method: str, samples: int, render_s: float, px, bake_s: float = 0.0, refs=None):
+        errs = [ref.error(px)] if refs is None else [rf.error(p) for rf, p in zip(refs, px)]
+        e = float(np.sqrt(np.mean([x[0] ** 2 for x in errs])))
+        raw = float(np.sqrt(np.mean([x[1] ** 2 for x in errs])))
+        ratio = ref.ratio(px) if refs is None else float(np.mean([rf.ratio(p) for rf, p in zip(refs, px)]))
+        out["rows"].append({"frame": frame, "method": method, "samples": samples, "render_s": round(render_s, 3),
                             "bake_s": round(bake_s, 3), "total_s": round(render_s + bake_s, 3),
-                            "rel_rms_error": round(error(px), 5),
-                            "mean_ratio": round(float(px[mask][:, :3].mean() / ref_rgb.mean()), 5)})
+                            "rel_rms_error": round(e, 5), "raw_rms_error": round(raw, 5),
+                            "mean_ratio": round(ratio, 5)})
         print(out["rows"][-1], flush=True)
 
-    for denoise in (False, True):
-        for n in args["samples"]:
-            px, s = render("CYCLES", n, denoise)
-            row("native Cycles" + (" + denoiser" if denoise else ""), n, s, px)
-    # ours: a probe at the sphere, default settings, baked from the same room (the bake mutes the splats' bounces)
+    # the move's camera: an orbit from the 320x180 camera, keyed per frame
+    move_cam = bpy.data.objects.new("Move", cam.data.copy())
+    scene.collection.objects.link(move_cam)
+    for f in range(1, MOVE["frames"] + 1):
+        turn = math.radians(MOVE["turn_deg"]) * (f - 1) / (MOVE["frames"] - 1)
+        place_camera(MOVE["frame"], turn)
+        move_cam.location, move_cam.rotation_euler = cam.location.copy(), cam.rotation_euler.copy()
+        move_cam.data.lens = cam.data.lens
+        move_cam.keyframe_insert("location", frame=f)
+        move_cam.keyframe_insert("rotation_euler", frame=f)
+    scene.frame_set(1)
+
+    # native first: the bake mutes the splats for our renders
+    refs, frames = {}, [f for f in args["frames"] if f in FRAMES]
+    for frame in frames:
+        place_camera(frame)
+        refs[frame] = ref = Reference(frame, args["reference"][frame])
+        for denoise in (False, True):
+            for n in args["samples"][frame]:
+                px, s = render("CYCLES", n, denoise)
+                row(frame, ref, "native Cycles" + (" + denoiser" if denoise else ""), n, s, px)
+    move_refs = None
+    if args["move"]:
+        place_camera(MOVE["frame"])
+        first = refs.get(MOVE["frame"]) or Reference(MOVE["frame"], args["reference"][MOVE["frame"]])
+        scene.camera = move_cam
+        scene.frame_set(MOVE["frames"])
+        last = Reference("move last", args["reference"][MOVE["frame"]])
+        scene.camera = cam
+        scene.frame_set(1)
+        move_refs = (first, last)
+        for denoise in (False, True):
+            for n in args["move_samples"]:
+                px, s = render_move("CYCLES", n, denoise)
+                row("move", first, "native Cycles" + (" + denoiser" if denoise else ""), n, s, px, refs=move_refs)
+    # ours: a probe at the sphere, default settings (Lighting Auto), baked from the same room
     bpy.ops.object.empty_add(location=at)
     probe = bpy.context.active_object
     probe.gs_ibl_probe.is_probe, probe.gs_ibl_probe.splats = True, room
-    probe.gs_ibl_probe.lighting = "WORLD"  # this chart is of one probe (Lighting Auto: issue 22's next chart)
+    assert probe.gs_ibl_probe.lighting == "AUTO"
     t0 = time.perf_counter()
     gb.bake_into_world(scene, probe)
     out["bake_first_s"] = time.perf_counter() - t0
@@ -141,16 +259,26 @@ def _in_blender(args: dict) -> dict:
     _, report, _ = gb.bake_into_world(scene, probe)
     bake_s = out["bake_s"] = time.perf_counter() - t0
     out["bake_report"] = report
-    for n in args["samples"]:
-        if n <= 1024:
-            px, s = render("CYCLES", n)
-            row("our bake + Cycles", n, s, px, bake_s)
-    eevee = next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
-                 if e in {i.identifier for i in r.bl_rna.properties["engine"].enum_items})
+    out["auto_choice"] = sphere.get("gs_ibl_grid_key")
+    out["probe"] = list(at)
+    out["sphere_box"] = [list(at - Vector((0.3, 0.3, 0.3))), list(at + Vector((0.3, 0.3, 0.3)))]
+    place_camera(frames[0] if frames else MOVE["frame"])
     _, out["eevee_first_frame_s"] = render(eevee, 1)  # shader compilation: once per session, not per frame
-    for n in args["eevee_samples"]:
-        px, s = render(eevee, n)
-        row("our bake + EEVEE", n, s, px, bake_s)
+    for frame in frames:
+        place_camera(frame)
+        for n in args["our_cycles_samples"][frame]:
+            px, s = render("CYCLES", n)
+            row(frame, refs[frame], "our bake + Cycles", n, s, px, bake_s)
+        for n in args["eevee_samples"][frame]:
+            px, s = render(eevee, n)
+            row(frame, refs[frame], "our bake + EEVEE", n, s, px, bake_s)
+    if move_refs:
+        for n in args["move_our_cycles_samples"]:
+            px, s = render_move("CYCLES", n)
+            row("move", move_refs[0], "our bake + Cycles", n, s, px, bake_s, refs=move_refs)
+        for n in args["move_eevee_samples"]:
+            px, s = render_move(eevee, n)
+            row("move", move_refs[0], "our bake + EEVEE", n, s, px, bake_s, refs=move_refs)
     return out
 
 
@@ -163,36 +291,106 @@ def _device() -> str:
     return "lavapipe" if "llvmpipe" in name else name.replace(" ", "-")
 
 
+STYLES = {"native Cycles": ("tab:red", "o-"), "native Cycles + denoiser": ("tab:orange", "s--"),
+          "our bake + Cycles": ("tab:blue", "o-"), "our bake + EEVEE": ("tab:green", "^-"),
+          "our bake on the H200 (core, clock held) + EEVEE here": ("tab:purple", "v:")}
+PANELS = ("48x48", "320x180", "960x540", "move")
+
+
+def gpu_series(rows: list[dict], gpu_bake_s: float | None) -> list[dict]:
+    """Our EEVEE rows again with the bake's time taken from the GPU machine (core, same settings)."""
+    if gpu_bake_s is None:
+        return []
+    return [{**r, "method": "our bake on the H200 (core, clock held) + EEVEE here", "bake_s": gpu_bake_s,
+             "total_s": float(r["render_s"]) + gpu_bake_s} for r in rows if r["method"] == "our bake + EEVEE"]
+
+
+def native_time_at(rows: list[dict], frame: str, error: float) -> tuple[float, str] | None:
+    """The least time native Cycles (with or without the denoiser) takes to reach ``error`` in ``frame``:
+    log-log interpolation between measured samples; past the last one without the denoiser, Monte Carlo's
+    error ~ 1/sqrt(time) (marked "extrapolated"); None when no series reaches it."""
+    best = None
+    for method in ("native Cycles", "native Cycles + denoiser"):
+        pts = sorted((float(r["total_s"]), float(r["rel_rms_error"])) for r in rows
+                     if r["frame"] == frame and r["method"] == method)
+        t = None
+        for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
+            if e0 >= error >= e1 and e0 > e1:
+                f = np.log(e0 / error) / np.log(e0 / e1)
+                t = (t0 * (t1 / t0) ** f, "measured")
+                break
+        if t is None and pts and pts[0][1] <= error:
+            t = (pts[0][0], "measured (fewest samples)")
+        if t is None and pts and method == "native Cycles" and pts[-1][1] > error:
+            t = (pts[-1][0] * (pts[-1][1] / error) ** 2, "extrapolated")
+        if t is not None and (best is None or t[0] < best[0]):
+            best = (t[0], f"{method}, {t[1]}")
+    return best
+
+
+def speedups(rows: list[dict]) -> list[dict]:
+    """Per panel and our method: our fastest point, and native's time to the same error."""
+    out = []
+    for frame in PANELS:
+        for method in ("our bake + EEVEE", "our bake + Cycles", "our bake on the H200 (core, clock held) + EEVEE here"):
+            ours = [r for r in rows if r["frame"] == frame and r["method"] == method]
+            if not ours:
+                continue
+            best = min(ours, key=lambda r: float(r["total_s"]) * float(r["rel_rms_error"]) ** 2)
+            native = native_time_at(rows, frame, float(best["rel_rms_error"]))
+            out.append({"frame": frame, "method": method, "samples": best["samples"],
+                        "error": float(best["rel_rms_error"]), "ours_s": float(best["total_s"]),
+                        "native_s": native[0] if native else None, "native_how": native[1] if native else "",
+                        "speedup": native[0] / float(best["total_s"]) if native else None})
+    return out
+
+
 def _plot(rows: list[dict], out_png: str, title: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(figsize=(7.5, 4.8))
-    styles = {"native Cycles": ("tab:red", "o-"), "native Cycles + denoiser": ("tab:orange", "s--"),
-              "our bake + Cycles": ("tab:blue", "o-"), "our bake + EEVEE": ("tab:green", "^-")}
-    for method, (colour, style) in styles.items():
-        pts = sorted((r["total_s"], r["rel_rms_error"], r["samples"]) for r in rows if r["method"] == method)
-        if not pts:
-            continue
-        ax.plot([p[0] for p in pts], [100 * p[1] for p in pts], style, color=colour, label=method)
-        for i, (t, e, n) in enumerate(pts):  # labels alternate above and below: near points stay readable
-            ax.annotate(str(n), (t, 100 * e), textcoords="offset points", xytext=(4, 4 if i % 2 else -10),
-                        fontsize=7, color=colour)
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("wall time, s (ours: bake + render)")
-    ax.set_ylabel("per-pixel error vs native reference, % (rel. RMS)")
-    ax.set_title(title, fontsize=8)
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
+    panels = [p for p in PANELS if any(r["frame"] == p for r in rows)]
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.4 * len(panels), 4.6), squeeze=False)
+    for ax, frame in zip(axes[0], panels):
+        for method, (colour, style) in STYLES.items():
+            pts = sorted((float(r["total_s"]), float(r["rel_rms_error"]), r["samples"]) for r in rows
+                         if r["method"] == method and r["frame"] == frame)
+            if not pts:
+                continue
+            ax.plot([p[0] for p in pts], [100 * max(p[1], 1e-4) for p in pts], style, color=colour, label=method)
+            for i, (t, e, n) in enumerate(pts):  # labels alternate above and below: near points stay readable
+                ax.annotate(str(n), (t, 100 * max(e, 1e-4)), textcoords="offset points",
+                            xytext=(4, 4 if i % 2 else -10), fontsize=6, color=colour)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("wall time, s (ours: bake + render)")
+        ax.set_title(f"24-frame move at {MOVE['frame']}, bake once" if frame == "move" else f"{frame} frame",
+                     fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].set_ylabel("per-pixel error vs native Cycles, % (rel. RMS)")
+    axes[0][-1].legend(fontsize=7)
+    fig.suptitle(title, fontsize=8)
     fig.tight_layout()
     fig.savefig(out_png, dpi=120)
 
 
-def _title(size, blender, device, threads, date, reference) -> str:
-    return (f"White sphere (albedo 0.8) in the sample room, {size}x{size} px, Blender {blender}, {device}, "
-            f"{threads} threads, {date}\nerror against native Cycles at {reference} spp (denoiser off); "
-            "labels: samples")
+def _title(blender, device, threads, date, gpu_note) -> str:
+    return (f"White sphere (albedo 0.8, 33/70/210 px wide) in the sample room, Blender {blender}, {device} "
+            f"({threads} threads), {date}; ours: Lighting Auto, panel defaults; error against two independent "
+            f"native Cycles renders (denoiser off), their own noise removed; labels: samples{gpu_note}")
+
+
+def _read_gpu_bake(path: str) -> tuple[float | None, str]:
+    if not os.path.exists(path):
+        return None, ""
+    import csv
+    row = list(csv.DictReader(open(path)))[-1]
+    return float(row["wall_s"]), (f"\nH200 bake: {row['device']}, driver {row['driver']}, SM {row['sm_mhz']} MHz, "
+                                  f"{row['date']} ({row['wall_s']} s wall, core Auto bake)")
+
+
+def _ints(text: str) -> list[int]:
+    return [int(x) for x in text.split(",") if x]
 
 
 def main() -> None:
@@ -200,26 +398,28 @@ def main() -> None:
         print(RESULT_TAG + json.dumps(_in_blender(json.load(open(sys.argv[2])))), flush=True)
         return
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--size", type=int, default=48)
-    ap.add_argument("--reference", type=int, default=8192)
-    ap.add_argument("--samples", default="16,64,256,1024,4096")
-    ap.add_argument("--eevee-samples", default="1,4,16")
+    ap.add_argument("--frames", default="48x48,320x180,960x540", help="which of " + ", ".join(FRAMES))
+    ap.add_argument("--no-move", action="store_true", help="leave the 24-frame move out")
+    ap.add_argument("--quick", action="store_true", help="a smoke run: few samples everywhere (a chart of noise)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--csv", default=None)
     ap.add_argument("--png", default=os.path.join(REPO, "docs", "native-vs-ours.png"))
+    ap.add_argument("--gpu-bake", default=os.path.join(REPO, "docs", "bench", "auto_bake_core_nvidia-h200.csv"),
+                    help="the GPU machine's bake time (benchmarks/auto_bake_core.py)")
     ap.add_argument("--plot-only", metavar="CSV", help="redraw the chart of an earlier run's CSV and stop")
     a = ap.parse_args()
+    gpu_bake_s, gpu_note = _read_gpu_bake(a.gpu_bake)
     if a.plot_only:
         import csv
-        rows = list(csv.DictReader(open(a.plot_only)))
-        for row in rows:
-            row.update(total_s=float(row["total_s"]), rel_rms_error=float(row["rel_rms_error"]))
+        rows = [r for r in csv.DictReader(open(a.plot_only)) if not r["method"].startswith("our bake on the H200")]
+        rows += gpu_series(rows, gpu_bake_s)
         r0 = rows[0]
-        _plot(rows, a.png, _title(r0["size"], r0["blender"], r0["device"], a.threads, r0["date"], r0["reference"]))
+        _plot(rows, a.png, _title(r0["blender"], r0["device"], a.threads, r0["date"], gpu_note))
+        _print_speedups(rows)
         return
     sys.path.insert(0, os.path.join(REPO, "tests", "real_blender"))
     import test_matrix as matrix
-    matrix.TIMEOUT_S = 3 * 3600  # the matrix's per-command limit is for tests; a full run here takes ~20 min
+    matrix.TIMEOUT_S = 3 * 3600  # the matrix's per-command limit is for tests; a full run here takes ~35 min
     entry = next(e for e in matrix.ENTRIES if e.name == "bpy-5.3")
     if not matrix._ready(entry.root):
         sys.exit(f"the bpy 5.3 root is not made: scripts/blender_roots.sh ensure {entry.root}")
@@ -231,14 +431,25 @@ def main() -> None:
     subprocess.run([sys.executable, "scripts/build_extension.py", "--output", zip_path], cwd=REPO, check=True,
                    capture_output=True, text=True)
     runner = matrix.Runner(entry, None)
+    frames = [f for f in a.frames.split(",") if f]
     try:
         shutil.copy(zip_path, runner.host / "gs_ibl.zip")
         shutil.copy(os.path.join(REPO, "samples", "room.ply"), runner.host / "room.ply")
         shutil.copy(os.path.abspath(__file__), runner.host / "native_bench.py")
-        args = {"work": str(runner.inner), "room": str(runner.inner / "room.ply"), "size": a.size,
-                "reference": a.reference, "samples": [int(x) for x in a.samples.split(",")],
-                "eevee_samples": [int(x) for x in a.eevee_samples.split(",")], "threads": a.threads,
+        # samples per frame: the larger frames stop where native's time runs to minutes on this CPU
+        args = {"work": str(runner.inner), "room": str(runner.inner / "room.ply"), "threads": a.threads,
+                "frames": frames, "move": not a.no_move,
+                "reference": {"48x48": 4096, "320x180": 1024, "960x540": 512},
+                "samples": {"48x48": [16, 64, 256, 1024], "320x180": [16, 64, 256], "960x540": [16, 64, 256]},
+                "our_cycles_samples": {"48x48": [16, 64, 256], "320x180": [16, 64, 256], "960x540": [16, 64]},
+                "eevee_samples": {"48x48": [1, 4, 16], "320x180": [1, 4], "960x540": [1, 4]},
+                "move_samples": [16, 64], "move_our_cycles_samples": [16], "move_eevee_samples": [1, 4],
                 "probe_in_room": [0.0, 0.45, 1.0]}
+        if a.quick:
+            for key in ("reference", "samples", "our_cycles_samples", "eevee_samples"):
+                args[key] = {f: (64 if key == "reference" else [4]) for f in FRAMES}
+            args.update(move_samples=[4], move_our_cycles_samples=[4], move_eevee_samples=[1])
+            csv_path, a.png = os.path.join(work, "quick.csv"), os.path.join(work, "quick.png")
         (runner.host / "args.json").write_text(json.dumps(args))
         assert matrix._install(runner, str(runner.inner / "gs_ibl.zip")).returncode == 0, "install failed"
         r = runner.run([runner.python(), str(runner.inner / "native_bench.py"), "--in-blender",
@@ -250,29 +461,40 @@ def main() -> None:
     finally:
         runner.close()
     stamp = time.strftime("%Y-%m-%d", time.gmtime())
-    rows = [{"date": stamp, "device": device, "blender": result["blender"], "size": a.size,
-             "reference": result["reference_samples"], **row}
+    ref_of = {f: v["reference_samples"] for f, v in result["frames"].items()}
+    rows = [{"date": stamp, "device": device, "blender": result["blender"],
+             "reference": ref_of.get(row["frame"] if row["frame"] != "move" else MOVE["frame"], ""), **row}
             for row in result["rows"]]
     from bench_common import append_csv
     if os.path.exists(csv_path):
         os.remove(csv_path)  # one run per file: the chart is of one run
     append_csv(csv_path, rows)
-    _plot(result["rows"], a.png, _title(a.size, result["blender"], device, a.threads, stamp,
-                                        result["reference_samples"]))
-    print(f"reference: native Cycles {result['reference_samples']} spp, {result['reference_s']:.1f} s, "
-          f"{result['sphere_pixels']} sphere pixels; our bake {result['bake_s']:.2f} s (first of the session "
-          f"{result['bake_first_s']:.2f} s): {result['bake_report']}; EEVEE's first frame (shaders) "
-          f"{result['eevee_first_frame_s']:.1f} s")
-    native = {r["samples"]: r["rel_rms_error"] for r in result["rows"] if r["method"] == "native Cycles"}
-    if native:  # error^2 = k (1/n + 1/reference): the reference's own share at the largest n
-        n, ref = max(native), result["reference_samples"]
-        print(f"the reference's own per-pixel noise: about {native[n] * (1 / ref / (1 / n + 1 / ref)) ** 0.5:.2%}\n")
-    print("| method | samples | render s | bake s | total s | rel. RMS error | mean / reference |")
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    json_path = os.path.splitext(csv_path)[0] + ".json"
+    with open(json_path, "w") as f:
+        json.dump({k: v for k, v in result.items() if k != "rows"}, f, indent=1)
+    rows += gpu_series(rows, gpu_bake_s)
+    _plot(rows, a.png, _title(result["blender"], device, a.threads, stamp, gpu_note))
+    print(f"references: {json.dumps(result['frames'])}\nour bake {result['bake_s']:.2f} s (first of the session "
+          f"{result['bake_first_s']:.2f} s, Auto chose {result['auto_choice']}): {result['bake_report']}; "
+          f"EEVEE's first frame (shaders) {result['eevee_first_frame_s']:.1f} s")
+    print("| frame | method | samples | render s | bake s | total s | rel. RMS error | raw | mean / reference |")
+    print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for row in result["rows"]:
-        print(f"| {row['method']} | {row['samples']} | {row['render_s']:.2f} | {row['bake_s']:.2f} | "
-              f"{row['total_s']:.2f} | {100 * row['rel_rms_error']:.2f}% | {row['mean_ratio']:.3f} |")
-    print(f"\n{csv_path}\n{a.png}")
+        print(f"| {row['frame']} | {row['method']} | {row['samples']} | {row['render_s']:.2f} | "
+              f"{row['bake_s']:.2f} | {row['total_s']:.2f} | {100 * row['rel_rms_error']:.2f}% | "
+              f"{100 * row['raw_rms_error']:.2f}% | {row['mean_ratio']:.3f} |")
+    _print_speedups(rows)
+    print(f"\n{csv_path}\n{json_path}\n{a.png}")
+
+
+def _print_speedups(rows: list[dict]) -> None:
+    print("\n| frame | ours | samples | error | ours s | native s at that error | how | ours faster |")
+    print("|---|---|---:|---:|---:|---:|---|---:|")
+    for s in speedups(rows):
+        nat = f"{s['native_s']:.1f}" if s["native_s"] else "not reached"
+        sp = f"{s['speedup']:.1f}x" if s["speedup"] else "-"
+        print(f"| {s['frame']} | {s['method']} | {s['samples']} | {100 * s['error']:.2f}% | {s['ours_s']:.1f} | "
+              f"{nat} | {s['native_how']} | {sp} |")
 
 
 if __name__ == "__main__":

@@ -31,3 +31,17 @@ def test_measure_points_and_grid_keep_off_the_floor():
     assert pts[1:, 2].min() > 0.05  # its lowest probes stand above the floor's splats
     flat = mesh_grid([0, 0, 0], [1, 1, 0.01])  # a thin plate gets one node across its thickness
     assert flat.shape == (3, 3, 1)
+
+
+def test_a_grid_reuses_the_measured_nodes():
+    """A mesh's 3 x 3 x 3 grid holds its 9 measure points (centre and corners of the same shrunk box): the second
+    batch renders only the other 18; a flat box (one node across) reuses its centre and four corners."""
+    from gs_ibl_addon.core.probe.auto_light import measure_points, measured_nodes, mesh_grid
+    lo, hi = np.array([0.2, -0.4, 1.0]), np.array([0.8, 0.3, 1.5])
+    spec, pts = mesh_grid(lo, hi), measure_points(lo, hi)
+    m = measured_nodes(spec, pts)
+    assert (m >= 0).sum() == 9 and sorted(m[m >= 0].tolist()) == list(range(9))
+    np.testing.assert_allclose(spec.points().reshape(-1, 3)[m >= 0], pts[m[m >= 0]], atol=1e-12)
+    flat = mesh_grid(lo, np.array([0.8, 0.3, 1.0]))  # no height: one node along z
+    mf = measured_nodes(flat, measure_points(lo, np.array([0.8, 0.3, 1.0])))
+    assert flat.count == 9 and (mf >= 0).sum() == 5  # the centre and four corners; the edge middles are new

@@ -2,7 +2,7 @@
 
 After the World probe's bake, probes at each lit mesh's centre and box corners are baked in one batch with one at
 the World probe's place (the measurement); a mesh whose light differs from the World's gets its centre's probe, and
-one whose light varies across it a grid (a second batch), through the local-light group (blender/local_light.py),
+one whose light varies across it a grid (a second batch of the grid nodes not measured already), through the local-light group (blender/local_light.py),
 which adds the difference to the World's light. A mesh the World lights well enough costs its nine probes. Re-decided when a lit mesh moves (Update When Moved) and at every bake.
 """
 from __future__ import annotations
@@ -10,11 +10,21 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ..core.probe.auto_light import MEASURE_FACE, LightChoice, choose_light, measure_points, mesh_grid
+from ..core.probe.auto_light import (MEASURE_FACE, LightChoice, choose_light, measure_points, measured_nodes,
+                                     mesh_grid)
+from ..core.probe.grid import bake_sh_points, monomial_coefficients
 from . import local_light as ll
 from .object_probes import Progress, coefficients_with_world, lit_meshes, probe_renderer, world_box
 
 REPORT_PREFIX = "Auto lighting: "
+
+
+def bake_sh_monomials(renderer, points: np.ndarray, progress: Progress | None) -> np.ndarray:
+    """Monomial coefficients (P, 9, 3) of MEASURE_FACE probes at ``points`` (the renderer trimmed after)."""
+    try:
+        return monomial_coefficients(bake_sh_points(renderer, points, MEASURE_FACE, progress=progress))
+    finally:
+        renderer.trim()
 AUTO_KEY = "gs_ibl_auto_light"  # on a mesh Lighting Auto lit: the probe that did (its light is that probe's to undo)
 
 
@@ -45,7 +55,7 @@ def auto_light(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bp
     tol = float(probe.gs_ibl_probe.variation_tolerance)
     choices = [choose_light(o.name, d_world, d[9 * i:9 * i + 9], tol) for i, o in enumerate(meshes)]
     # light of their own, at the operators' size, for the meshes that need it: one more batch
-    keys, tiles, grids = {}, {}, {}
+    keys, tiles, grids, grid_of = {}, {}, {}, {}
     for i, (obj, box, c) in enumerate(zip(meshes, boxes, choices)):
         if c.kind == "probe":  # its centre's measurement is its probe
             keys[obj.name] = f"probe:{obj.name}"
@@ -53,13 +63,20 @@ def auto_light(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bp
         elif c.kind == "grid":
             keys[obj.name] = f"object:{obj.name}"
             grids[keys[obj.name]] = mesh_grid(*box)
-    if grids:  # the grids' nodes: one more batch, baked alike with the World's place
-        pts = np.concatenate([spec.points().reshape(-1, 3) for spec in grids.values()])
-        d_world_g, dg = coefficients_with_world(probe, r, pts, progress, MEASURE_FACE)
+            grid_of[i] = keys[obj.name]
+    if grid_of:  # the grids' nodes the measurement did not place: one more batch
+        reuse = {i: measured_nodes(grids[key], points[9 * i:9 * i + 9]) for i, key in grid_of.items()}
+        fresh = {i: grids[key].points().reshape(-1, 3)[reuse[i] < 0] for i, key in grid_of.items()}
+        todo = np.concatenate(list(fresh.values()))
+        dg = bake_sh_monomials(r, todo, progress) if len(todo) else np.empty((0, *d.shape[1:]))
         start = 0
-        for key, spec in grids.items():
-            tiles[key] = (spec, dg[start:start + spec.count].reshape(*spec.shape, *dg.shape[1:]) - d_world_g)
-            start += spec.count
+        for i, key in grid_of.items():
+            spec, m = grids[key], reuse[i]
+            nodes = np.empty((spec.count, *d.shape[1:]))
+            nodes[m >= 0] = d[9 * i + m[m >= 0]]
+            nodes[m < 0] = dg[start:start + len(fresh[i])]
+            start += len(fresh[i])
+            tiles[key] = (spec, nodes.reshape(*spec.shape, *d.shape[1:]) - d_world)
     for obj, c in zip(meshes, choices):
         if c.kind == "world":
             if ll.has_local_light(obj):

@@ -168,6 +168,12 @@ def build_world(radiance: bpy.types.Image, strength: float = 1.0, keep_backgroun
         # which the local-light group models and corrects (core/probe/local_mix.py); a sun of the pixels above 10
         # lit our meshes from between the lamp and the window (measured 0.92-1.22 of Cycles' World light)
         world.sun_threshold = 0.0
+    if hasattr(world, "cycles"):
+        # Cycles' automatic importance map cost 1.5 s a render at 48x48 on 2 CPU cores, where a map as wide as
+        # the radiance image (512 for the default bake) costs 0.08 s with the same noise (16 and 64 spp, measured
+        # against 4,096 spp: 9.66/3.38% vs 9.58/3.25%)
+        world.cycles.sampling_method = "MANUAL"
+        world.cycles.sample_map_resolution = int(min(max(radiance.size[0], 256), 2048))
     nt = node_tree(world)
     out, prev_shader = _background_output(world)
     if out is None:

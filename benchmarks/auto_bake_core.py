@@ -1,0 +1,93 @@
+"""The bake of benchmarks/native_bench.py's scene without Blender: what the GPU machine's series on that chart
+costs (issue 22, goal 3).
+
+Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
+
+The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3), the panel's defaults and Lighting
+Auto's work as blender/bake.py bake_into_world and blender/auto_light.py do it, on one uploaded renderer (Blender's
+splat cache keeps it between bakes): the World probe's bake and its files (core CLI: write_probe), the 9-point
+measurement in one batch with the World probe's place, and the sphere's 3 x 3 x 3 grid when the measurement asks
+for one. Wall time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA
+context: bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import statistics
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from bench_common import append_csv, gpu_clock, hold_gpu_clock  # noqa: E402
+from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
+from gs_ibl_addon.core.formats import read_scene  # noqa: E402
+from gs_ibl_addon.core.probe.auto_light import MEASURE_FACE, choose_light, measure_points, mesh_grid  # noqa: E402
+from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
+from gs_ibl_addon.core.probe.result import write_probe  # noqa: E402
+from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
+
+REPO = os.path.dirname(HERE)
+PROBE = np.array([0.0, 0.45, 1.0])
+RADIUS = 0.3
+TOLERANCE = 0.05  # the panel's Variation Tolerance
+
+
+def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
+    """One bake as the panel's Bake does it: (wall seconds per stage, the light the sphere got)."""
+    t = {"start": time.perf_counter()}
+    result = bake_probe(None, PROBE, ProbeSettings(), renderer=r, estimate_from=scene)
+    t["world probe"] = time.perf_counter()
+    write_probe(result, out_dir)
+    t["writing"] = time.perf_counter()
+    pts = measure_points(PROBE - RADIUS, PROBE + RADIUS)
+    d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
+    choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
+    t["measurement"] = time.perf_counter()
+    if choice.kind == "grid":
+        spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS)
+        bake_sh_points(r, np.vstack([PROBE[None], spec.points().reshape(-1, 3)]), MEASURE_FACE)
+    t["grid"] = time.perf_counter()
+    names = list(t)
+    stages = {b: t[b] - t[a] for a, b in zip(names, names[1:])}
+    return {"wall_s": t["grid"] - t["start"], **stages, "choice": choice.kind,
+            "faces": "/".join(str(x) for x in result.settings.get("face_sizes", []))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args()
+    keep = hold_gpu_clock()  # noqa: F841 (the context holds the clock while it lives)
+    scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
+    r = SplatRenderer(scene)
+    info = {"device": r.ctx.device_name, "driver": getattr(r.ctx, "driver_version", "")}
+    try:
+        import pynvml
+        pynvml.nvmlInit()
+        info["driver"] = pynvml.nvmlSystemGetDriverVersion()
+    except Exception:
+        pass
+    with tempfile.TemporaryDirectory() as tmp:
+        auto_bake(r, scene, tmp)  # warm-up: pipelines, first allocations
+        runs = [auto_bake(r, scene, tmp) for _ in range(a.repeats)]
+    r.close()
+    med = {k: statistics.median(x[k] for x in runs) for k in runs[0] if isinstance(runs[0][k], float)}
+    row = {"date": datetime.date.today().isoformat(), "device": info["device"], "driver": info["driver"],
+           "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2), "repeats": a.repeats,
+           "choice": runs[0]["choice"], "faces": runs[0]["faces"],
+           **{k: round(v, 4) for k, v in med.items()}}
+    print(" ".join(f"{k}={v}" for k, v in row.items()))
+    name = info["device"].lower()
+    dev = "lavapipe" if "llvmpipe" in name else "nvidia-h200" if "h200" in name else name.replace(" ", "-")
+    append_csv(a.out or os.path.join(REPO, "docs", "bench", f"auto_bake_core_{dev}.csv"), [row])
+
+
+if __name__ == "__main__":
+    main()
