@@ -154,11 +154,27 @@ def _z2_world(a: float, c: tuple) -> np.ndarray:
     return w
 
 
+def _irradiance_image(w: np.ndarray, width: int = 128) -> "bpy.types.Image":
+    """A float lat-long image of E/pi = sum_k w_k P_k(n) in our mapping (core/cubemap.py: u = 0.5 - atan2(y, x) /
+    2pi, v = 1 - acos(z) / pi, rows bottom-up): the World probe's irradiance image for a World of known light."""
+    h = width // 2
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(h) + 0.5) / h
+    phi, theta = (0.5 - u)[None, :] * 2 * np.pi, (1.0 - v)[:, None] * np.pi
+    n = np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)), -1)
+    img = bpy.data.images.new("irradiance", width, h, float_buffer=True)
+    rgba = np.ones((h, width, 4), np.float32)
+    rgba[..., :3] = pg.eval_irradiance(w, n)
+    img.pixels.foreach_set(rgba.ravel())
+    img.pack()
+    return img
+
+
 @pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
 def test_group_darkens_and_corrects_the_world(blender, engine, tmp_path):
-    """Under a World of known light W (radiance 0.25 + c z^2, its order-2 part large), a probe tile D that is
-    darker than the World in two channels and brighter in one: the sphere renders H = W + D (the numpy twin
-    core/probe/local_mix.py) within 3% median, 6% at the 95th percentile, in both engines. Before, EEVEE clamped
+    """Under a World of known light W (radiance 0.25 + c z^2, its order-2 part large; its irradiance image made from
+    it), a probe tile D that is darker than the World in two channels and brighter in one: the sphere renders
+    H = W + D (the numpy twin core/probe/local_mix.py) within 3% median, 6% at the 95th percentile, in both engines. Before, EEVEE clamped
     the negative part (the sphere stayed as bright as the World), and EEVEE's order-1 World light kept its error
     (the poles 27% off here)."""
     from gs_ibl_addon.blender import local_light as ll
@@ -171,7 +187,7 @@ def test_group_darkens_and_corrects_the_world(blender, engine, tmp_path):
     d[0] = (-0.15, 0.1, -0.2)  # darker in red and blue
     d[2] = (0.05, -0.05, 0.0)  # a slope in z
     ll.set_object_grid(sphere, "probe:sphere")
-    ll.store_grids({"probe:sphere": ll.probe_tile((0, 0, 0), d)}, w)
+    ll.store_grids({"probe:sphere": ll.probe_tile((0, 0, 0), d)}, w, _irradiance_image(w))
     ll.light_object(sphere)
     assert any(n.name == ll.EEVEE_OUTPUT and n.target == "EEVEE" for n in mat.node_tree.nodes)
     px = _render(scene, tmp_path, engine)

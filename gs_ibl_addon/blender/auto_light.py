@@ -87,7 +87,7 @@ def auto_light(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bp
         ll.light_object(obj, float(probe.gs_ibl_probe.strength))
         obj[AUTO_KEY] = probe.name
     if tiles:
-        ll.store_grids(tiles, d_world)
+        ll.store_grids(tiles, d_world, probe.gs_ibl_probe.irradiance_image)
     if objects is None:  # a whole bake: the More Than One Probe panel lists why each mesh got what it got
         probe.gs_ibl_probe.local_report = "\n".join(c.message() for c in choices)
     counts = {k: sum(c.kind == k for c in choices) for k in ("world", "probe", "grid")}

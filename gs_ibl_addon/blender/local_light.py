@@ -46,6 +46,7 @@ GRID_ATTRS = {"lo": "gs_ibl_grid_lo", "scale": "gs_ibl_grid_scale", "max": "gs_i
               "tile": "gs_ibl_grid_tile"}
 TILES = "gs_ibl_tiles"  # atlas custom property: JSON {key: {"lo", "hi", "shape", "row0"}}
 WORLD_COEFFS = "gs_ibl_world"  # atlas custom property: JSON (9, 3) monomial coefficients of the World probe's light
+WORLD_IRRADIANCE = "gs_ibl_world_irradiance"  # atlas custom property: the World probe's irradiance image (E/pi)
 EEVEE_OUTPUT = "GS-IBL EEVEE Output"  # our Material Output (target EEVEE) in a lit material
 GRID_IMAGE = "GS-IBL Grid"
 DEFAULT_MATERIAL_ROLE = "local_material"
@@ -90,11 +91,13 @@ def _tile_pixels(img: bpy.types.Image, tile: dict) -> np.ndarray:
     return buf.reshape(h, w, 4)[tile["row0"]:tile["row0"] + nz * ny, :COEFFS * nx, :3].copy()
 
 
-def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray | None = None) -> bpy.types.Image:
+def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray | None = None,
+                irradiance: bpy.types.Image | None = None) -> bpy.types.Image:
     """Put grids {key: (spec, coefficients (nx, ny, nz, 9, 3))} into the file's atlas, replacing tiles of the same
     key and dropping tiles no object points at (call set_object_grid first); then every object lit by a tile gets
     its numbers, and the group is rebuilt for the atlas's size. ``world``: the (9, 3) coefficients of the World
-    probe's light the tiles are differences to (kept from the last call when None; black at first)."""
+    probe's light the tiles are differences to, and ``irradiance`` its irradiance image (each kept from the last
+    call when None; at first a black World and no image)."""
     from ..core.probe.grid import pack_grid
     img, tiles = _atlas()
     used = {o.get(GRID_KEY) for o in bpy.data.objects}
@@ -110,12 +113,16 @@ def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray
         tiles[k] = {**t, "row0": row}
         row += px.shape[0]
     old_world = img.get(WORLD_COEFFS) if img is not None else None
+    old_irr = img.get(WORLD_IRRADIANCE) if img is not None else None
     img = _atlas_image(atlas, img)
     img[TILES] = json.dumps(tiles)
     if world is not None:
         img[WORLD_COEFFS] = json.dumps(np.asarray(world, np.float64).reshape(COEFFS, 3).tolist())
     elif old_world is not None:
         img[WORLD_COEFFS] = old_world
+    irr = irradiance if irradiance is not None else old_irr
+    if isinstance(irr, bpy.types.Image):
+        img[WORLD_IRRADIANCE] = irr
     for o in bpy.data.objects:
         t = tiles.get(o.get(GRID_KEY))
         if t is None:
@@ -237,9 +244,11 @@ class _Nodes:
 
 
 def _build(tree, atlas) -> None:
-    """(Re)build the group's nodes (core/probe/local_mix.py in nodes): H = W + w D with D = sum_k c_k(P) P_k(n),
-    then per engine s x shader + Emission(albedo x strength x (H - s B)). Without an atlas both outputs pass the
-    shader through."""
+    """(Re)build the group's nodes (core/probe/local_mix.py in nodes): H = E_world + w D with D = sum_k c_k(P)
+    P_k(n), then per engine s x shader + Emission(albedo x strength x (H - s B)). E_world is the World probe's
+    irradiance image along n (exactly what Cycles' diffuse gets from that World) where the atlas names one, else its
+    order-2 coefficients W; B is E_world for Cycles, EEVEE's order-1 part of W for EEVEE. Without an atlas both
+    outputs pass the shader through."""
     tree.nodes.clear()
     b = _Nodes(tree)
     N, L = b.N, b.L
@@ -262,7 +271,12 @@ def _build(tree, atlas) -> None:
         return total
     coeffs, weight = _grid_lookups(b, geo.outputs["Position"], atlas)
     world = [b.const(c) for c in _world_coefficients(atlas)]
-    w_light = poly_sum(world)
+    irr = atlas.get(WORLD_IRRADIANCE)
+    if isinstance(irr, bpy.types.Image):
+        from .world import latlong_lookup
+        w_light = latlong_lookup(tree, geo.outputs["Normal"], irr, name="GS-IBL World Irradiance")
+    else:
+        w_light = poly_sum(world)
     here = b.vec("ADD", w_light, b.scale(poly_sum(coeffs), weight))
     bases = {"Shader": w_light, "EEVEE": b.vec("MAXIMUM", poly_sum(world[:L1_TERMS]), (0.0, 0.0, 0.0))}
     for out_name, base in bases.items():

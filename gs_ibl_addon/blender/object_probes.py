@@ -118,7 +118,7 @@ def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects:
         tiles[key] = ll.probe_tile(c, di - d_world)
         ll.set_object_grid(obj, key)
         ll.light_object(obj, strength)
-    ll.store_grids(tiles, d_world)
+    ll.store_grids(tiles, d_world, probe.gs_ibl_probe.irradiance_image)
     names = ", ".join(o.name for o in objects[:6]) + (", ..." if len(objects) > 6 else "")
     text = (f"Per-object probes for {len(objects)} meshes ({names}), {POINT_FACE_SIZE}x{POINT_FACE_SIZE} faces, "
             "SH order 2")

@@ -56,7 +56,7 @@ def bake_probe_grid(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
         for obj in objs:
             ll.set_object_grid(obj, key)
             ll.light_object(obj, float(s.strength))
-    ll.store_grids(grids, d_world)
+    ll.store_grids(grids, d_world, s.irradiance_image)
     nx, ny, nz = next(iter(specs.values()))[0].shape
     where = (f"over Grid Region {s.grid_region.name!r}" if s.grid_region is not None
              else "over each mesh's own bounds")

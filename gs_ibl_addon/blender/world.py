@@ -286,8 +286,7 @@ def irradiance_group(image: bpy.types.Image) -> bpy.types.ShaderNodeTree:
 
     Outputs "Irradiance" (E(n)/pi times Strength: a white Lambertian surface's outgoing radiance) and
     "Diffuse" (an Emission shader of Albedo x Irradiance: the thesis's fast diffuse path, no ray tracing).
-    The lookup is the one of core/cubemap.py written in math nodes:
-    u = 0.5 - atan2(y, x) / 2pi,  v (bottom-up) = 1 - acos(z) / pi.
+    The lookup: latlong_lookup.
     """
     tree = find_ours(bpy.data.node_groups, "irradiance")
     if tree is None:
@@ -300,19 +299,13 @@ def irradiance_group(image: bpy.types.Image) -> bpy.types.ShaderNodeTree:
     return tree
 
 
-def _build_irradiance_tree(tree: bpy.types.ShaderNodeTree) -> None:
-    iface = tree.interface
-    alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
-    alb.default_value = (0.8, 0.8, 0.8, 1.0)
-    st = iface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
-    st.default_value, st.min_value = 1.0, 0.0
-    iface.new_socket("Diffuse", in_out="OUTPUT", socket_type="NodeSocketShader")
-    iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketColor")
+def latlong_lookup(tree, normal, image: bpy.types.Image | None, name: str = "GS-IBL Irradiance Image"):
+    """Nodes in ``tree`` that read our lat-long ``image`` along the world-space direction ``normal`` (a socket);
+    returns the colour socket. The lookup of core/cubemap.py in math nodes:
+    u = 0.5 - atan2(y, x) / 2pi,  v (bottom-up) = 1 - acos(z) / pi."""
     N, L = tree.nodes, tree.links
-    gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
-    geo = N.new("ShaderNodeNewGeometry")
     sep = N.new("ShaderNodeSeparateXYZ")
-    L.new(geo.outputs["Normal"], sep.inputs[0])
+    L.new(normal, sep.inputs[0])
 
     def op(name, a, b=None, x=0):
         m = N.new("ShaderNodeMath")
@@ -338,13 +331,29 @@ def _build_irradiance_tree(tree: bpy.types.ShaderNodeTree) -> None:
     L.new(u, comb.inputs["X"])
     L.new(v, comb.inputs["Y"])
     tex = N.new("ShaderNodeTexImage")
-    tex.name = tex.label = "GS-IBL Irradiance Image"
+    tex.name = tex.label = name
+    tex.image = image
     tex.interpolation = "Linear"
     tex.extension = "REPEAT"  # wraps the azimuth seam
     L.new(comb.outputs[0], tex.inputs["Vector"])
+    return tex.outputs["Color"]
+
+
+def _build_irradiance_tree(tree: bpy.types.ShaderNodeTree) -> None:
+    iface = tree.interface
+    alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    alb.default_value = (0.8, 0.8, 0.8, 1.0)
+    st = iface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
+    st.default_value, st.min_value = 1.0, 0.0
+    iface.new_socket("Diffuse", in_out="OUTPUT", socket_type="NodeSocketShader")
+    iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketColor")
+    N, L = tree.nodes, tree.links
+    gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
+    geo = N.new("ShaderNodeNewGeometry")
+    colour = latlong_lookup(tree, geo.outputs["Normal"], None)
     scaled = N.new("ShaderNodeVectorMath")
     scaled.operation = "SCALE"
-    L.new(tex.outputs["Color"], scaled.inputs[0])
+    L.new(colour, scaled.inputs[0])
     L.new(gin.outputs["Strength"], scaled.inputs["Scale"])
     diffuse = N.new("ShaderNodeVectorMath")
     diffuse.operation = "MULTIPLY"

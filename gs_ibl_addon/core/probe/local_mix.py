@@ -1,7 +1,8 @@
 """How the local-light group turns a mesh's own light into a shader: the numpy twin of blender/local_light.py.
 
-The user's shader already sees the World's diffuse light B(n); the mesh should see H(n) = W(n) + D(n) (the World
-probe's light plus the mesh's difference). Adding Emission(albedo (H - B)) is right only where H >= B: EEVEE clamps
+The user's shader already sees the World's diffuse light B(n); the mesh should see H(n) = E(n) + D(n): the World
+probe's irradiance (its irradiance image, E/pi: what Cycles integrates from that World) plus the mesh's difference
+D (order-2 SH of its probes minus the World probe's, baked alike). Adding Emission(albedo (H - B)) is right only where H >= B: EEVEE clamps
 negative emission to 0 (measured: Emission -0.3 renders 0 in EEVEE, -0.3 in Cycles), so a mesh darker than the
 World (a far corner) stayed as bright as the World. So the user's shader is first scaled by the largest s in 0..1
 that keeps every channel's remainder non-negative:
@@ -11,10 +12,10 @@ that keeps every channel's remainder non-negative:
 whose diffuse part is albedo x H wherever H is non-negative; specular and the rest of the user's material dim with
 the diffuse where the mesh's light is darker than the World's.
 
-B differs by engine. Cycles integrates the World image: B = W, our order-2 estimate of it. EEVEE lights from an
-order-1 SH of the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1,
+B differs by engine. Cycles integrates the World image: B = E. EEVEE lights from an order-1 SH of the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1,
 clamped at 0) once the World's sun extraction is off (World.sun_threshold = 0, blender/world.py): B = max(0, the
-first four monomial terms of W). Correcting towards H then removes EEVEE's own order-1 error from our meshes too.
+first four monomial terms of W, the World probe's order-2 coefficients). Correcting towards H then removes EEVEE's
+own order-1 error from our meshes: both engines aim at the same H.
 """
 from __future__ import annotations
 
@@ -26,12 +27,14 @@ EPS = 1e-6  # a World channel darker than this is treated as black: any light of
 L1_TERMS = 4  # monomials 1, y, z, x: the order-1 part of an order-2 irradiance
 
 
-def world_diffuse(world: np.ndarray, normals: np.ndarray, engine: str) -> np.ndarray:
+def world_diffuse(world: np.ndarray, normals: np.ndarray, engine: str,
+                  irradiance: np.ndarray | None = None) -> np.ndarray:
     """E(n)/pi the user's shader gets from the World in ``engine`` ("CYCLES" or "EEVEE"): world (9, 3) monomial
-    coefficients, normals (..., 3) -> (..., 3)."""
+    coefficients, normals (..., 3) -> (..., 3); ``irradiance``: the World's irradiance at those normals (Cycles';
+    default: the coefficients' own)."""
     w = np.asarray(world, np.float64)
     if engine == "CYCLES":
-        return eval_irradiance(w, normals)
+        return eval_irradiance(w, normals) if irradiance is None else np.asarray(irradiance, np.float64)
     return np.maximum(monomials(normals)[..., :L1_TERMS] @ w[:L1_TERMS], 0.0)
 
 
@@ -41,11 +44,11 @@ def mix(here: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, here - s[..., None] * base
 
 
-def shaded(world: np.ndarray, here: np.ndarray, normals: np.ndarray, engine: str,
-           albedo: float = 1.0) -> np.ndarray:
+def shaded(world: np.ndarray, here: np.ndarray, normals: np.ndarray, engine: str, albedo: float = 1.0,
+           irradiance: np.ndarray | None = None) -> np.ndarray:
     """What a diffuse mesh of ``albedo`` renders, given H(n) ``here`` (..., 3) at its normals: s x albedo x B +
     the emission, with the emission clamped at 0 as EEVEE does (Cycles keeps a negative remainder)."""
-    base = world_diffuse(world, normals, engine)
+    base = world_diffuse(world, normals, engine, irradiance)
     s, emit = mix(here, base)
     if engine != "CYCLES":
         emit = np.maximum(emit, 0.0)
