@@ -244,11 +244,11 @@ class _Nodes:
 
 
 def _build(tree, atlas) -> None:
-    """(Re)build the group's nodes (core/probe/local_mix.py in nodes): H = E_world + w D with D = sum_k c_k(P)
-    P_k(n), then per engine s x shader + Emission(albedo x strength x (H - s B)). E_world is the World probe's
-    irradiance image along n (exactly what Cycles' diffuse gets from that World) where the atlas names one, else its
-    order-2 coefficients W; B is E_world for Cycles, EEVEE's order-1 part of W for EEVEE. Without an atlas both
-    outputs pass the shader through."""
+    """(Re)build the group's nodes (core/probe/local_mix.py in nodes): per engine s x shader + Emission(albedo x
+    strength x (H - s B)), with w D = w sum_k c_k(P) P_k(n) the mesh's difference. Cycles: H = E + w D over B = E,
+    E the World probe's irradiance image along n (what Cycles' diffuse gets from that World; its order-2
+    coefficients W where the atlas names no image). EEVEE: H = W + w D over B = EEVEE's order-1 part of W. Without
+    an atlas both outputs pass the shader through."""
     tree.nodes.clear()
     b = _Nodes(tree)
     N, L = b.N, b.L
@@ -271,15 +271,18 @@ def _build(tree, atlas) -> None:
         return total
     coeffs, weight = _grid_lookups(b, geo.outputs["Position"], atlas)
     world = [b.const(c) for c in _world_coefficients(atlas)]
+    w_sh = poly_sum(world)
     irr = atlas.get(WORLD_IRRADIANCE)
     if isinstance(irr, bpy.types.Image):
         from .world import latlong_lookup
-        w_light = latlong_lookup(tree, geo.outputs["Normal"], irr, name="GS-IBL World Irradiance")
+        w_image = latlong_lookup(tree, geo.outputs["Normal"], irr, name="GS-IBL World Irradiance")
     else:
-        w_light = poly_sum(world)
-    here = b.vec("ADD", w_light, b.scale(poly_sum(coeffs), weight))
-    bases = {"Shader": w_light, "EEVEE": b.vec("MAXIMUM", poly_sum(world[:L1_TERMS]), (0.0, 0.0, 0.0))}
-    for out_name, base in bases.items():
+        w_image = w_sh
+    delta = b.scale(poly_sum(coeffs), weight)
+    # (H, B) per output: Cycles E + D over E; EEVEE W + D over its order-1 World (core/probe/local_mix.py says why)
+    paths = {"Shader": (b.vec("ADD", w_image, delta), w_image),
+             "EEVEE": (b.vec("ADD", w_sh, delta), b.vec("MAXIMUM", poly_sum(world[:L1_TERMS]), (0.0, 0.0, 0.0)))}
+    for out_name, (here, base) in paths.items():
         rx, ry, rz = b.separate(b.vec("DIVIDE", here, b.vec("MAXIMUM", base, (EPS, EPS, EPS))))
         s = b.math("MINIMUM", b.math("MINIMUM", rx, ry), rz)
         s.node.use_clamp = True  # 0..1

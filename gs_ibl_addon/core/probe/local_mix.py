@@ -12,10 +12,14 @@ that keeps every channel's remainder non-negative:
 whose diffuse part is albedo x H wherever H is non-negative; specular and the rest of the user's material dim with
 the diffuse where the mesh's light is darker than the World's.
 
-B differs by engine. Cycles integrates the World image: B = E. EEVEE lights from an order-1 SH of the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1,
-clamped at 0) once the World's sun extraction is off (World.sun_threshold = 0, blender/world.py): B = max(0, the
-first four monomial terms of W, the World probe's order-2 coefficients). Correcting towards H then removes EEVEE's
-own order-1 error from our meshes: both engines aim at the same H.
+B differs by engine. Cycles integrates the World image: B = E, and H = E + D. EEVEE lights from an order-1 SH of
+the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1, clamped at 0)
+once the World's sun extraction is off (World.sun_threshold = 0, blender/world.py): B = max(0, the first four
+monomial terms of W, the World probe's order-2 coefficients), and H = W + D, our order-2 light. Checked: on smooth
+Worlds (radiance a + b z, a + c z^2) EEVEE's own light is this B within 1% and the group's result H within 0.5%.
+Measured, not explained: for the sample room's World (a lamp of radiance 40, a window) EEVEE's own light falls
+1-3% (a bpy 5.0 view of the window side) to ~10% (the five-place bench, bpy 5.3) below B, red most; aiming EEVEE
+at E + D put the five places' spheres 4-14% below native Cycles, at W + D 0-6% (docs/blender.md).
 """
 from __future__ import annotations
 
@@ -46,7 +50,8 @@ def mix(here: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def shaded(world: np.ndarray, here: np.ndarray, normals: np.ndarray, engine: str, albedo: float = 1.0,
            irradiance: np.ndarray | None = None) -> np.ndarray:
-    """What a diffuse mesh of ``albedo`` renders, given H(n) ``here`` (..., 3) at its normals: s x albedo x B +
+    """What a diffuse mesh of ``albedo`` renders, given H(n) ``here`` (..., 3) at its normals (E + D in Cycles,
+    W + D in EEVEE): s x albedo x B +
     the emission, with the emission clamped at 0 as EEVEE does (Cycles keeps a negative remainder)."""
     base = world_diffuse(world, normals, engine, irradiance)
     s, emit = mix(here, base)
