@@ -37,6 +37,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests" / "real_blender"))
+from native_bench import mesh_mask  # noqa: E402 (its in-Blender half needs it too)
+
 RESULT_TAG = "GSIBL-AUTO-BENCH"
 WORK = REPO / "build" / "auto-light"
 CSV = REPO / "docs" / "auto_light.csv"
@@ -58,19 +60,6 @@ PLACES = {
 MESHES = ("sphere", "suzanne")
 ENGINES = ("cycles", "eevee")
 PROBE = [0.0, 0.0, 1.2]
-
-
-def mesh_mask(*renders: np.ndarray, erode: int = 1) -> np.ndarray:
-    """Pixels covered (alpha > 0.999) in every render, ``erode`` pixels in from the outline."""
-    m = np.logical_and.reduce([r[..., 3] > 0.999 for r in renders])
-    for _ in range(erode):
-        e = m.copy()
-        e[1:] &= m[:-1]
-        e[:-1] &= m[1:]
-        e[:, 1:] &= m[:, :-1]
-        e[:, :-1] &= m[:, 1:]
-        m = e
-    return m
 
 
 def cells(arrays: dict, result: dict, places, meshes) -> list[dict]:

@@ -44,6 +44,20 @@ MODULE = "bl_ext.user_default.gs_ibl"
 
 # ---------------------------------------------------------------------------------------------------- in Blender
 
+def mesh_mask(*renders, erode: int = 1):
+    """Pixels covered (alpha > 0.999) in every render, ``erode`` pixels in from the outline (numpy only: this file
+    also runs inside Blender)."""
+    m = np.logical_and.reduce([r[..., 3] > 0.999 for r in renders])
+    for _ in range(erode):
+        e = m.copy()
+        e[1:] &= m[:-1]
+        e[:-1] &= m[1:]
+        e[:, 1:] &= m[:, :-1]
+        e[:, :-1] &= m[:, 1:]
+        m = e
+    return m
+
+
 # name: (width, height, camera offset from the sphere (m), lens (mm)); the sphere is 33, 70 and 210 px wide
 FRAMES = {"48x48": (48, 48, (0.0, -1.2, 0.25), 50.0),
           "320x180": (320, 180, (0.0, -1.86, 0.39), 25.0),
@@ -175,15 +189,8 @@ def _in_blender(args: dict) -> dict:
         def __init__(self, label: str, samples: int):
             border = sphere_border()
             (a, sa), (b, sb) = (render("CYCLES", samples, seed=s, border=border) for s in (101, 102))
-            m = (a[..., 3] > 0.999) & (b[..., 3] > 0.999)
-            for _ in range(1):  # one pixel in from the outline: edges are each engine's own filter
-                e = m.copy()
-                e[1:] &= m[:-1]
-                e[:-1] &= m[1:]
-                e[:, 1:] &= m[:, :-1]
-                e[:, :-1] &= m[:, 1:]
-                m = e
-            self.mask = m
+            # one pixel in from the outline: edges are each engine's own filter
+            self.mask = m = mesh_mask(a, b)
             self.a, self.b = a[m][:, :3].astype(np.float64), b[m][:, :3].astype(np.float64)
             self.mean = 0.5 * (self.a + self.b)
             self.noise_var = float(np.mean((self.a - self.b) ** 2)) / 4.0  # of the mean's pixels

@@ -37,6 +37,7 @@ from ..core.probe.grid import COEFFS, GridSpec
 from ..core.probe.local_mix import EPS, L1_TERMS
 from .compat import node_tree
 from .datablocks import MARKER, find_ours, is_ours
+from .world import albedo_strength_inputs, latlong_lookup
 
 GROUP_NAME = "GS-IBL Local Light"
 ROLE = "local_light"
@@ -178,10 +179,7 @@ def local_light_group(atlas: bpy.types.Image | None = None) -> bpy.types.ShaderN
 def _interface(tree) -> None:
     iface = tree.interface
     iface.new_socket("Shader", in_out="INPUT", socket_type="NodeSocketShader")
-    alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
-    alb.default_value = (0.8, 0.8, 0.8, 1.0)
-    st = iface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
-    st.default_value, st.min_value = 1.0, 0.0
+    albedo_strength_inputs(iface)
     iface.new_socket("Shader", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
 
@@ -274,7 +272,6 @@ def _build(tree, atlas) -> None:
     w_sh = poly_sum(world)
     irr = atlas.get(WORLD_IRRADIANCE)
     if isinstance(irr, bpy.types.Image):
-        from .world import latlong_lookup
         w_image = latlong_lookup(tree, geo.outputs["Normal"], irr, name="GS-IBL World Irradiance")
     else:
         w_image = w_sh

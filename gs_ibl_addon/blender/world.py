@@ -339,12 +339,17 @@ def latlong_lookup(tree, normal, image: bpy.types.Image | None, name: str = "GS-
     return tex.outputs["Color"]
 
 
-def _build_irradiance_tree(tree: bpy.types.ShaderNodeTree) -> None:
-    iface = tree.interface
+def albedo_strength_inputs(iface) -> None:
+    """The Albedo (0.8 grey) and Strength (1) inputs our diffuse node groups share."""
     alb = iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
     alb.default_value = (0.8, 0.8, 0.8, 1.0)
     st = iface.new_socket("Strength", in_out="INPUT", socket_type="NodeSocketFloat")
     st.default_value, st.min_value = 1.0, 0.0
+
+
+def _build_irradiance_tree(tree: bpy.types.ShaderNodeTree) -> None:
+    iface = tree.interface
+    albedo_strength_inputs(iface)
     iface.new_socket("Diffuse", in_out="OUTPUT", socket_type="NodeSocketShader")
     iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketColor")
     N, L = tree.nodes, tree.links
