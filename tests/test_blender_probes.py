@@ -290,3 +290,41 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     nt = mat.node_tree
     assert [n.bl_idname for n in nt.nodes] == ["ShaderNodeBsdfPrincipled", "ShaderNodeOutputMaterial"]
     assert nt.nodes[0].outputs[0].links[0].to_node == nt.nodes[1]
+
+
+def test_eevee_output_is_ours_to_add_and_remove(blender):
+    """Lighting a material adds one EEVEE Material Output of ours fed by the group (the user's displacement copied
+    to it) and removing the light deletes only our nodes; a material with an EEVEE output of its own keeps it and
+    gets none of ours."""
+    from gs_ibl_addon.blender import local_light as ll
+    bpy.ops.mesh.primitive_uv_sphere_add()
+    obj = bpy.context.active_object
+    mat = bpy.data.materials.new("user")
+    nt = node_tree(mat, clear=True)
+    bsdf = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    disp = nt.nodes.new("ShaderNodeDisplacement")
+    nt.links.new(bsdf.outputs[0], out.inputs["Surface"])
+    nt.links.new(disp.outputs[0], out.inputs["Displacement"])
+    obj.data.materials.append(mat)
+    ll.set_object_grid(obj, "probe:x")
+    ll.store_grids({"probe:x": ll.probe_tile((0, 0, 0), np.zeros((9, 3)))}, np.zeros((9, 3)))
+    ll.light_object(obj)
+    ours = [n for n in nt.nodes if n.name == ll.EEVEE_OUTPUT]
+    assert len(ours) == 1 and ours[0].target == "EEVEE" and out.target == "ALL"
+    assert ours[0].inputs["Surface"].links[0].from_socket.name == "EEVEE"
+    assert ours[0].inputs["Displacement"].links[0].from_node == disp
+    ll.light_object(obj)  # again: nothing more
+    assert sum(n.bl_idname == "ShaderNodeOutputMaterial" for n in nt.nodes) == 2
+    ll.unlight_object(obj)
+    assert sorted(n.bl_idname for n in nt.nodes) == ["ShaderNodeBsdfPrincipled", "ShaderNodeDisplacement",
+                                                      "ShaderNodeOutputMaterial"]
+    assert out.inputs["Surface"].links[0].from_node == bsdf and out.inputs["Displacement"].links[0].from_node == disp
+    # the user's own EEVEE output stays theirs
+    ev = nt.nodes.new("ShaderNodeOutputMaterial")
+    ev.target = "EEVEE"
+    ll.set_object_grid(obj, "probe:x")
+    ll.light_object(obj)
+    assert not any(n.name == ll.EEVEE_OUTPUT for n in nt.nodes)
+    ll.unlight_object(obj)
+    assert ev.name in nt.nodes and len(nt.nodes) == 4
