@@ -7,7 +7,8 @@ from the World probe's gets it through its material:
 
 where W is the World probe's light, D the mesh's difference (its own probe, or its grid at the shading point), B
 what the user's shader gets from the World in this engine and s the largest scale in 0..1 that keeps the emission
-non-negative (EEVEE clamps negative emission): core/probe/local_mix.py is the numpy twin and says why. The group
+non-negative (EEVEE clamps negative emission): core/probe/local_mix.py is the numpy twin and says why. The emission
+is also scaled by the mesh's own ambient occlusion (Only Local): the engines shadow the user's shader, not emission. The group
 has two outputs, one per engine (B = W for Cycles, the World's order-1 part for EEVEE), read by the user's Material
 Output and by an EEVEE-only output of ours. E is order-2 SH irradiance, kept as the nine monomial coefficients of
 core/probe/grid.py, so each of W and D is a sum of nine colours times polynomials of the world normal.
@@ -48,6 +49,8 @@ GRID_ATTRS = {"lo": "gs_ibl_grid_lo", "scale": "gs_ibl_grid_scale", "max": "gs_i
 TILES = "gs_ibl_tiles"  # atlas custom property: JSON {key: {"lo", "hi", "shape", "row0"}}
 WORLD_COEFFS = "gs_ibl_world"  # atlas custom property: JSON (9, 3) monomial coefficients of the World probe's light
 WORLD_IRRADIANCE = "gs_ibl_world_irradiance"  # atlas custom property: the World probe's irradiance image (E/pi)
+AO_SAMPLES = 4  # Cycles' rays per shading point for the correction's occlusion (its samples average them)
+AO_DISTANCE = 1.0  # metres
 EEVEE_OUTPUT = "GS-IBL EEVEE Output"  # our Material Output (target EEVEE) in a lit material
 GRID_IMAGE = "GS-IBL Grid"
 DEFAULT_MATERIAL_ROLE = "local_material"
@@ -279,6 +282,11 @@ def _build(tree, atlas) -> None:
     # (H, B) per output: Cycles E + D over E; EEVEE W + D over its order-1 World (core/probe/local_mix.py says why)
     paths = {"Shader": (b.vec("ADD", w_image, delta), w_image),
              "EEVEE": (b.vec("ADD", w_sh, delta), b.vec("MAXIMUM", poly_sum(world[:L1_TERMS]), (0.0, 0.0, 0.0)))}
+    # the emission is light the engine does not trace: its own mesh's occlusion of it (Only Local AO) stands in
+    # for the shadows the user's shader gets from the World (a convex mesh: 1)
+    ao = N.new("ShaderNodeAmbientOcclusion")
+    ao.only_local, ao.samples = True, AO_SAMPLES
+    ao.inputs["Distance"].default_value = AO_DISTANCE
     for out_name, (here, base) in paths.items():
         rx, ry, rz = b.separate(b.vec("DIVIDE", here, b.vec("MAXIMUM", base, (EPS, EPS, EPS))))
         s = b.math("MINIMUM", b.math("MINIMUM", rx, ry), rz)
@@ -286,7 +294,7 @@ def _build(tree, atlas) -> None:
         mixer = N.new("ShaderNodeMixShader")  # Fac 1 - s: s x the shader, the rest nothing (no second shader)
         L.new(b.math("SUBTRACT", 1.0, s), mixer.inputs["Fac"])
         L.new(gin.outputs["Shader"], mixer.inputs[1])
-        rest = b.vec("SUBTRACT", here, b.scale(base, s))
+        rest = b.scale(b.vec("SUBTRACT", here, b.scale(base, s)), ao.outputs["AO"])
         lit = b.vec("MULTIPLY", b.scale(rest, gin.outputs["Strength"]), gin.outputs["Albedo"])
         emit = N.new("ShaderNodeEmission")
         L.new(lit, emit.inputs["Color"])

@@ -10,7 +10,9 @@ that keeps every channel's remainder non-negative:
     s = clamp(min_c H_c / B_c, 0, 1),   surface = s x user + Emission(albedo x (H - s B))
 
 whose diffuse part is albedo x H wherever H is non-negative; specular and the rest of the user's material dim with
-the diffuse where the mesh's light is darker than the World's.
+the diffuse where the mesh's light is darker than the World's. In Blender the emission is also multiplied by the
+mesh's own ambient occlusion (Only Local), standing in for the shadows the engine traces for the user's shader and
+not for emission; on a convex mesh it is 1, which is what this twin models.
 
 B differs by engine. Cycles integrates the World image: B = E, and H = E + D. EEVEE lights from an order-1 SH of
 the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1, clamped at 0)
