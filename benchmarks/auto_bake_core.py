@@ -6,8 +6,8 @@ Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
 The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3), the panel's defaults and Lighting
 Auto's work as blender/bake.py bake_into_world and blender/auto_light.py do it, on one uploaded renderer (Blender's
 splat cache keeps it between bakes): the World probe's bake and its files (core CLI: write_probe), the 9-point
-measurement in one batch with the World probe's place, and the sphere's 3 x 3 x 3 grid when the measurement asks
-for one. Wall time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA
+measurement in one batch with the World probe's place, and the 18 nodes of the sphere's 3 x 3 x 3 grid the
+measurement did not place, when it asks for a grid. Wall time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA
 context: bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv).
 """
 from __future__ import annotations
@@ -27,7 +27,8 @@ sys.path.insert(0, HERE)
 from bench_common import append_csv, gpu_clock, hold_gpu_clock  # noqa: E402
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
-from gs_ibl_addon.core.probe.auto_light import MEASURE_FACE, choose_light, measure_points, mesh_grid  # noqa: E402
+from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
+                                                measured_nodes, mesh_grid)
 from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
 from gs_ibl_addon.core.probe.result import write_probe  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
@@ -49,9 +50,9 @@ def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
     choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
     t["measurement"] = time.perf_counter()
-    if choice.kind == "grid":
+    if choice.kind == "grid":  # the nodes the measurement did not place, as blender/auto_light.py
         spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS)
-        bake_sh_points(r, np.vstack([PROBE[None], spec.points().reshape(-1, 3)]), MEASURE_FACE)
+        bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
     t["grid"] = time.perf_counter()
     names = list(t)
     stages = {b: t[b] - t[a] for a, b in zip(names, names[1:])}

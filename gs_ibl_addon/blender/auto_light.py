@@ -2,8 +2,8 @@
 
 After the World probe's bake, probes at each lit mesh's centre and box corners are baked in one batch with one at
 the World probe's place (the measurement); a mesh whose light differs from the World's gets its centre's probe, and
-one whose light varies across it a grid (a second batch of the grid nodes not measured already), through the local-light group (blender/local_light.py),
-which adds the difference to the World's light. A mesh the World lights well enough costs its nine probes. Re-decided when a lit mesh moves (Update When Moved) and at every bake.
+one whose light varies across it a grid (a second batch of the grid nodes not measured already), through the
+local-light group (blender/local_light.py), which adds the difference to the World's light. A mesh the World lights well enough costs its nine probes. Re-decided when a lit mesh moves (Update When Moved) and at every bake.
 """
 from __future__ import annotations
 
@@ -12,19 +12,11 @@ import numpy as np
 
 from ..core.probe.auto_light import (MEASURE_FACE, LightChoice, choose_light, measure_points, measured_nodes,
                                      mesh_grid)
-from ..core.probe.grid import bake_sh_points, monomial_coefficients
 from . import local_light as ll
-from .object_probes import Progress, coefficients_with_world, lit_meshes, probe_renderer, world_box
+from .object_probes import (Progress, coefficients_with_world, lit_meshes, point_coefficients, probe_renderer,
+                            world_box)
 
 REPORT_PREFIX = "Auto lighting: "
-
-
-def bake_sh_monomials(renderer, points: np.ndarray, progress: Progress | None) -> np.ndarray:
-    """Monomial coefficients (P, 9, 3) of MEASURE_FACE probes at ``points`` (the renderer trimmed after)."""
-    try:
-        return monomial_coefficients(bake_sh_points(renderer, points, MEASURE_FACE, progress=progress))
-    finally:
-        renderer.trim()
 AUTO_KEY = "gs_ibl_auto_light"  # on a mesh Lighting Auto lit: the probe that did (its light is that probe's to undo)
 
 
@@ -55,28 +47,27 @@ def auto_light(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bp
     tol = float(probe.gs_ibl_probe.variation_tolerance)
     choices = [choose_light(o.name, d_world, d[9 * i:9 * i + 9], tol) for i, o in enumerate(meshes)]
     # light of their own, at the operators' size, for the meshes that need it: one more batch
-    keys, tiles, grids, grid_of = {}, {}, {}, {}
+    keys, tiles, grids = {}, {}, {}  # grids: {mesh index: its grid}
     for i, (obj, box, c) in enumerate(zip(meshes, boxes, choices)):
         if c.kind == "probe":  # its centre's measurement is its probe
             keys[obj.name] = f"probe:{obj.name}"
             tiles[keys[obj.name]] = ll.probe_tile(points[9 * i], d[9 * i] - d_world)
         elif c.kind == "grid":
             keys[obj.name] = f"object:{obj.name}"
-            grids[keys[obj.name]] = mesh_grid(*box)
-            grid_of[i] = keys[obj.name]
-    if grid_of:  # the grids' nodes the measurement did not place: one more batch
-        reuse = {i: measured_nodes(grids[key], points[9 * i:9 * i + 9]) for i, key in grid_of.items()}
-        fresh = {i: grids[key].points().reshape(-1, 3)[reuse[i] < 0] for i, key in grid_of.items()}
+            grids[i] = mesh_grid(*box)
+    if grids:  # the grids' nodes the measurement did not place: one more batch
+        reuse = {i: measured_nodes(spec, points[9 * i:9 * i + 9]) for i, spec in grids.items()}
+        fresh = {i: spec.points().reshape(-1, 3)[reuse[i] < 0] for i, spec in grids.items()}
         todo = np.concatenate(list(fresh.values()))
-        dg = bake_sh_monomials(r, todo, progress) if len(todo) else np.empty((0, *d.shape[1:]))
+        dg = point_coefficients(r, todo, progress, MEASURE_FACE) if len(todo) else np.empty((0, *d.shape[1:]))
         start = 0
-        for i, key in grid_of.items():
-            spec, m = grids[key], reuse[i]
+        for i, spec in grids.items():
+            m = reuse[i]
             nodes = np.empty((spec.count, *d.shape[1:]))
             nodes[m >= 0] = d[9 * i + m[m >= 0]]
             nodes[m < 0] = dg[start:start + len(fresh[i])]
             start += len(fresh[i])
-            tiles[key] = (spec, nodes.reshape(*spec.shape, *d.shape[1:]) - d_world)
+            tiles[keys[meshes[i].name]] = (spec, nodes.reshape(*spec.shape, *d.shape[1:]) - d_world)
     for obj, c in zip(meshes, choices):
         if c.kind == "world":
             if ll.has_local_light(obj):

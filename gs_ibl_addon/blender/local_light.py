@@ -3,15 +3,16 @@
 The World (one probe) keeps lighting every mesh: background, specular and diffuse. A mesh whose light differs
 from the World probe's gets it through its material:
 
-    surface = s x the user's shader + Emission(albedo x strength x (H(n) - s B(n))),  H = W + D
+    surface = s x the user's shader + Emission(albedo x strength x (H(n) - s B(n)))
 
-where W is the World probe's light, D the mesh's difference (its own probe, or its grid at the shading point), B
-what the user's shader gets from the World in this engine and s the largest scale in 0..1 that keeps the emission
-non-negative (EEVEE clamps negative emission): core/probe/local_mix.py is the numpy twin and says why. The emission
-is also scaled by the mesh's own ambient occlusion (Only Local): the engines shadow the user's shader, not emission. The group
-has two outputs, one per engine (B = W for Cycles, the World's order-1 part for EEVEE), read by the user's Material
-Output and by an EEVEE-only output of ours. E is order-2 SH irradiance, kept as the nine monomial coefficients of
-core/probe/grid.py, so each of W and D is a sum of nine colours times polynomials of the world normal.
+where H is the mesh's light (the World probe's plus D, the mesh's difference: its own probe, or its grid at the
+shading point), B what the user's shader gets from the World in this engine and s the largest scale in 0..1 that
+keeps the emission non-negative (EEVEE clamps negative emission): core/probe/local_mix.py is the numpy twin and
+says why. The emission is also scaled by the mesh's own ambient occlusion (Only Local): the engines shadow the
+user's shader, not emission. The group has two outputs, one per engine, read by the user's Material Output and by
+an EEVEE-only output of ours: Cycles H = E + D over B = E (the World probe's irradiance image), EEVEE H = W + D over
+its order-1 part of W (the World probe's order-2 coefficients). Irradiance is order-2 SH, kept as the nine monomial
+coefficients of core/probe/grid.py, so each of W and D is a sum of nine colours times polynomials of the normal.
 
 Every kind of local light is a grid (a per-object probe is a 1 x 1 x 1 grid at the mesh's centre), and every grid
 is a tile (core/probe/grid.py ``pack_grid``) of one float image per file, the atlas, stacked from the bottom

@@ -95,12 +95,18 @@ def coefficients_with_world(probe: bpy.types.Object, renderer, points: np.ndarra
     """Monomial coefficients of the World probe's light (9, 3) and of probes at ``points`` (P, 9, 3), baked in one
     batch the same way (so their difference carries no difference of method)."""
     pos = np.array(probe.matrix_world.translation, np.float64)
-    try:
-        d = monomial_coefficients(bake_sh_points(renderer, np.vstack([pos[None], points]), face_size,
-                                                 progress=progress))
-    finally:
-        renderer.trim()  # as check_variation: a batch's buffers are not kept in the splat cache
+    d = point_coefficients(renderer, np.vstack([pos[None], points]), progress, face_size)
     return d[0], d[1:]
+
+
+def point_coefficients(renderer, points: np.ndarray, progress: Progress | None = None,
+                       face_size: int = POINT_FACE_SIZE) -> np.ndarray:
+    """Monomial coefficients (P, 9, 3) of SH probes at ``points``, in one batch; the renderer is trimmed after (as
+    check_variation: a batch's buffers are not kept in the splat cache)."""
+    try:
+        return monomial_coefficients(bake_sh_points(renderer, points, face_size, progress=progress))
+    finally:
+        renderer.trim()
 
 
 def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],

@@ -2,8 +2,8 @@
 
 The user's shader already sees the World's diffuse light B(n); the mesh should see H(n) = E(n) + D(n): the World
 probe's irradiance (its irradiance image, E/pi: what Cycles integrates from that World) plus the mesh's difference
-D (order-2 SH of its probes minus the World probe's, baked alike). Adding Emission(albedo (H - B)) is right only where H >= B: EEVEE clamps
-negative emission to 0 (measured: Emission -0.3 renders 0 in EEVEE, -0.3 in Cycles), so a mesh darker than the
+D (order-2 SH of its probes minus the World probe's, baked alike). Adding Emission(albedo (H - B)) is right only
+where H >= B: EEVEE clamps negative emission to 0 (measured: Emission -0.3 renders 0 in EEVEE, -0.3 in Cycles), so a mesh darker than the
 World (a far corner) stayed as bright as the World. So the user's shader is first scaled by the largest s in 0..1
 that keeps every channel's remainder non-negative:
 
@@ -53,8 +53,7 @@ def mix(here: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def shaded(world: np.ndarray, here: np.ndarray, normals: np.ndarray, engine: str, albedo: float = 1.0,
            irradiance: np.ndarray | None = None) -> np.ndarray:
     """What a diffuse mesh of ``albedo`` renders, given H(n) ``here`` (..., 3) at its normals (E + D in Cycles,
-    W + D in EEVEE): s x albedo x B +
-    the emission, with the emission clamped at 0 as EEVEE does (Cycles keeps a negative remainder)."""
+    W + D in EEVEE): s x albedo x B + the emission, clamped at 0 as EEVEE does (Cycles keeps a negative remainder)."""
     base = world_diffuse(world, normals, engine, irradiance)
     s, emit = mix(here, base)
     if engine != "CYCLES":
