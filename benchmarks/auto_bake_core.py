@@ -42,7 +42,7 @@ TOLERANCE = 0.05  # the panel's Variation Tolerance
 def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     """One bake as the panel's Bake does it: (wall seconds per stage, the light the sphere got)."""
     t = {"start": time.perf_counter()}
-    result = bake_probe(None, PROBE, ProbeSettings(), renderer=r, estimate_from=scene)
+    result = bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
     t["world probe"] = time.perf_counter()
     write_probe(result, out_dir)
     t["writing"] = time.perf_counter()

@@ -27,7 +27,7 @@ layout(std430, binding = 10) readonly buffer Origin { vec4 origins[]; };  // one
 layout(std430, binding = 11) readonly buffer Lod { uvec2 lod[]; };
 layout(std430, binding = 12) writeonly buffer Live { uint live[]; };
 layout(push_constant) uniform P {
-    uint n; float pixel_angle; float near; uint sh_k; uint n_views;
+    uint n; float dilation_angle; float near; uint sh_k; uint n_views;
     uint energy_preserving;  // 1: the dilation keeps each splat's integral (probes); 0: 3DGS's look (views)
     uint lod;  // 1: nodes of a level of detail, drawn where in the cut of threshold lod_tau
     float lod_tau; float lod_cell; float lod_ox; float lod_oy; float lod_oz;  // threshold, level-1 cell, grid corner
@@ -132,7 +132,7 @@ void main() {
     vec3 mu = po.xyz - origin;
     float dist = length(mu);
     vec3 sc = scale[i].xyz;
-    vec3 s2 = dilated_scale2(sc, dist, p.pixel_angle);
+    vec3 s2 = dilated_scale2(sc, dist, p.dilation_angle);
     mat3 R = quat_to_mat(rot[i]);
     float opacity = po.w;
     if (p.energy_preserving != 0u) {

@@ -21,8 +21,8 @@ mat3 quat_to_mat(vec4 q) {  // q = (w, x, y, z), unit; returns columns
 }
 
 // Squared dilated scales: 3DGS's 0.3 px^2 screen-space low-pass, as a 3D isotropic variance at this distance.
-vec3 dilated_scale2(vec3 s, float dist, float pixel_angle) {
-    float d = pixel_angle * dist;
+vec3 dilated_scale2(vec3 s, float dist, float dilation_angle) {
+    float d = dilation_angle * dist;
     return s * s + vec3(DILATION_PX2 * d * d);
 }
 

@@ -1,15 +1,16 @@
-"""Face size 0 sizes each cube face by itself (core/bake.py choose_face_sizes): a small bright light's face is
-rendered finer, the rest stay coarse, and the irradiance still meets the tolerance against a fine uniform render."""
+"""Face size 0 sizes each cube face by itself (core/bake.py choose_face_sizes): a lamp's face is rendered finer,
+the rest stay coarse, and the irradiance still meets the tolerance against a fine uniform render."""
 import numpy as np
 import pytest
 
 from gs_ibl_addon.core import cubemap
 from gs_ibl_addon.core.bake import RADIANCE_OUT_MAX, ProbeSettings, bake_probe, relative_rms
 from gs_ibl_addon.core.probe.box import downsample_cube, faces_to_size
-from gs_ibl_addon.core.synthetic import BrightPatch, SkyGradient, shell_scene
-from gs_ibl_addon.core.tolerance import ErrorModel, footprints
+from gs_ibl_addon.core.probe.reference import exact_irradiance_cube, exact_irradiance_parts
+from gs_ibl_addon.core.synthetic import SkyGradient, sample_environment, shell_scene
+from gs_ibl_addon.core.tolerance import ErrorModel
 
-SUN = BrightPatch()  # its disc lies in the +Z face
+LAMP_AT = [0.0, 0.0, 1.0]  # the sample environment's probe: its lamp is straight above, in the +Z face
 
 
 def _shuffled(scene, seed=3):
@@ -18,8 +19,8 @@ def _shuffled(scene, seed=3):
 
 
 @pytest.fixture(scope="module")
-def sun_shell():
-    return _shuffled(shell_scene(SUN, 8000, radius=5.0))
+def lamp_room():
+    return _shuffled(sample_environment())
 
 
 def test_faces_to_size_keeps_each_texels_light():
@@ -35,31 +36,43 @@ def test_faces_to_size_keeps_each_texels_light():
     np.testing.assert_allclose(up.mean((1, 2)), cube[:2].mean((1, 2)), rtol=0.02)
 
 
-def test_face_excess_adds_up_to_the_uniform_excess(sun_shell):
-    prints = footprints(sun_shell, np.zeros(3))
-    for n in (32, 64, 256):
-        assert np.sum(prints.face_excess([n] * 6)) == pytest.approx(prints.excess(n), rel=1e-9)
-    assert np.sum(prints.face_light()) == pytest.approx(1.0)
-    assert int(np.argmax(prints.face_light())) == cubemap.FACE_NAMES.index("+Z")  # the sun's face
+def test_a_change_splits_into_each_faces_part():
+    cube = np.random.default_rng(1).random((6, 64, 64, 3))
+    parts = exact_irradiance_parts(cube, 8, downsample_to=32)
+    assert parts.shape == (6, 6, 8, 8, 3)
+    np.testing.assert_allclose(parts.sum(0), exact_irradiance_cube(cube, 8, downsample_to=32), rtol=1e-12)
+    only = np.zeros_like(cube)
+    only[2] = cube[2]
+    np.testing.assert_allclose(parts[2], exact_irradiance_cube(only, 8, downsample_to=32), rtol=1e-12)
 
 
-def test_the_plan_refines_the_bright_face_first(sun_shell):
-    model = ErrorModel(footprints(sun_shell, np.zeros(3)))
-    model.calibrate(32, 64, 0.05)  # as if 32^2 -> 64^2 had moved the irradiance by 5%
-    sizes, est = model.plan_faces(0.01, 64, 1024)
+def test_the_plan_refines_the_face_whose_part_is_largest():
+    irr = np.ones((6, 8, 8, 3))
+    parts = np.zeros((6, 6, 8, 8, 3))
     z = cubemap.FACE_NAMES.index("+Z")
-    assert est <= 0.01 and sizes[z] == max(sizes) and sizes[z] > 64
-    assert min(sizes) < sizes[z]  # the dim faces are not all made as fine
-    assert est == pytest.approx(model.estimate_faces(sizes, 64))
+    parts[z] = 0.03  # as if 32^2 -> 64^2 had moved the irradiance by 3.1%, 3% of it from the +Z face
+    parts[0] = 0.001
+    model = ErrorModel()
+    model.calibrate(32, 64, 0.031)
+    model.take_parts(parts, [32] * 6, [64] * 6, irr)
+    assert model.estimate_faces([64] * 6) == pytest.approx(0.031)
+    sizes, est = model.plan_faces(0.01, 1024)
+    assert sizes[z] == 256 and sizes.count(64) == 5 and est == pytest.approx(0.03 / 4 + 0.001)  # two doublings
+    assert est == pytest.approx(model.estimate_faces(sizes))
+    # a face measured again keeps its new part; the others keep theirs
+    again = np.zeros_like(parts)
+    again[z] = 0.003
+    model.take_parts(again, [64] * 6, [64] * 4 + [256, 64], irr)
+    assert model.estimate_faces([64, 64, 64, 64, 256, 64]) == pytest.approx(0.001 + 0.003 / 3)
 
 
-def test_per_face_bake_meets_the_tolerance_for_less(sun_shell):
+def test_per_face_bake_meets_the_tolerance_for_less(lamp_room):
     tol = 0.01
-    auto = bake_probe(sun_shell, [0, 0, 0], ProbeSettings(tolerance=tol, irradiance_size=8, max_face_size=512))
+    auto = bake_probe(lamp_room, LAMP_AT, ProbeSettings(tolerance=tol, irradiance_size=8, max_face_size=512))
     sizes = auto.settings["face_sizes"]
     z = cubemap.FACE_NAMES.index("+Z")
-    assert len(sizes) == 6 and sizes[z] == max(sizes)
-    truth = bake_probe(sun_shell, [0, 0, 0], ProbeSettings(face_size=512, irradiance_size=8))
+    assert len(sizes) == 6 and sizes[z] == max(sizes) > 64 and min(sizes) == 64, sizes
+    truth = bake_probe(lamp_room, LAMP_AT, ProbeSettings(face_size=512, irradiance_size=8))
     err = relative_rms(auto.irradiance, truth.irradiance)
     assert err <= tol, (sizes, err)
     est = auto.settings["tolerance_plan"]["estimated_error"]

@@ -16,7 +16,8 @@ from gs_ibl_addon.core.bake_batch import bake_probes
 from gs_ibl_addon.core.probe import filter_probe
 from gs_ibl_addon.core.probe.gpu_filters import filter_probes
 from gs_ibl_addon.core.render import renderer as renderer_module
-from gs_ibl_addon.core.render.renderer import CHUNK_BYTES, SplatRenderer, probes_per_group, raster_chunks
+from gs_ibl_addon.core.render.renderer import (CHUNK_BYTES, CPU_RASTER_TARGET_GROUPS, SplatRenderer, probes_per_group,
+                                               raster_chunks)
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.scene import SplatScene
 
@@ -70,7 +71,9 @@ def test_each_probe_is_its_single_render(scene, lod, n):
     assert min(b[..., 3].mean() for b in batch) > 0.5  # something was drawn
 
 
-def test_small_faces_are_their_single_renders(scene):
+def test_small_faces_are_their_single_renders(scene, monkeypatch):
+    import gs_ibl_addon.core.render.renderer as renderer_module
+    monkeypatch.setattr(renderer_module, "CPU_RASTER_TARGET_GROUPS", renderer_module.RASTER_TARGET_GROUPS)  # lavapipe too
     origins = _origins(3, seed=9)
     with SplatRenderer(scene) as r:
         batch = r.render_probes(origins, 32).frame.read_probes()
@@ -82,6 +85,7 @@ def test_small_faces_are_their_single_renders(scene):
 
 def test_chunks_follow_the_workgroups_of_the_whole_group():
     assert raster_chunks(24) == 32 and raster_chunks(96) == 1
+    assert raster_chunks(24, target=CPU_RASTER_TARGET_GROUPS) == 1  # a CPU device: one chunk keeps early termination
     assert raster_chunks(24, 8) == 5 and raster_chunks(24, 27) == 1 and raster_chunks(24, 53) == 1
     assert raster_chunks(24, 1, CHUNK_BYTES // 4) == 4 and raster_chunks(24, 1, 2 * CHUNK_BYTES) == 1  # bounded
 

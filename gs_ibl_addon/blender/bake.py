@@ -220,7 +220,7 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
         result = bake_probe(scene_from_object(splats), where, settings, progress=progress)
     else:
         result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress,
-                            estimate_from=cached.host)
+                            host_splats=cached.host)
     t = lap("bake", t)  # renders, filters and the host work between them
     face = np.asarray(result.radiance).shape[1]
     irr_face = np.asarray(result.irradiance).shape[1]

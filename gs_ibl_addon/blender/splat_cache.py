@@ -11,8 +11,8 @@ Moved" cheap).
 
 Next to the GPU copy an entry keeps a slim host copy (``host``: positions, scales, rotations, opacities and the
 base colour, 56 bytes a splat, 56 MB for 1M splats; the higher SH bands, up to 180 bytes more, are not kept): the
-face-size error model (core/tolerance.py footprints) and the near-splats check (core/probe/near.py) read it, so a
-bake from the cache gets the footprint model instead of the weaker fallback without reading the object again.
+near-splats check (core/probe/near.py) reads it, so a bake from the cache warns of a probe inside the splats
+without reading the object again.
 """
 from __future__ import annotations
 
@@ -33,11 +33,11 @@ class CachedSplats:
     key: tuple
     renderer: object  # core.render.renderer.SplatRenderer holding the object's splats in world space (no full
     # CPU copy is kept, which for millions of splats would double what Blender's mesh already holds)
-    host: object = None  # core.scene.SplatScene without the higher SH bands: bake_probe's estimate_from
+    host: object = None  # core.scene.SplatScene without the higher SH bands: bake_probe's host_splats
 
 
 def slim(scene):
-    """``scene`` with only the base colour of its SH (what footprints and near_splats read)."""
+    """``scene`` with only the base colour of its SH (what near_splats reads)."""
     return replace(scene, sh=scene.sh[:, :1].copy())
 
 
@@ -81,7 +81,7 @@ def get(obj: bpy.types.Object) -> CachedSplats:
         _fingerprints[uid(obj.data)] = fingerprint(obj.data)
         uploads += 1
     entry.renderer.colour_space = colour_space_of(obj)  # the colour rule: nothing uploaded again when it changes
-    if entry.host.colour_space != entry.renderer.colour_space:  # the footprints weigh light by it
+    if entry.host.colour_space != entry.renderer.colour_space:  # the host copy is the scene as rendered
         entry.host = replace(entry.host, colour_space=entry.renderer.colour_space)
     return entry
 

@@ -1,10 +1,10 @@
 """Bake a light probe: splats -> radiance cubemap (GPU) -> irradiance (GPU filter) -> ProbeResult.
 
 ``auto`` models no more than the probe needs, measured on the probe itself: with face size 0 the cube is rendered
-at 32^2 and 64^2, an error model (core/tolerance.py: the dilation's share of each splat's footprint, calibrated on
-the change between the two) predicts the face size that meets the tolerance (relative RMS irradiance error), and
-the bake renders that size next, until the estimate at the size rendered meets it. With irradiance size 0 the
-irradiance faces are chosen too, by the error of reading between texels. The filter is the exact texel integral on
+at 32^2 and 64^2, and the change between the two (core/tolerance.py) estimates the error (relative RMS
+irradiance); where it is over the tolerance, the faces whose part of the change is largest are rendered finer,
+until the estimate meets it. With irradiance size 0 the irradiance faces are chosen too, by the error of reading
+between texels. The filter is the exact texel integral on
 the GPU
 (docs/accuracy.md: it costs about what SH projection costs and has neither SH's ringing nor the cosine
 convolution's sampling noise); the 9 SH coefficients are still computed and stored in probe.json.
@@ -29,7 +29,8 @@ from .cubemap import FACE_NAMES
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
-from .tolerance import ErrorModel, check_tolerance, choose_irradiance_size, footprints, relative_rms, search_face
+from .probe.reference import exact_irradiance_parts
+from .tolerance import ErrorModel, check_tolerance, choose_irradiance_size, relative_rms, search_face
 from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_HOLE_FILL, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD,
                        DEFAULT_LOD_K, DEFAULT_METHOD, DEFAULT_TOLERANCE, HOLE_FILLS, LOD_MODES, MAX_IRRADIANCE_SIZE,
                        IRRADIANCE_SIZES, METHOD_ALIASES, METHOD_NAMES)
@@ -191,22 +192,37 @@ def choose_face(probe_at: Callable[[int, float], object], model, s: ProbeSetting
 def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], dict],
                       filter_cube: Callable[[np.ndarray], ProbeResult], model: ErrorModel, s: ProbeSettings,
                       say: Callable[[str, float], None]) -> tuple[ProbeResult, list[int], list, dict]:
-    """Face size 0 with the splats' footprints: "model no more than the probe needs", per cube face.
+    """Face size 0: "model no more than the probe needs", per cube face.
 
-    The probe is rendered at 32^2 and 64^2 (the error model is calibrated on the change, as search_face does);
-    where that does not meet the tolerance, each face gets the size the model predicts it needs (a lamp's face
-    finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), only those faces are rendered again, and the model is
-    re-calibrated on the change they made. ``render_faces({face: size})`` returns {face: (size, size, 4) image};
-    ``filter_cube(cube)`` filters a host cube. Returns (the probe, per-face sizes, trials, the tolerance plan)."""
+    The probe is rendered at 32^2 and 64^2 and the change between them gives the error (tolerance.ErrorModel).
+    Where that does not meet the tolerance the change is split into each face's part of it, each face gets the
+    size its part predicts it needs (a lamp's face finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), only
+    those faces are rendered again, and their parts are measured again from what they changed.
+    ``render_faces({face: size})`` returns {face: (size, size, 4) image}; ``filter_cube(cube)`` filters a host
+    cube. Returns (the probe, per-face sizes, trials, the tolerance plan)."""
     limit = int(s.max_face_size)
-    result, face, trials, est = search_face(probe_at, model, s.tolerance, AUTO_FIRST_FACE,
-                                            min(PER_FACE_BASE, limit), say)
+    cubes: dict[int, np.ndarray] = {}
+
+    def kept(face: int) -> ProbeResult:  # the search's two cubes are small: read back for the per-face parts
+        probe = probe_at(face)
+        cubes[face] = probe_at.last_frame().read_cube()
+        return probe
+
+    result, face, trials, est = search_face(kept, model, s.tolerance, AUTO_FIRST_FACE, min(PER_FACE_BASE, limit),
+                                            say)
     sizes = [face] * 6
-    if est > s.tolerance and face < limit:
-        faces = list(probe_at.last_frame().read_cube())  # the base render's faces, still on the GPU
-        irradiance = result.irradiance
+    if est > s.tolerance and face < limit and len(cubes) == 2:
+        first, m = min(cubes), int(result.irradiance.shape[1])
+
+        def level(images) -> np.ndarray:  # where the exact filter integrates (its default downsample)
+            return np.stack([faces_to_size(np.asarray(img[..., :3], np.float64)[None], first)[0] for img in images])
+
+        faces = list(cubes[face])
+        low = level(faces)
+        model.take_parts(exact_irradiance_parts(low - level(cubes[first]), m), [first] * 6, sizes,
+                         result.irradiance)
         for _ in range(PER_FACE_ROUNDS):
-            plan, _planned = model.plan_faces(s.tolerance, face, limit)
+            plan, _planned = model.plan_faces(s.tolerance, limit)
             todo = {f: plan[f] for f in range(6) if plan[f] > sizes[f]}
             if not todo:
                 break
@@ -219,13 +235,15 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
             cube = np.stack([faces_to_size(img[None], out)[0] for img in faces]).astype(np.float32)
             finer = filter_cube(cube)
             finer.radiance = cube
-            change = float(np.max(model.change(irradiance, finer.irradiance)))
-            model.calibrate_faces(before, sizes, change)
-            est = model.estimate_faces(sizes, face)
+            change = float(np.max(model.change(result.irradiance, finer.irradiance)))
+            finer_low = level(faces)
+            model.take_parts(exact_irradiance_parts(finer_low - low, m), before, sizes, finer.irradiance)
+            low = finer_low
+            est = model.estimate_faces(sizes)
             trials.append({"face_size": max(sizes), "face_sizes": list(sizes), "change": change, "estimate": est})
             say(f"faces {'/'.join(map(str, sizes))}: irradiance moved {100 * change:.2f}%; estimated error "
                 f"{100 * est:.2f}% ({model.kind} model, per face)", min(0.8, 0.1 + 0.15 * len(trials)))
-            result, irradiance = finer, finer.irradiance
+            result = finer
             if est <= s.tolerance:
                 break
     plan = {"model": model.kind, "estimated_error": est, "met": est <= s.tolerance, "face_sizes": list(sizes)}
@@ -247,10 +265,9 @@ def light_from_radiance(result: ProbeResult, s: ProbeSettings, colour_space: str
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
                        say: Callable[[str, float], None],
                        hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
-                       highlights_done: bool = False, prints=None) -> ProbeResult:
+                       highlights_done: bool = False) -> ProbeResult:
     """Render (and, with face size 0, choose the face size), fill the holes, filter, and add the glossy maps when
-    asked. ``prints``: the splats' tolerance.Footprints from the probe (None: the error model falls back to the
-    changes' tail)."""
+    asked."""
     # a renderer holding a level of detail draws from it when asked (one built without renders every splat)
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     m_search = int(s.irradiance_size) or DEFAULT_IRRADIANCE_SIZE  # the size 0 chooses from is picked at the end
@@ -304,14 +321,14 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
         face = int(s.face_size)
         say(f"rendering a {face}x{face} cubemap", 0.2)
         result = probe_at(face)
-    elif lod_k == 0 and prints is not None and prints.face is not None:
-        result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube, ErrorModel(prints),
+    elif lod_k == 0:
+        result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube, ErrorModel(),
                                                              s, say)
         face = min(max(face_sizes), RADIANCE_OUT_MAX) if result.radiance is not None else max(face_sizes)
         for k, v in extra_ms.items():
             result.timings_ms[k] = result.timings_ms.get(k, 0.0) + v
     else:
-        result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(prints), s, lod_k, say)
+        result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
     frame = None
     if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
         frame = r.last_frame
@@ -359,11 +376,11 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
                renderer: SplatRenderer | None = None,
                progress: Callable[[str, float], None] | None = None,
                hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
-               estimate_from: SplatScene | None = None) -> ProbeResult:
+               host_splats: SplatScene | None = None) -> ProbeResult:
     """Render the probe's radiance cubemap from the splats and filter it into irradiance (and optionally GGX).
 
-    ``estimate_from``: the splats on the host for the face-size error model when ``scene`` is None (without them the
-    model falls back to the changes' tail, core/tolerance.py).
+    ``host_splats``: the splats on the host for the near-splat check when ``scene`` is None (without them the
+    check is left out).
 
     Directions that meet no splat are filled by ``settings.hole_fill`` (core/probe/holes.py); ``hole_radiance``,
     a function of (M, 3) unit directions returning (M, 3) linear RGB, is the light of hole fill "environment"
@@ -390,10 +407,8 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        host = scene if scene is not None else estimate_from
-        prints = footprints(host, pos) if host is not None and not s.face_size else None
-        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None,
-                                    prints)
+        host = scene if scene is not None else host_splats
+        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None)
         result.highlights = highlights or result.highlights
         result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
         if host is not None:

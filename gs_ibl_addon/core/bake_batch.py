@@ -30,7 +30,7 @@ from .probe.holes import fill_holes
 from .render.renderer import SplatRenderer, largest_probe_face
 from .scene import SplatScene
 from .settings import AUTO_FIRST_FACE
-from .tolerance import ErrorModel, footprints, relative_rms
+from .tolerance import ErrorModel, relative_rms
 from .vk import get_context
 
 
@@ -38,8 +38,8 @@ class ProbeModels:
     """One tolerance.ErrorModel per probe of a batch, read as one: the face is the largest any probe needs and the
     estimate the worst (search_face and choose_face take it in place of an ErrorModel)."""
 
-    def __init__(self, prints: list) -> None:
-        self.models = [ErrorModel(p) for p in prints]
+    def __init__(self, probes: int) -> None:
+        self.models = [ErrorModel() for _ in range(probes)]
 
     @property
     def kind(self) -> str:
@@ -113,10 +113,9 @@ def _filter_cubes(cubes: np.ndarray, s: ProbeSettings, method: str, ctx
 def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | dict | None = None,
                 renderer: SplatRenderer | None = None, progress: Callable[[str, float], None] | None = None,
                 hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
-                keep_radiance: bool = True, estimate_from: SplatScene | None = None) -> list[ProbeResult]:
+                keep_radiance: bool = True) -> list[ProbeResult]:
     """One ProbeResult per row of ``positions`` (N, 3), as bake_probe would give each (see the module's
-    docstring for the face-size search). ``scene`` may be None when ``renderer`` holds the splats;
-    ``estimate_from``: then the splats on the host for the error model, as bake_probe's.
+    docstring for the face-size search). ``scene`` may be None when ``renderer`` holds the splats.
     ``keep_radiance=False`` leaves ProbeResult.radiance None where nothing else needs it (a grid keeps SH only).
     SH orders other than 2 are not batched: use bake_probe."""
     s = settings if isinstance(settings, ProbeSettings) else ProbeSettings(**(settings or {}))
@@ -147,12 +146,10 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
     if scene is not None and renderer is None:  # clipped splats gained before upload, as bake_probe does
         scene, highlights = gain_clipped_splats(scene, s.highlight_gain)
     try:
-        host = scene if scene is not None else estimate_from
-        prints = [footprints(host, p) for p in pos] if host is not None and not s.face_size else [None] * len(pos)
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             r = SplatRenderer(scene, lod=s.lod == "auto")
-        results = _bake(r, pos, s, method, say, hole_radiance, keep_radiance, largest, prints, highlights)
+        results = _bake(r, pos, s, method, say, hole_radiance, keep_radiance, largest, highlights)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count
@@ -173,7 +170,7 @@ def bake_probes(scene: SplatScene | None, positions, settings: ProbeSettings | d
 
 
 def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say, hole_radiance,
-          keep_radiance: bool, largest: int, prints: list, highlights: dict | None) -> list[ProbeResult]:
+          keep_radiance: bool, largest: int, highlights: dict | None) -> list[ProbeResult]:
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     n = len(pos)
 
@@ -186,7 +183,7 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
 
     trials: list[dict] = []
     plan: dict = {}
-    models = ProbeModels(prints)
+    models = ProbeModels(n)
     if s.face_size:
         face = int(s.face_size)
         say(f"rendering {n} probes at {face}x{face}", 0.1)

@@ -1,26 +1,21 @@
 """Error estimates that choose a probe's settings from a tolerance (docs/accuracy.md, "Settings from a tolerance").
 
-Why a model, not the change between sizes. A probe's irradiance error comes mostly from the render, and there
-mostly from the anti-aliasing dilation: every splat is widened by a variance of DILATION_PX2 pixel^2, which makes
-small bright splats (a lamp, a window's edge) send too much light at coarse faces. The change between two sizes
-over-states the error while that bias is still large and under-states it once the faces resolve the splats (the
-error then falls faster than the change suggests): doubling until the change is under 1% took the sample room to
-512^2 where 256^2 was within 1%.
+What the error is. Probe faces dilate every splat by one size, a 1024^2 face's pixel, at every face size
+(render/splat_math.py), so a coarse face is the same radiance read at fewer points and converges on the finer ones
+without a bias of its own: what is left is where a texel's centre falls on an edge (a lamp's rim, a window's
+frame) or on a splat far below a texel. That error falls at least as fast as the texel's width (first order) and
+usually faster (the sample room's: 0.86% at 32^2, 0.10% at 64^2).
 
-The model. Each splat's share of light that the dilation adds, delta^2 / (sigma^2 + delta^2) (sigma^2: the
-splat's angular footprint variance seen from the probe, delta = sqrt(DILATION_PX2) x the pixel angle 2/N), averaged
-with each splat's light as weight, gives a curve S(N) that only needs the splats, not a render. The error at face N
-is taken as C x S(N); C comes from the change between two rendered sizes, C = change / (S(N1) - S(N2)). The
-estimate is SAFETY x C x S(N), and never less than the two-size Richardson estimate for second-order convergence
-(change / 3 after a doubling), which catches errors the dilation does not explain. Against a 1024^2 truth on every
-synthetic scene, the sample room and the real guitar capture (docs/accuracy.md) it was 1.3-4.8x the true error from
-64^2 to 512^2, and 1.9-7.4x predicted from the first pair (32^2, 64^2); it under-states only below 0.01%, where the
-render's own floor takes over. With that model the next face is the smallest whose predicted error meets the
-tolerance, so a bake jumps there instead of doubling through every size.
+The estimate. The error at the finer of two sizes rendered is the geometric tail of the change between them,
+change x r^k / (1 - r^k) after k doublings, with r the error's fall per doubling: 0.5 (first order, the slowest)
+until two changes measure it, then their ratio clamped to TAIL_RATIO_RANGE. Sizes not yet rendered are predicted
+by the same fall. Against a 1024^2 truth the estimate at 64^2 from 32^2 was 2.6-10x the true error on the sample
+room, the guitar capture and the synthetic scenes (docs/accuracy.md), 2.6x on a starfield of splats far below a
+texel.
 
-Without the splats on the host (a caller that keeps them on the GPU only) the estimate falls back to the geometric
-tail of the changes: change x r / (1 - r), r the ratio of the last two changes per doubling (0.5 until there are
-two).
+Per cube face. Irradiance is linear in radiance, so a change between two cubes splits exactly into six parts, the
+irradiance each face's change makes (probe/reference.py exact_irradiance_parts); each face's part falls with its
+own size, so a lamp's face is rendered finer and a dim wall's is kept (ErrorModel.plan_faces).
 """
 from __future__ import annotations
 
@@ -29,13 +24,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .colour import splat_radiance
-from .render.splat_math import DILATION_PX2
-from .scene import SplatScene, sh_dc_to_rgb
 from .settings import IRRADIANCE_SIZES, MAX_TOLERANCE, MIN_TOLERANCE
 
-SAFETY = 1.3  # over the calibrated C x S(N), which came down to 0.99x the true error (sample_env, 256^2)
-TAIL_RATIO_RANGE = (0.35, 0.8)  # the fallback's per-doubling ratio is clamped here (p between 0.3 and 1.5)
+TAIL_RATIO = 0.5  # the error's fall per doubling until two changes measure it: first order
+TAIL_RATIO_RANGE = (0.35, 0.8)  # a measured fall is clamped here (order between 0.3 and 1.5)
 
 
 def check_tolerance(value) -> float:
@@ -50,117 +42,79 @@ def check_tolerance(value) -> float:
     return float(value)
 
 
-@dataclass(frozen=True)
-class Footprints:
-    """What the dilation bias of a probe at one position depends on, per splat."""
-    weight: np.ndarray  # (N,) share of the probe's light (sums to 1)
-    variance: np.ndarray  # (N,) angular footprint variance seen from the probe, rad^2
-    face: np.ndarray | None = None  # (N,) the cube face (cubemap.FACE_NAMES order) each splat's centre lies in
-    _per_face: dict = field(default_factory=dict, compare=False, repr=False)  # size -> (6,) S of each face there
-
-    def excess(self, face: int) -> float:
-        """S(face): the light-weighted share of each splat's footprint that the dilation adds at this face size."""
-        d2 = DILATION_PX2 * (2.0 / float(face)) ** 2
-        return float(np.sum(self.weight * d2 / (self.variance + d2)))
-
-    def face_excess(self, sizes) -> np.ndarray:
-        """(6,) S of each cube face's splats with that face rendered at ``sizes[f]``: a probe whose faces differ in
-        size has the error C x sum of these (the biases are of one sign: excess light of small splats)."""
-        out = np.empty(6)
-        for f, n in enumerate(sizes):
-            n = int(n)
-            if n not in self._per_face:  # one pass over the splats per size, however many plans ask
-                d2 = DILATION_PX2 * (2.0 / n) ** 2
-                self._per_face[n] = np.bincount(self.face, weights=self.weight * d2 / (self.variance + d2),
-                                                minlength=6)
-            out[f] = self._per_face[n][f]
-        return out
-
-    def face_light(self) -> np.ndarray:
-        """(6,) each cube face's share of the probe's light."""
-        if "light" not in self._per_face:
-            self._per_face["light"] = np.bincount(self.face, weights=self.weight, minlength=6)
-        return self._per_face["light"]
-
-
-def footprints(scene: SplatScene, position) -> Footprints | None:
-    """Per-splat footprint statistics of ``scene`` seen from ``position``; None for a scene with no light."""
-    p = scene.positions.astype(np.float64) - np.asarray(position, np.float64).reshape(1, 3)
-    dist2 = np.maximum(np.einsum("ij,ij->i", p, p), 1e-12)
-    q = scene.scales.astype(np.float64) ** 2
-    # the footprint's area-equivalent variance, averaged over view directions (render/lod.py's mean_footprint)
-    var = np.sqrt((q[:, 0] * q[:, 1] + q[:, 0] * q[:, 2] + q[:, 1] * q[:, 2]) / 3.0)
-    ang = var / dist2
-    lum = splat_radiance(sh_dc_to_rgb(scene.sh[:, 0]), scene.colour_space).mean(axis=1)
-    w = scene.opacities.astype(np.float64) * np.maximum(lum, 0.0) * np.minimum(ang, 4 * np.pi)
-    total = float(w.sum())
-    if not np.isfinite(total) or total <= 0:
-        return None
-    from .cubemap import direction_to_face
-    return Footprints(w / total, ang, direction_to_face(p)[0].astype(np.intp))
+def tail(ratio: float, doublings: float) -> float:
+    """The error left at the finer size per unit of change, after a step of ``doublings`` doublings."""
+    q = ratio ** max(doublings, 1e-9)
+    return q / (1.0 - q)
 
 
 @dataclass
 class ErrorModel:
-    """The render error of a probe against its face size, calibrated on the sizes rendered so far."""
-    prints: Footprints | None
-    safety: float = SAFETY
-    scale: float | None = None  # C of the footprint model
-    tail_ratio: float = 0.5  # the fallback's per-doubling ratio
-    last: tuple[int, float] | None = None  # (face, the second-order Richardson error there) of the last calibration
+    """The render error of a probe against its face size, from the changes between the sizes rendered."""
+    tail_ratio: float = TAIL_RATIO
+    last: tuple[int, float, float] | None = None  # (face, change, doublings) of the last uniform step
     changes: list[tuple[int, int, float]] = field(default_factory=list)
-
-    @property
-    def kind(self) -> str:
-        return "footprint" if self.prints is not None else "tail"
+    parts: np.ndarray | None = None  # (6, ...) each cube face's part of the irradiance change it last made
+    part_steps: np.ndarray | None = None  # (6, 2) the (coarse, fine) face sizes of each face's last change
+    scale: float = 1.0  # the RMS of the irradiance the parts are relative to
+    kind: str = "change"
 
     def calibrate(self, coarse: int, fine: int, change: float) -> float:
         """Take the measured change between two rendered sizes; returns the estimated error at ``fine``."""
+        steps = max(np.log2(fine / coarse), 1e-9)
         if self.changes:
-            prev, steps = self.changes[-1][2], max(np.log2(fine / coarse), 1e-9)
+            prev = self.changes[-1][2]
             per = (change / prev) ** (1.0 / steps) if prev > 0 else TAIL_RATIO_RANGE[0]
             self.tail_ratio = float(np.clip(per, *TAIL_RATIO_RANGE))
         self.changes.append((coarse, fine, float(change)))
-        if self.prints is not None:
-            drop = self.prints.excess(coarse) - self.prints.excess(fine)
-            if drop > 1e-9:
-                self.scale = change / drop
-        q = (coarse / fine) ** 2  # second-order convergence over the step (1/4 for a doubling)
-        self.last = (fine, float(change * q / (1.0 - q)))
+        self.last = (fine, float(change), float(steps))
         return self.estimate(fine)
 
     def estimate(self, face: int) -> float:
-        """The predicted error at ``face`` from the last calibration (at the last rendered size: its estimate)."""
+        """The predicted error at ``face`` from the last step (at the last rendered size: its estimate)."""
         if self.last is None:
             return float("inf")
-        f0, floor = self.last
-        r = self.tail_ratio
-        fall = r ** max(np.log2(face / f0), 0.0)  # the tail's decay from the last rendered size
-        if self.prints is not None and self.scale:
-            return float(max(self.safety * self.scale * self.prints.excess(face), floor * fall))
-        change = self.changes[-1][2]
-        return float(max(change * r / (1.0 - r), floor) * fall)
+        f0, change, steps = self.last
+        return float(change * tail(self.tail_ratio, steps) * self.tail_ratio ** max(np.log2(face / f0), 0.0))
 
     def change(self, coarse: np.ndarray, fine: np.ndarray) -> float:
         """The measured change between two sizes' irradiance that calibrate takes."""
         return relative_rms(coarse, fine)
 
-    def estimate_faces(self, sizes, base: int) -> float:
-        """The predicted error of a cube whose faces are rendered at ``sizes`` (6,), the footprint model calibrated
-        on uniform sizes up to ``base``; the Richardson floor falls per face with that face's share of light."""
-        sizes = np.asarray(sizes, np.float64)
-        f0, floor = self.last
-        fall = self.tail_ratio ** np.maximum(np.log2(sizes / f0), 0.0)
-        tail = floor * float(np.sum(self.prints.face_light() * fall))
-        scale = float(np.max(self.scale)) if self.scale is not None else 0.0
-        return float(max(self.safety * scale * float(np.sum(self.prints.face_excess(sizes))), tail))
+    def next_face(self, tolerance: float, current: int, largest: int) -> int:
+        """The next size to render: twice ``current`` (the tail has no shape to jump with), at most ``largest``."""
+        return min(current * 2, largest)
 
-    def plan_faces(self, tolerance: float, base: int, largest: int) -> tuple[list[int], float]:
-        """Per-face sizes (powers of two from ``base`` up to ``largest``) predicted to meet the tolerance at the
+    def take_parts(self, parts: np.ndarray, coarse, fine, irradiance: np.ndarray) -> None:
+        """Each face's part of a change (``parts[f]``: the irradiance that face f's texels changed by going from
+        size ``coarse[f]`` to ``fine[f]``; faces not in the change keep their last part), relative to
+        ``irradiance``."""
+        coarse, fine = np.asarray(coarse, np.int64), np.asarray(fine, np.int64)
+        moved = fine > coarse
+        if self.parts is None:
+            self.parts = np.zeros_like(parts, dtype=np.float64)
+            self.part_steps = np.stack([coarse, fine], 1)
+        self.parts[moved] = parts[moved]
+        self.part_steps[moved] = np.stack([coarse, fine], 1)[moved]
+        self.scale = max(float(np.sqrt(np.mean(np.asarray(irradiance, np.float64) ** 2))), 1e-12)
+
+    def estimate_faces(self, sizes) -> float:
+        """The predicted error of a cube whose faces are rendered at ``sizes`` (6,): each face's part of its last
+        change, carried by the tail to that face's size, summed as irradiance (take_parts first)."""
+        sizes = np.asarray(sizes, np.float64)
+        coarse, fine = self.part_steps[:, 0].astype(np.float64), self.part_steps[:, 1].astype(np.float64)
+        r = self.tail_ratio
+        g = np.array([tail(r, np.log2(b / a)) for a, b in zip(coarse, fine)]) * r ** np.maximum(
+            np.log2(sizes / fine), 0.0)
+        left = np.tensordot(g, self.parts, 1)
+        return float(np.sqrt(np.mean(left ** 2)) / self.scale)
+
+    def plan_faces(self, tolerance: float, largest: int) -> tuple[list[int], float]:
+        """Per-face sizes (each face's last size doubled, up to ``largest``) predicted to meet the tolerance at the
         least pixel cost: the face whose doubling removes the most predicted error per added pixel is doubled,
         until the estimate meets it or no face can grow. Returns (sizes, their estimate)."""
-        sizes = [int(base)] * 6
-        est = self.estimate_faces(sizes, base)
+        sizes = [int(n) for n in self.part_steps[:, 1]]
+        est = self.estimate_faces(sizes)
         while est > tolerance:
             best, gain = None, 0.0
             for f in range(6):
@@ -168,31 +122,14 @@ class ErrorModel:
                     continue
                 trial = list(sizes)
                 trial[f] *= 2
-                g = (est - self.estimate_faces(trial, base)) / (3.0 * sizes[f] ** 2)
+                g = (est - self.estimate_faces(trial)) / (3.0 * sizes[f] ** 2)
                 if g > gain:
                     best, gain = f, g
             if best is None:
                 break
             sizes[best] *= 2
-            est = self.estimate_faces(sizes, base)
+            est = self.estimate_faces(sizes)
         return sizes, est
-
-    def calibrate_faces(self, before, after, change: float) -> None:
-        """Take the measured change between a cube at face sizes ``before`` and one at ``after`` (per face): the
-        footprint model's C from the drop it predicts."""
-        drop = float(np.sum(self.prints.face_excess(before) - self.prints.face_excess(after)))
-        if drop > 1e-9 and change > 0:
-            self.scale = float(change) / drop
-
-    def next_face(self, tolerance: float, current: int, largest: int) -> int:
-        """The smallest power-of-two multiple of ``current`` (up to ``largest``) predicted to meet the tolerance;
-        the fallback model only doubles (it has no shape to extrapolate with)."""
-        if self.prints is None or not self.scale:
-            return min(current * 2, largest)
-        face = current * 2
-        while face < largest and self.estimate(face) > tolerance:
-            face *= 2
-        return min(face, largest)
 
 
 def upsample2(cube: np.ndarray) -> np.ndarray:

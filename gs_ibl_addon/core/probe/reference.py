@@ -72,6 +72,22 @@ def exact_irradiance_cube(cube: np.ndarray, size: int, downsample_to: int | None
     return exact_irradiance(rgb, cubemap.face_directions(size))
 
 
+def exact_irradiance_parts(cube: np.ndarray, size: int, downsample_to: int | None = None) -> np.ndarray:
+    """(6, 6, size, size, C): [f] is the exact irradiance (E/pi) that face f's texels alone give, as
+    exact_irradiance_cube integrates them (so the six parts sum to it). A change between two cubes splits this way
+    into what each face's change does to the light (tolerance.ErrorModel.take_parts)."""
+    rgb, _ = split_alpha(cube)
+    rgb = downsample_to_size(rgb, integration_size(rgb.shape[1], downsample_to))
+    n, c = rgb.shape[1], rgb.shape[3]
+    w = cubemap.face_directions(n).reshape(6, -1, 3)
+    lw = rgb.reshape(6, -1, c) * cubemap.texel_solid_angles(n).reshape(1, -1, 1) / np.pi
+    normals = cubemap.face_directions(size).reshape(-1, 3)
+    out = np.empty((6, normals.shape[0], c))
+    for f in range(6):
+        out[f] = np.maximum(normals @ w[f].T, 0.0) @ lw[f]
+    return out.reshape(6, 6, size, size, c)
+
+
 def _hemisphere_rule(n_mu: int, n_phi: int) -> tuple[np.ndarray, np.ndarray]:
     # Gauss-Legendre in mu = cos(theta) on [0, 1], midpoint in phi: local directions (S, 3) and weights mu*dmu*dphi.
     x, wx = np.polynomial.legendre.leggauss(n_mu)

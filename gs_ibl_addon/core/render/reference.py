@@ -43,10 +43,10 @@ def _front_to_back(scene: SplatScene, origin, p: PreparedSplats) -> np.ndarray:
     return order[p.alive[order]]
 
 
-def composite_rays(scene: SplatScene, origin, dirs: np.ndarray, pixel_angle: float = 0.0,
+def composite_rays(scene: SplatScene, origin, dirs: np.ndarray, dilation_angle: float = 0.0,
                    near: float = DEFAULT_NEAR, chunk: int = 64) -> tuple[np.ndarray, np.ndarray]:
-    """Colour (M, 3) and alpha (M,) along rays from ``origin`` in directions (M, 3); pixel_angle 0: no dilation."""
-    p = prepare(scene, origin, pixel_angle, near)
+    """Colour (M, 3) and alpha (M,) along rays from ``origin`` in directions (M, 3); dilation_angle 0: none."""
+    p = prepare(scene, origin, dilation_angle, near)
     color, alpha, _ = _composite(p, _front_to_back(scene, origin, p), np.asarray(dirs, np.float64).reshape(-1, 3),
                                  chunk)
     return color, alpha
@@ -56,7 +56,7 @@ def render_reference(scene: SplatScene, batch: ViewBatch, near: float = DEFAULT_
                      with_depth: bool = False) -> list[np.ndarray] | tuple[list[np.ndarray], list[np.ndarray]]:
     """One (H, W, 4) float32 image per view: premultiplied linear RGB and alpha = 1 - transmittance; with_depth:
     also one (H, W) depth image per view (view-space z, coverage-weighted; 0 where nothing is seen)."""
-    p = prepare(scene, batch.origin, batch.pixel_angle, near, batch.energy_preserving)
+    p = prepare(scene, batch.origin, batch.dilation, near, batch.energy_preserving)
     order = _front_to_back(scene, batch.origin, p)
     images, depths = [], []
     for view in batch.views:

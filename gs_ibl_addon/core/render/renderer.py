@@ -58,17 +58,29 @@ from .views import ViewBatch
 # (docs/bench/multi_probe_nvidia-h200*.csv): the target counts the group's tiles, not one probe's. The partial
 # images of the chunks are bounded by CHUNK_BYTES (one storage binding, and memory a large batch would multiply).
 RASTER_TARGET_GROUPS = 1024
+# A CPU device (lavapipe) is full with a few workgroups per core, and there chunks only cost the early termination:
+# the guitar capture's 32^2 probe rastered in 6.5 s with 1024 as the target (32 chunks), 0.9 s with 16 (one), where
+# its 64^2 probe takes 1.3 s (2 cores, 2026-12-03).
+CPU_RASTER_TARGET_GROUPS = 16
 MAX_RASTER_CHUNKS = 32
 CHUNK_BELOW_TILES = 64
 CHUNK_BYTES = 128 << 20
 
 
-def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk: int = 0) -> int:
+def target_groups(ctx) -> int:
+    """The workgroups a raster should reach on this device before its tiles' lists are split into chunks."""
+    return CPU_RASTER_TARGET_GROUPS if getattr(ctx, "is_cpu", False) else RASTER_TARGET_GROUPS
+
+
+def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk: int = 0,
+                  target: int | None = None) -> int:
     """Chunks per tile list for a group of ``probes`` probes of ``tiles_per_probe`` tiles each;
-    ``partial_bytes_per_chunk``: one chunk's partial image(s) for the whole group, which CHUNK_BYTES bounds."""
+    ``partial_bytes_per_chunk``: one chunk's partial image(s) for the whole group, which CHUNK_BYTES bounds;
+    ``target``: the device's target_groups (default: a GPU's)."""
     if tiles_per_probe >= CHUNK_BELOW_TILES:
         return 1
-    chunks = min(MAX_RASTER_CHUNKS, max(1, RASTER_TARGET_GROUPS // max(1, tiles_per_probe * max(1, probes))))
+    target = RASTER_TARGET_GROUPS if target is None else int(target)
+    chunks = min(MAX_RASTER_CHUNKS, max(1, target // max(1, tiles_per_probe * max(1, probes))))
     if partial_bytes_per_chunk > 0:
         chunks = min(chunks, CHUNK_BYTES // partial_bytes_per_chunk)
     return int(max(1, chunks))
@@ -522,7 +534,7 @@ class SplatRenderer:
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
                  depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
         shape = tuple((v.width, v.height) for v in batch.views)
-        key = (shape, batch.n_probes, group, float(batch.pixel_angle), bool(batch.energy_preserving),
+        key = (shape, batch.n_probes, group, float(batch.pixel_angle), batch.dilation, bool(batch.energy_preserving),
                bool(timestamps), bool(depth), self.capacity, lod_k, self.cut_capacity,
                check_colour_space(self.colour_space))
         prog = self._programs.pop(key, None)
@@ -553,7 +565,8 @@ class SplatRenderer:
         g_image = self._frame_buffer("group_image", group * total_pixels * 16) if split else image
         g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
         # the same chunks for every group (the last, smaller one included): partial sized for a full group
-        chunks = chunks_max = raster_chunks(total_tiles, group, group * total_pixels * (16 + (4 if depth else 0)))
+        chunks = chunks_max = raster_chunks(total_tiles, group, group * total_pixels * (16 + (4 if depth else 0)),
+                                            target_groups(c))
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
@@ -607,7 +620,7 @@ class SplatRenderer:
                       self.lod_words if tree is not None else self.no_depth,
                       self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
                      (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
-                     n=n, pixel_angle=batch.pixel_angle, near=self.near, sh_k=self.sh_k, n_views=nv,
+                     n=n, dilation_angle=batch.dilation, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
                      **grid)
         stamp("preprocess")

@@ -13,6 +13,7 @@ import numpy as np
 
 from ..cubemap import FACE_BASES
 from ..vk.constants import TILE
+from .splat_math import PROBE_DILATION_ANGLE
 
 
 @dataclass(frozen=True)
@@ -42,10 +43,16 @@ class View:
 class ViewBatch:
     origin: np.ndarray
     views: tuple[View, ...]
-    pixel_angle: float  # radians per pixel at the view centre; sets the anti-aliasing dilation
+    pixel_angle: float  # radians per pixel at the view centre (the level of detail's unit)
     energy_preserving: bool = False  # probes: dilation keeps each splat's integral (render/splat_math.py)
     # Several probes (ViewBatch.cubemaps): (N, 3) origins, each seeing ``views``; ``origin`` is the first.
     probe_origins: np.ndarray | None = None
+    dilation_angle: float | None = None  # the anti-aliasing dilation's pixel angle; None: pixel_angle's
+
+    @property
+    def dilation(self) -> float:
+        """The angle the anti-aliasing dilation is sized by (render/splat_math.py)."""
+        return self.pixel_angle if self.dilation_angle is None else float(self.dilation_angle)
 
     @property
     def origins(self) -> np.ndarray:
@@ -58,12 +65,16 @@ class ViewBatch:
 
     @staticmethod
     def cubemap(origin, face_size: int, energy_preserving: bool = True) -> "ViewBatch":
-        """The six faces of a probe; their images are light to integrate, so the dilation preserves energy."""
+        """The six faces of a probe. Their images are light to integrate: the dilation preserves energy and has one
+        size whatever the face (PROBE_DILATION_ANGLE), so every face size samples the same radiance and a coarse
+        face is that radiance read at its texel centres. ``energy_preserving=False``: 3DGS's look instead, dilated
+        by this face's pixel."""
         if int(face_size) < 1:
             raise ValueError(f"cube face size {face_size} must be 1 or more")
         views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
                       for f in range(6))
-        return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving)
+        return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving,
+                         dilation_angle=PROBE_DILATION_ANGLE if energy_preserving else None)
 
     @staticmethod
     def cubemaps(origins, face_size: int) -> "ViewBatch":

@@ -48,7 +48,7 @@ _SORT_PUSH = "n_blocks shift count_index drop drop_key"
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
-       "n pixel_angle:float near:float sh_k n_views energy_preserving lod lod_tau:float lod_cell:float "
+       "n dilation_angle:float near:float sh_k n_views energy_preserving lod lod_tau:float lod_cell:float "
        "lod_ox:float lod_oy:float lod_oz:float srgb"),
     _k("gs_lod_compact", "DepthKey Live SortKey SortVal", "n"),
     _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets Count", "n count_index"),
