@@ -228,7 +228,9 @@ def test_big_faces_render_one_at_a_time_with_progress_and_the_same_result(sky_sh
     assert [m for m, _ in said if m.startswith("rendering face")] == [f"rendering face {f} of 6 (32x32)"
                                                                      for f in range(1, 7)]
     assert [f for _, f in said] == sorted(f for _, f in said)
-    np.testing.assert_allclose(split.radiance, whole.radiance, atol=1e-6)
+    # one face has fewer tiles than six, so its tile lists may be split into other chunks: the same sums in another
+    # order (renderer.raster_chunks; tests/test_multi_probe.py allows 2e-4 for it)
+    np.testing.assert_allclose(split.radiance, whole.radiance, atol=2e-4)
 
 
 def test_nan_probe_is_refused_by_the_core_too(sky_shell):

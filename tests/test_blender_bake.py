@@ -94,11 +94,11 @@ def test_auto_reports_choice_and_error(blender, tmp_path, write_3dgs_ply):
     # a smooth sky converges at once: 32 -> 64 moves the irradiance by far less than 5%
     assert lines[0].endswith("64x64 faces"), lines
     assert lines[1].startswith("exact; face size by irradiance change (64: ") and lines[1].endswith(" converged"), lines
-    # the splat cache's host copy (base colour only) gives the error model the splats' footprints
+    # the splat cache's host copy (base colour only) gives the near-splat check its splats
     from gs_ibl_addon.blender import splat_cache
     entry = splat_cache.get(shell)
     assert entry.host.sh.shape == (entry.renderer.scene_count, 1, 3)
-    assert "(footprint model)" in probe.gs_ibl_probe.last_report, lines
+    assert "(change model)" in probe.gs_ibl_probe.last_report, lines
 
 
 def test_hole_warning(blender):

@@ -323,10 +323,12 @@ def test_irradiance_changes_smoothly_along_a_path():
     env = synthetic.sample_environment()
     ys = np.linspace(-1.0, -0.6, 9)  # 5 cm steps
     with SplatRenderer(env) as r:
-        irr = [bake_probe(None, (0.3, y, 1.2), ProbeSettings(face_size=32, irradiance_size=IRR), renderer=r).irradiance
+        irr = [bake_probe(None, (0.3, y, 1.2), ProbeSettings(face_size=64, irradiance_size=IRR), renderer=r).irradiance
                for y in ys]
     steps = np.array([relative_rms(b, a) for a, b in zip(irr, irr[1:])])
-    assert steps.max() < 1.5 * np.median(steps), np.round(100 * steps, 2)  # no pop (measured 1.3x over 4 m)
+    # no pop: measured 1.04x at 64^2, the default bake's size (2026-12-03). At 32^2 the texel centres that hit the
+    # lamp change as the probe moves and the steps reach 1.8x their median (core/probe/grid.py POINT_FACE_SIZE).
+    assert steps.max() < 1.5 * np.median(steps), np.round(100 * steps, 2)
 
 
 def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_shells, sun_float, tmp_path,
