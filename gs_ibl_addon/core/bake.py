@@ -42,7 +42,7 @@ FACE_BY_FACE_FROM = 1024
 # of at most RADIANCE_OUT_MAX (finer faces box-filtered down, keeping their light; coarser ones interpolated up).
 PER_FACE_BASE = 2 * AUTO_FIRST_FACE
 RADIANCE_OUT_MAX = 128
-PER_FACE_ROUNDS = 3  # plan, render, re-calibrate on what the finer faces changed: at most this many times
+PER_FACE_ROUNDS = 4  # plan, render, measure what the finer faces changed (one doubling each): at most this often
 
 
 class BadSetting(ValueError):
@@ -196,8 +196,9 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
 
     The probe is rendered at 32^2 and 64^2 and the change between them gives the error (tolerance.ErrorModel).
     Where that does not meet the tolerance the change is split into each face's part of it, each face gets the
-    size its part predicts it needs (a lamp's face finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), only
-    those faces are rendered again, and their parts are measured again from what they changed.
+    size its part predicts it needs (a lamp's face finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), those
+    faces are rendered again one doubling finer, and their parts, and from the second on their fall per doubling,
+    are measured again from what they changed.
     ``render_faces({face: size})`` returns {face: (size, size, 4) image}; ``filter_cube(cube)`` filters a host
     cube. Returns (the probe, per-face sizes, trials, the tolerance plan)."""
     limit = int(s.max_face_size)
@@ -222,7 +223,7 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
         model.take_parts(exact_irradiance_parts(low - level(cubes[first]), m), [first] * 6, sizes,
                          result.irradiance)
         for _ in range(PER_FACE_ROUNDS):
-            plan, _planned = model.plan_faces(s.tolerance, limit)
+            plan = model.next_sizes(s.tolerance, limit)
             todo = {f: plan[f] for f in range(6) if plan[f] > sizes[f]}
             if not todo:
                 break

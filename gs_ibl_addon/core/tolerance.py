@@ -8,8 +8,8 @@ usually faster (the sample room's: 0.86% at 32^2, 0.10% at 64^2).
 
 The estimate. The error at the finer of two sizes rendered is the geometric tail of the change between them,
 change x r^k / (1 - r^k) after k doublings, with r the error's fall per doubling: 0.5 (first order, the slowest)
-until two changes measure it, then their ratio clamped to TAIL_RATIO_RANGE. Sizes not yet rendered are predicted
-by the same fall. Against a 1024^2 truth the estimate at 64^2 from 32^2 was 2.6-10x the true error on the sample
+until two changes measure it (per face, once a face has changed twice), then their ratio clamped to
+TAIL_RATIO_RANGE. Sizes not yet rendered are predicted by the same fall. Against a 1024^2 truth the estimate at 64^2 from 32^2 was 2.6-10x the true error on the sample
 room, the guitar capture and the synthetic scenes (docs/accuracy.md), 2.6x on a starfield of splats far below a
 texel.
 
@@ -56,6 +56,7 @@ class ErrorModel:
     changes: list[tuple[int, int, float]] = field(default_factory=list)
     parts: np.ndarray | None = None  # (6, ...) each cube face's part of the irradiance change it last made
     part_steps: np.ndarray | None = None  # (6, 2) the (coarse, fine) face sizes of each face's last change
+    part_ratios: np.ndarray | None = None  # (6,) each face's fall per doubling, measured once it changed twice
     scale: float = 1.0  # the RMS of the irradiance the parts are relative to
     kind: str = "change"
 
@@ -94,6 +95,12 @@ class ErrorModel:
         if self.parts is None:
             self.parts = np.zeros_like(parts, dtype=np.float64)
             self.part_steps = np.stack([coarse, fine], 1)
+            self.part_ratios = np.full(6, self.tail_ratio)
+        for f in np.flatnonzero(moved):  # a face's second change measures its own fall
+            before, after = np.sqrt(np.mean(self.parts[f] ** 2)), np.sqrt(np.mean(parts[f] ** 2))
+            if before > 0 and self.part_steps[f, 1] == coarse[f]:
+                per = (after / before) ** (1.0 / max(np.log2(fine[f] / coarse[f]), 1e-9))
+                self.part_ratios[f] = float(np.clip(per, *TAIL_RATIO_RANGE))
         self.parts[moved] = parts[moved]
         self.part_steps[moved] = np.stack([coarse, fine], 1)[moved]
         self.scale = max(float(np.sqrt(np.mean(np.asarray(irradiance, np.float64) ** 2))), 1e-12)
@@ -103,16 +110,18 @@ class ErrorModel:
         change, carried by the tail to that face's size, summed as irradiance (take_parts first)."""
         sizes = np.asarray(sizes, np.float64)
         coarse, fine = self.part_steps[:, 0].astype(np.float64), self.part_steps[:, 1].astype(np.float64)
-        r = self.tail_ratio
-        g = np.array([tail(r, np.log2(b / a)) for a, b in zip(coarse, fine)]) * r ** np.maximum(
+        r = self.part_ratios
+        g = np.array([tail(q, np.log2(b / a)) for q, a, b in zip(r, coarse, fine)]) * r ** np.maximum(
             np.log2(sizes / fine), 0.0)
         left = np.tensordot(g, self.parts, 1)
         return float(np.sqrt(np.mean(left ** 2)) / self.scale)
 
     def plan_faces(self, tolerance: float, largest: int) -> tuple[list[int], float]:
-        """Per-face sizes (each face's last size doubled, up to ``largest``) predicted to meet the tolerance at the
-        least pixel cost: the face whose doubling removes the most predicted error per added pixel is doubled,
-        until the estimate meets it or no face can grow. Returns (sizes, their estimate)."""
+        """Per-face sizes (powers of two from each face's last size up to ``largest``) predicted to meet the
+        tolerance at the least pixel cost: the face whose doubling removes the most predicted error per added pixel
+        is doubled, until the estimate meets it or no face can grow. Returns (sizes, their estimate); a bake renders
+        one doubling of each face the plan grows (next_sizes), so that a face's second change measures its own fall
+        before it is made finer still."""
         sizes = [int(n) for n in self.part_steps[:, 1]]
         est = self.estimate_faces(sizes)
         while est > tolerance:
@@ -130,6 +139,12 @@ class ErrorModel:
             sizes[best] *= 2
             est = self.estimate_faces(sizes)
         return sizes, est
+
+    def next_sizes(self, tolerance: float, largest: int) -> list[int]:
+        """The per-face sizes to render next: one doubling of each face plan_faces would make finer."""
+        now = [int(n) for n in self.part_steps[:, 1]]
+        plan, _est = self.plan_faces(tolerance, largest)
+        return [min(p, 2 * n) for p, n in zip(plan, now)]
 
 
 def upsample2(cube: np.ndarray) -> np.ndarray:
