@@ -298,15 +298,14 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                             splat_count=splat_count, device=r.ctx.device_name, **s.extra)
 
     def render_faces(todo: dict[int, int]) -> dict[int, np.ndarray]:
-        out = {}
-        for size in sorted(set(todo.values())):  # one render per size: the dilation is set per batch
-            chosen = [f for f in sorted(todo) if todo[f] == size]
-            cube = ViewBatch.cubemap(pos, size)
-            res = r.render(replace(cube, views=tuple(cube.views[f] for f in chosen)), timestamps=True)
-            out.update(zip(chosen, res.images))
-            for k, v in res.timings_ms.items():
-                extra_ms[f"render_{k}"] = extra_ms.get(f"render_{k}", 0.0) + v
-        return out
+        # one submission for every size: the probe's dilation is one size whatever the face (render/splat_math.py)
+        chosen = sorted(todo)
+        cube = ViewBatch.cubemap(pos, max(todo.values()))
+        views = tuple(ViewBatch.cubemap(pos, todo[f]).views[f] for f in chosen)
+        res = r.render(replace(cube, views=views), timestamps=True)
+        for k, v in res.timings_ms.items():
+            extra_ms[f"render_{k}"] = extra_ms.get(f"render_{k}", 0.0) + v
+        return dict(zip(chosen, res.images))
 
     def filter_cube(cube: np.ndarray) -> ProbeResult:
         return filter_probe(cube, irradiance_size=m_search, method=method, sh_order=s.sh_order, roughness=None,
