@@ -60,6 +60,12 @@ def integration_size(face_size: int, downsample_to: int | None) -> int:
     return halving_sizes(face_size, downsample_to)[-1]
 
 
+def _integrated_rgb(cube: np.ndarray, downsample_to: int | None) -> np.ndarray:
+    """The cube's RGB (holes black) at the face size the exact integral runs at."""
+    rgb, _ = split_alpha(cube)
+    return downsample_to_size(rgb, integration_size(rgb.shape[1], downsample_to))
+
+
 def exact_irradiance_cube(cube: np.ndarray, size: int, downsample_to: int | None = None) -> np.ndarray:
     """Exact irradiance (E/pi) of a radiance cube at the texel centres of a (6, size, size) cube.
 
@@ -67,17 +73,14 @@ def exact_irradiance_cube(cube: np.ndarray, size: int, downsample_to: int | None
     children's power) while they are above this size and even. Irradiance is a low-pass, so the only loss is
     the cosine taken at parent rather than child centres (measured in docs/accuracy.md); None keeps every texel.
     """
-    rgb, _ = split_alpha(cube)
-    rgb = downsample_to_size(rgb, integration_size(rgb.shape[1], downsample_to))
-    return exact_irradiance(rgb, cubemap.face_directions(size))
+    return exact_irradiance(_integrated_rgb(cube, downsample_to), cubemap.face_directions(size))
 
 
 def exact_irradiance_parts(cube: np.ndarray, size: int, downsample_to: int | None = None) -> np.ndarray:
     """(6, 6, size, size, C): [f] is the exact irradiance (E/pi) that face f's texels alone give, as
     exact_irradiance_cube integrates them (so the six parts sum to it). A change between two cubes splits this way
     into what each face's change does to the light (tolerance.ErrorModel.take_parts)."""
-    rgb, _ = split_alpha(cube)
-    rgb = downsample_to_size(rgb, integration_size(rgb.shape[1], downsample_to))
+    rgb = _integrated_rgb(cube, downsample_to)
     n, c = rgb.shape[1], rgb.shape[3]
     w = cubemap.face_directions(n).reshape(6, -1, 3)
     lw = rgb.reshape(6, -1, c) * cubemap.texel_solid_angles(n).reshape(1, -1, 1) / np.pi

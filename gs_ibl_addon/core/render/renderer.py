@@ -69,7 +69,7 @@ CHUNK_BYTES = 128 << 20
 
 def target_groups(ctx) -> int:
     """The workgroups a raster should reach on this device before its tiles' lists are split into chunks."""
-    return CPU_RASTER_TARGET_GROUPS if getattr(ctx, "is_cpu", False) else RASTER_TARGET_GROUPS
+    return CPU_RASTER_TARGET_GROUPS if ctx.is_cpu else RASTER_TARGET_GROUPS
 
 
 def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk: int = 0,
