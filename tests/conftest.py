@@ -1,10 +1,23 @@
 """Fixtures shared by the Blender tests (bpy is imported only by the tests that ask for it)."""
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
+
 import numpy as np
 import pytest
 
 from gs_ibl_addon.core.scene import SplatScene
+
+# Hermetic: the Vulkan pipeline cache of every test (and of the subprocesses they start, which inherit it) goes to a
+# folder of this session, never the user's ~/.cache; tests/test_pipeline_cache.py points it elsewhere per test.
+_PIPELINE_CACHE_DIR = tempfile.mkdtemp(prefix="gs-ibl-test-pipeline-cache-")
+os.environ["GS_IBL_CACHE_DIR"] = _PIPELINE_CACHE_DIR
+
+
+def pytest_unconfigure(config) -> None:
+    shutil.rmtree(_PIPELINE_CACHE_DIR, ignore_errors=True)
 
 
 def _write_3dgs_ply(path, scene: SplatScene) -> None:

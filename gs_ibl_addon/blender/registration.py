@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import bpy
 
+from ..core.vk import pipeline_cache
 from . import bake, bake_undo, importer, local_light_ui, overlay, panel, properties, splat_cache, webp_decoder
 
 _CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES, *local_light_ui.CLASSES)
@@ -11,6 +12,8 @@ _MENUS = (*importer.MENUS, *panel.MENUS)
 
 
 def register() -> None:
+    pipeline_cache.set_cache_dir_from(lambda: bpy.utils.extension_path_user(  # Blender 4.2+, as an extension only
+        __package__.rpartition(".")[0], path="vulkan_cache", create=True))
     for cls in _CLASSES:
         bpy.utils.register_class(cls)
     properties.register_properties()

@@ -10,6 +10,8 @@ import os
 import sys
 import threading
 
+from .pipeline_cache import PipelineCache
+
 
 def _install_hint(platform: str = sys.platform) -> str:
     if platform == "darwin":
@@ -85,6 +87,7 @@ class VulkanContext:
         pci = vk.VkCommandPoolCreateInfo(queueFamilyIndex=self.queue_family,
                                          flags=vk.VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT)
         self.command_pool = vk.vkCreateCommandPool(self.device, pci, None)
+        self.pipeline_cache = PipelineCache(vk, self.physical_device, self.device)  # loaded from disk, saved back
         self._pipelines: dict[object, object] = {}
         self.lock = threading.RLock()
         # Frame resources, made once and reused by every submission: command buffers, fences, timestamp query
@@ -191,6 +194,7 @@ class VulkanContext:
         for p in self._pipelines.values():
             p.destroy()
         self._pipelines.clear()
+        self.pipeline_cache.close()
         vk.vkDestroyCommandPool(self.device, self.command_pool, None)
         vk.vkDestroyDevice(self.device, None)
         vk.vkDestroyInstance(self.instance, None)

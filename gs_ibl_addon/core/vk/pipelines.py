@@ -42,7 +42,7 @@ class Pipeline:
         stage = vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_COMPUTE_BIT, module=self.module, pName=entry)
         cpci = vk.VkComputePipelineCreateInfo(stage=stage, layout=self.layout)
         cpcis = [cpci]
-        self.handle = vk.vkCreateComputePipelines(ctx.device, None, 1, cpcis, None)[0]
+        self.handle = vk.vkCreateComputePipelines(ctx.device, ctx.pipeline_cache.handle, 1, cpcis, None)[0]
         del code, stage, cpci, cpcis, entry
         pool_sizes = [vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
                                               descriptorCount=max(1, self.n_buffers) * self.POOL_SETS)]
@@ -101,4 +101,6 @@ def get_pipeline(ctx: VulkanContext, kernel: Kernel) -> Pipeline:
         p = ctx._pipelines.get(kernel)
         if p is None:
             p = ctx._pipelines[kernel] = Pipeline(ctx, kernel, _load_spirv(kernel.name))
+            # now rather than at close: shared contexts are never closed, and a crash keeps what was compiled
+            ctx.pipeline_cache.save()
         return p
