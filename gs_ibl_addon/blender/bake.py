@@ -27,7 +27,9 @@ from .bake_undo import stamp
 from . import world as gw
 from .lights_from_probe import sync_lights
 from .properties import is_probe
-from .splat_object import is_splat_object
+from .jobs import Job, Step, Work, busy, cancel_all, run_now
+from .jobs import start as start_job
+from .splat_object import is_splat_object, splat_count
 
 HOLE_WARNING = 0.01  # warn when more of the sphere than this sees no splat
 WARNING_PREFIX = "Warning: "  # a report line the panel shows with a warning icon
@@ -189,17 +191,58 @@ def summary(result, seconds: float, stages: dict[str, float] | None = None) -> t
 
 def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy.types.Object | None = None,
                     progress: Callable[[str, float], None] | None = None):
-    """Bake ``probe`` from ``splats`` (default: the probe's) and write the result into Blender.
+    """Bake ``probe`` from ``splats`` (default: the probe's) and write the result into Blender, now (bake_job run
+    in this thread). Returns (ProbeResult, one-line report, hole warning or None). Raises ValueError/RuntimeError/
+    OSError/MemoryError with a message meant for the user."""
+    return run_now(bake_job(scene, probe, splats), progress)
 
-    Returns (ProbeResult, one-line report, hole warning or None). Raises ValueError/RuntimeError/OSError/MemoryError
-    with a message meant for the user.
-    """
+
+def bake_job(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy.types.Object | None = None) -> Job:
+    """The bake as a job (blender/jobs.py): checked now, before any work (a ValueError says what is wrong); then
+    the splats read a piece at a time on the main thread, turned, uploaded and baked by a worker, and written into
+    Blender on the main thread at the end. Its result: (ProbeResult, one-line report, hole warning or None)."""
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
     splats = splats or require_splats(scene, probe)
     if not in_scene(scene, splats):
         raise ValueError(f"{splats.name!r} is not in scene {scene.name!r}: a deleted or unlinked splat object is "
                          "never baked")
+    settings = probe_settings(probe.gs_ibl_probe)
+    check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
+    return _bake_steps(scene.name, probe.name, splats, settings)
+
+
+def _named(scene_name: str, probe_name: str, splats_name: str):
+    """The scene, probe and splat object by name, after a worker ran: the user may have deleted them meanwhile (a
+    Runner's job keeps the UI working), and a reference held across that would point at freed data."""
+    scene = bpy.data.scenes.get(scene_name)
+    probe = scene.objects.get(probe_name) if scene is not None else None
+    splats = scene.objects.get(splats_name) if scene is not None else None
+    if probe is None or not is_probe(probe) or splats is None:
+        gone = probe_name if probe is None or not is_probe(probe) else splats_name
+        raise ValueError(f"{gone!r} was deleted while it was being baked: nothing was written")
+    return scene, probe, splats
+
+
+def _bake_and_resample(where: np.ndarray, settings: ProbeSettings, cached, local=None,
+                       progress: Callable[[str, float], None] | None = None):
+    """The worker's part of a bake: the core bake and its lat-long images. ``local``: (splats as read, matrix,
+    object name) for a bake that uploads its own copy."""
+    if local is not None:  # the gain goes on the splats (exact), so this bake uploads its own copy
+        from .splat_object import to_world
+        result = bake_probe(to_world(*local), where, settings, progress=progress)
+    else:
+        result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress,
+                            host_splats=cached.host)
+    face = np.asarray(result.radiance).shape[1]
+    irr_face = np.asarray(result.irradiance).shape[1]
+    # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
+    radiance = result_latlong(result, "radiance", max(2 * face, 32))
+    irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
+    return result, radiance, irradiance
+
+
+def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, settings: ProbeSettings) -> Job:
     t0 = time.perf_counter()
     stages: dict[str, float] = {}  # wall seconds of the report's parts (they add up to its total)
 
@@ -208,25 +251,22 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
         stages[name] = stages.get(name, 0.0) + now - since
         return now
 
-    settings = probe_settings(probe.gs_ibl_probe)
-    check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
+    splats_name = splats.name
     t = time.perf_counter()
-    cached = splat_cache.get(splats)  # read and uploaded once, shared with the overlay and later re-bakes
+    yield Step(f"reading {splat_count(splats):,} splats", 0.0)
+    cached = yield from splat_cache.get_steps(splats)  # read and uploaded once, shared with the overlay and re-bakes
     t = lap("reading and upload", t)
+    scene, probe, splats = _named(scene_name, probe_name, splats_name)
     check_fits_device(settings, cached.renderer.ctx, cached.renderer.scene_count)
     where = np.array(probe.matrix_world.translation, np.float64)
-    if settings.highlight_gain != 1:  # the gain goes on the splats (exact), so this bake uploads its own copy
-        from .splat_object import scene_from_object
-        result = bake_probe(scene_from_object(splats), where, settings, progress=progress)
-    else:
-        result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress,
-                            host_splats=cached.host)
+    local = None
+    if settings.highlight_gain != 1:
+        from .splat_object import read_steps
+        local = (*(yield from read_steps(splats)), splats_name)
+    result, radiance, irradiance = yield Work(_bake_and_resample, where, settings, cached, local, span=(0.05, 0.95))
     t = lap("bake", t)  # renders, filters and the host work between them
-    face = np.asarray(result.radiance).shape[1]
-    irr_face = np.asarray(result.irradiance).shape[1]
-    # lat-long width >= 4x the face size keeps the resampling from aliasing (core/probe/latlong.py)
-    radiance = result_latlong(result, "radiance", max(2 * face, 32))
-    irradiance = result_latlong(result, "irradiance", max(2 * irr_face, 32))
+    scene, probe, splats = _named(scene_name, probe_name, splats_name)
+    yield Step("writing the light into Blender", 0.95)
     apply_probe_images(scene, probe, radiance, irradiance)
     sync_lights(scene, probe, result.lights, probe.gs_ibl_probe.strength)
     t = lap("writing", t)
@@ -235,9 +275,9 @@ def bake_into_world(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy
     _baked[(scene.name, probe.name)] = bake_state(probe, splats)
     auto = None
     if probe.gs_ibl_probe.lighting == "AUTO":
-        if progress:
-            progress("choosing each mesh's light", 0.95)
-        auto = _relight(scene, probe)
+        yield Step("choosing each mesh's light", 0.96)
+        auto = yield from _relight_steps(scene, probe)
+        scene, probe, splats = _named(scene_name, probe_name, splats_name)
         t = lap("each mesh's light", t)
     else:
         from .auto_light import remove_auto_light  # imports object_probes, which imports this module
@@ -294,11 +334,14 @@ def _place(obj: bpy.types.Object) -> bytes:
     return np.array(obj.matrix_world, np.float64).round(9).tobytes()
 
 
-def _relight(scene: bpy.types.Scene, probe: bpy.types.Object, meshes: list | None = None) -> str:
-    """Lighting Auto: choose the light of ``meshes`` (default: every lit mesh) and remember where they were."""
-    from .auto_light import auto_light  # imports object_probes, which imports this module
-    text, choices = auto_light(scene, probe, meshes)
-    places = _lit_places.setdefault((scene.name, probe.name), {})
+def _relight_steps(scene: bpy.types.Scene, probe: bpy.types.Object, meshes: list | None = None) -> Job:
+    """Lighting Auto as a job: choose the light of ``meshes`` (default: every lit mesh) and remember where they
+    were."""
+    from .auto_light import auto_light_steps  # imports object_probes, which imports this module
+    scene_name, probe_name = scene.name, probe.name
+    text, choices = yield from auto_light_steps(scene, probe, meshes)
+    scene = bpy.data.scenes[scene_name]  # auto_light_steps found it after its workers
+    places = _lit_places.setdefault((scene_name, probe_name), {})
     for c in choices:
         obj = scene.objects.get(c.name)
         if obj is not None:
@@ -388,14 +431,35 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         bpy.app.timers.register(run_pending, first_interval=delay)
 
 
-def run_pending() -> None:
-    """Timer: re-bake every probe noted by on_depsgraph_update whose state still differs from its last bake.
-    Errors go to the console and the probe's report."""
-    global last_auto_error, auto_bakes, auto_relights
-    jobs = sorted(_pending | set(_pending_meshes))
+UPDATE_JOB = "update when moved"  # the background job (blender/jobs.py) of automatic re-bakes
+
+
+def run_pending() -> float | None:
+    """Timer: re-bake every probe noted by on_depsgraph_update whose state still differs from its last bake, as a
+    background job (the window stays responsive; without one, as in ``blender -b``, now). While an earlier one
+    runs it waits for it (returns the timer's next interval). Errors go to the console and the probe's report."""
+    if busy(UPDATE_JOB):
+        return 0.25
+    keys = sorted(_pending | set(_pending_meshes))
     relight = {k: _pending_meshes.pop(k) for k in list(_pending_meshes)}
     _pending.clear()
-    for scene_name, probe_name in jobs:
+    if keys:
+        start_job(UPDATE_JOB, _pending_job(keys, relight), "re-baking moved probes", done=_update_done)
+    return None  # one-shot; the handler registers it again when something moves
+
+
+def _update_done(runner) -> None:
+    global last_auto_error
+    if runner.error is not None:  # the job catches the users' errors itself: this is a bug, said once
+        last_auto_error = f"{type(runner.error).__name__}: {runner.error}"
+        print(f"GS-IBL (update when moved): {last_auto_error}")
+    from .overlay import tag_redraw
+    tag_redraw()
+
+
+def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set[str]]) -> Job:
+    global last_auto_error, auto_bakes, auto_relights
+    for scene_name, probe_name in keys:
         scene = bpy.data.scenes.get(scene_name)
         probe = scene.objects.get(probe_name) if scene is not None else None
         if probe is None or not is_probe(probe):
@@ -409,7 +473,7 @@ def run_pending() -> None:
             if meshes:  # only lit meshes moved: their light is chosen again, the World stays
                 try:
                     auto_relights += 1
-                    text = _relight(scene, probe, meshes)
+                    text = yield from _relight_steps(scene, probe, meshes)
                     print(f"GS-IBL (update when moved): {text}")
                 except (ValueError, RuntimeError, OSError, MemoryError) as e:
                     last_auto_error = f"{probe_name}: {e}"
@@ -417,19 +481,22 @@ def run_pending() -> None:
             continue  # the probe moved back to where it was baked, or only meshes moved
         try:
             auto_bakes += 1
-            _, text, warning = bake_into_world(scene, probe, splats)
+            _, text, warning = yield from bake_job(scene, probe, splats)
             last_auto_error = None
             print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
         except (ValueError, RuntimeError, OSError, MemoryError) as e:
             last_auto_error = f"{probe_name}: {e}"
-            probe.gs_ibl_probe.last_report = f"{WARNING_PREFIX}automatic re-bake failed:\n{e}"
+            scene = bpy.data.scenes.get(scene_name)
+            probe = scene.objects.get(probe_name) if scene is not None else None
+            if probe is not None and is_probe(probe):
+                probe.gs_ibl_probe.last_report = f"{WARNING_PREFIX}automatic re-bake failed:\n{e}"
             print(f"GS-IBL (update when moved): {last_auto_error}")
-    return None  # one-shot; the handler registers it again when something moves
 
 
 @persistent
 def on_load_pre(*_args) -> None:
     global _rebaseline_next
+    cancel_all()  # their results would land in the file being closed
     _rebaseline_next = False
     _pending.clear()
     _pending_meshes.clear()

@@ -8,9 +8,10 @@ import numpy as np
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper, axis_conversion
 
-from ..core.formats import EXTENSIONS, SplatFormatError, read_scene
+from ..core.formats import EXTENSIONS, read_scene
 from ..core.formats.axes import declared_axes
 from ..core.formats.spz import read_spz
+from .jobs import JobOperator, Step, Work
 from .splat_object import create_splat_object, native_splats_supported
 
 _AXES = [(a, a, "") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
@@ -47,11 +48,13 @@ def _is_spz(path: str) -> bool:
     return os.path.splitext(path)[1].lower() == ".spz"
 
 
-class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
-    """Import a 3D Gaussian Splatting file as a splat object (stored in the .blend)"""
+class GSIBL_OT_import_splats(JobOperator, bpy.types.Operator, ImportHelper):
+    """Import a 3D Gaussian Splatting file as a splat object (stored in the .blend). From the menu or a drop it
+    reads beside the UI, with its progress in the status bar; Esc cancels it"""
     bl_idname = "gs_ibl.import_splats"
     bl_label = "Import Splats"  # the file browser's button: a longer label is cut ("Import Gaussian Spl...")
     bl_options = {"REGISTER", "UNDO", "PRESET"}
+    job_title = "importing"
 
     filename_ext = ".ply"
     filter_glob: StringProperty(default=_FILTER, options={"HIDDEN"})
@@ -118,46 +121,75 @@ class GSIBL_OT_import_splats(bpy.types.Operator, ImportHelper):
             return [os.path.join(self.directory, n) for n in names]
         return [self.filepath]
 
-    def _read(self, path: str):
-        if _is_spz(path):
-            # RUB: None, so that a version-4 coordinate-system record still wins over the spec's default
-            return read_spz(path, coordinates="RDF" if self.spz_axes == "RDF" else None)
-        return read_scene(path)
-
-    def execute(self, context):
+    def make_job(self, context):
         if self.axis_preset == "CUSTOM" and self.axis_forward.lstrip("-") == self.axis_up.lstrip("-"):
-            self.report({"ERROR"}, "Forward and Up must be different axes")
-            return {"CANCELLED"}
-        # Read everything first: a bad file cancels the whole import before anything is created.
-        scenes = []
-        for path in self._paths():
-            try:
-                scenes.append((path, self._read(path)))
-            except (SplatFormatError, ValueError, OSError) as e:
-                self.report({"ERROR"}, str(e))
-                return {"CANCELLED"}
-            except MemoryError:
-                self.report({"ERROR"}, f"{path}: not enough memory to read this file: close other programs or "
-                                       "import a smaller or compressed version (.sog, .spz, compressed .ply)")
-                return {"CANCELLED"}
-        for path, scene in scenes:
-            name = os.path.splitext(os.path.basename(path))[0] or "Splats"
-            matrix = import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale, path)
-            native = self._native()
-            obj = create_splat_object(context, scene, name, matrix, proxy=self.show_proxy, native=native)
-            repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
-            kind = "Blender splats" if native else "a mesh for the GS-IBL overlay"
-            self.report({"INFO"}, f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r} "
-                        f"({kind})" + (f"; repaired {repaired}" if repaired else ""))
-        if scenes and not self._native() and self.show_splats:
-            context.scene.gs_ibl_overlay.show = True  # seen at once, not as a grey pin-cushion of proxy points
+            raise ValueError("Forward and Up must be different axes")
+        paths = self._paths()
+        matrices = [import_matrix(self.axis_preset, self.axis_forward, self.axis_up, self.global_scale, p)
+                    for p in paths]
+        return _import_steps(paths, matrices, "RDF" if self.spz_axes == "RDF" else None, self._native(),
+                             self.show_proxy, self.show_splats)
+
+    def finished(self, context, result):
+        for line in result:
+            self.report({"INFO"}, line)
         return {"FINISHED"}
 
+    # set by invoke (the file browser, a drop): execute() then runs the import beside the UI; scripts, which call
+    # execute() directly, get their objects at once
+    from_ui: BoolProperty(default=False, options={"HIDDEN", "SKIP_SAVE"})
+
     def invoke(self, context, event):
+        self.from_ui = True
         if self.filepath or (self.directory and len(self.files)):
-            # Dropped on the viewport: the file is known, ask only for the options.
+            # Dropped on the viewport: the file is known, ask only for the options (then execute() runs: the
+            # popup's OK button calls it, not a modal run; the read still goes beside the UI, see execute)
             return self.invoke_popup(context)
         return ImportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        # The file browser's Import button and the drop popup's OK call execute(): from a window it starts the
+        # modal run (invoke of JobOperator) so a 3M-splat file reads beside the UI; scripts and blender -b run now.
+        if self.from_ui and not bpy.app.background and context.window is not None and not self.options.is_repeat:
+            return JobOperator.invoke(self, context, None)
+        return JobOperator.execute(self, context)
+
+
+def _read_file(path: str, spz_coordinates: str | None, progress=None):
+    """The worker's part of an import: one file read and checked (core; no bpy)."""
+    if progress is not None:
+        progress(f"reading {os.path.basename(path)}", 0.0)
+    try:
+        if _is_spz(path):
+            # RUB: None, so that a version-4 coordinate-system record still wins over the spec's default
+            return read_spz(path, coordinates=spz_coordinates)
+        return read_scene(path)
+    except MemoryError:
+        raise MemoryError(f"{path}: not enough memory to read this file: close other programs or import a smaller "
+                          "or compressed version (.sog, .spz, compressed .ply)") from None
+
+
+def _import_steps(paths: list[str], matrices: list[np.ndarray], spz_coordinates: str | None, native: bool,
+                  proxy: bool, show_splats: bool):
+    """The import as a job (blender/jobs.py): every file read first by a worker (a bad file cancels the whole
+    import before anything is made), then the objects made on the main thread. Its result: the report lines."""
+    scenes = []
+    for i, path in enumerate(paths):
+        span = (0.8 * i / len(paths), 0.8 * (i + 1) / len(paths))
+        scenes.append((yield Work(_read_file, path, spz_coordinates, span=span, uses_gpu=False)))
+    lines = []
+    for (path, scene), matrix in zip(zip(paths, scenes), matrices):
+        yield Step(f"making the splat object of {os.path.basename(path)} ({scene.count:,} splats)", 0.8)
+        context = bpy.context
+        name = os.path.splitext(os.path.basename(path))[0] or "Splats"
+        obj = create_splat_object(context, scene, name, matrix, proxy=proxy, native=native)
+        repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
+        kind = "Blender splats" if native else "a mesh for the GS-IBL overlay"
+        lines.append(f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r} ({kind})"
+                     + (f"; repaired {repaired}" if repaired else ""))
+    if scenes and not native and show_splats:
+        bpy.context.scene.gs_ibl_overlay.show = True  # seen at once, not as a grey pin-cushion of proxy points
+    return lines
 
 
 class GSIBL_FH_splats(bpy.types.FileHandler):

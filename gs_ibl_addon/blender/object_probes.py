@@ -18,6 +18,7 @@ from ..core.probe.variation import Variation, box_points, variation_from_sh
 from . import local_light as ll
 from . import splat_cache
 from .bake import find_splats, require_splats
+from .jobs import Job, gpu, run_now
 from .properties import is_probe
 from .splat_object import is_splat_object
 
@@ -56,15 +57,20 @@ def lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, selected=()) -> 
     return out
 
 
-def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False):
-    """The GPU renderer holding the probe's splats (splat_cache), after checking the probe, its splats and, with
-    ``need_world``, that it has been baked (local light corrects the light of its World)."""
+def probe_renderer_steps(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False) -> Job:
+    """A job giving the GPU renderer holding the probe's splats (splat_cache), after checking the probe, its splats
+    and, with ``need_world``, that it has been baked (local light corrects the light of its World)."""
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
     splats = require_splats(scene, probe)
     if need_world and probe.gs_ibl_probe.world is None:
         raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
-    return splat_cache.get(splats).renderer
+    return (yield from splat_cache.get_steps(splats)).renderer
+
+
+def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False):
+    """probe_renderer_steps, run now."""
+    return run_now(probe_renderer_steps(scene, probe, need_world))
 
 
 def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],
@@ -76,10 +82,11 @@ def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
     r = probe_renderer(scene, probe)
     boxes = {o.name: world_box(o) for o in objects}
     pts = np.concatenate([box_points(*boxes[n]) for n in boxes])
-    try:
-        sh = bake_sh_points(r, pts, progress=progress)
-    finally:
-        r.trim()  # the cached renderer keeps no more than one probe's buffers (core/render/renderer.py)
+    with gpu:  # the renderer is shared with the overlay and running jobs (blender/jobs.py)
+        try:
+            sh = bake_sh_points(r, pts, progress=progress)
+        finally:
+            r.trim()  # the cached renderer keeps no more than one probe's buffers (core/render/renderer.py)
     found = [variation_from_sh(n, sh[9 * i:9 * i + 9], pts[9 * i:9 * i + 9]) for i, n in enumerate(boxes)]
     tol = float(probe.gs_ibl_probe.variation_tolerance)
     over = [v for v in found if v.exceeds(tol)]
@@ -103,10 +110,11 @@ def point_coefficients(renderer, points: np.ndarray, progress: Progress | None =
                        face_size: int = POINT_FACE_SIZE) -> np.ndarray:
     """Monomial coefficients (P, 9, 3) of SH probes at ``points``, in one batch; the renderer is trimmed after (as
     check_variation: a batch's buffers are not kept in the splat cache)."""
-    try:
-        return monomial_coefficients(bake_sh_points(renderer, points, face_size, progress=progress))
-    finally:
-        renderer.trim()
+    with gpu:  # the renderer is shared with the overlay and running jobs (blender/jobs.py)
+        try:
+            return monomial_coefficients(bake_sh_points(renderer, points, face_size, progress=progress))
+        finally:
+            renderer.trim()
 
 
 def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],

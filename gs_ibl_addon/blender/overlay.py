@@ -34,6 +34,8 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from . import splat_cache
+from .jobs import busy, gpu, running
+from .jobs import start as start_job
 from ..core.colour import linear_to_srgb, srgb_to_linear
 from .overlay_math import (BACKGROUND_KINDS, COVERAGE_EPS, DEPTH_PULL, EDGE_REACH, GRID_TOLERANCE, LINE_CUT,
                            LINE_REACH, MAX_LAYERS, SplatOverlay, ViewMotion, splat_hit, view_key)
@@ -355,6 +357,59 @@ def splat_image(obj: bpy.types.Object, region_3d, width: int, height: int, scale
     """The OverlayImage the handler would draw for ``obj`` in a view (works in background mode)."""
     return overlay_for(obj).image(np.array(region_3d.view_matrix), np.array(region_3d.window_matrix),
                                   width, height, scale, slot)
+
+
+def _image_now(obj: bpy.types.Object, region_3d, width: int, height: int, scale: float, slot: object):
+    """The image to draw for ``obj`` now, never waiting: rendered when its splats are on the GPU and no job holds
+    it; otherwise the last one drawn in this region (None before the first) while a background job uploads the
+    splats (Show Splats on a 3M-splat object: seconds of reading and upload) or a bake's worker uses the GPU."""
+    last = _textures.get((splat_cache.uid(obj), slot))
+    if splat_cache.current(obj) is None:
+        _start_upload(obj)  # without a window (blender -b) it has run now
+        if splat_cache.current(obj) is None:
+            return last[0] if last else None
+    if not gpu.acquire(blocking=False):
+        _schedule_retry()
+        return last[0] if last else None
+    try:
+        return splat_image(obj, region_3d, width, height, scale, slot)
+    finally:
+        gpu.release()
+
+
+def _start_upload(obj: bpy.types.Object) -> None:
+    key = splat_cache.upload_key(obj)
+    if busy(key) is None:
+        start_job(key, splat_cache.get_steps(obj), f"showing {obj.name}", done=_uploaded)
+
+
+def _uploaded(runner) -> None:
+    global last_error
+    if runner.error is not None:
+        last_error = str(runner.error)
+        print(f"GS-IBL overlay: {last_error}")
+    tag_redraw()
+
+
+_retry_scheduled = False
+
+
+def _schedule_retry() -> None:
+    """Draw again once the GPU is free (a job's worker held it at the last draw)."""
+    global _retry_scheduled
+    if _retry_scheduled:
+        return
+    _retry_scheduled = True
+
+    def retry() -> float | None:
+        global _retry_scheduled
+        if any(r.working for r in running()):
+            return 0.25
+        _retry_scheduled = False
+        tag_redraw()
+        return None
+
+    bpy.app.timers.register(retry, first_interval=0.25)
 
 
 def _shader_get():
@@ -721,7 +776,9 @@ def draw_callback() -> None:
                               settings.resolution_scale)
         ms, quads = 0.0, []
         for obj in objs:
-            img = splat_image(obj, rv3d, region.width, region.height, scale, slot)
+            img = _image_now(obj, rv3d, region.width, region.height, scale, slot)
+            if img is None:  # its splats are still being uploaded: nothing drawn of it yet
+                continue
             ms += img.render_ms
             quads.append((*_textures_for((splat_cache.uid(obj), slot), img), img.view.ndc_rect,
                           shader_params(img.view, settings.exposure)))
@@ -748,8 +805,9 @@ def last_images(context, region, rv3d) -> list[tuple]:
     settings = context.scene.gs_ibl_overlay
     slot = region.as_pointer()
     scale = last_draw.get(slot, {}).get("scale", settings.resolution_scale)
-    return [(o, splat_image(o, rv3d, region.width, region.height, scale, slot))
-            for o in context.visible_objects if is_mesh_splats(o)]
+    images = [(o, _image_now(o, rv3d, region.width, region.height, scale, slot))
+              for o in context.visible_objects if is_mesh_splats(o)]
+    return [(o, img) for o, img in images if img is not None]
 
 
 def splats_under_mouse(context, x: float, y: float):

@@ -11,6 +11,7 @@ from mathutils import Vector
 from . import bake as gb
 from . import world as gw
 from .bake_undo import stale_images
+from .jobs import JobOperator
 from .properties import PROBE_NAME, is_probe
 from .splat_object import is_native_splats, is_splat_object, splat_count
 
@@ -66,39 +67,26 @@ class GSIBL_OT_add_probe(bpy.types.Operator):
         return {"FINISHED"}
 
 
-class GSIBL_OT_bake_probe(bpy.types.Operator):
-    """Render the splats' light from the probe and write it into the GS-IBL World (bake or refresh)"""
+class GSIBL_OT_bake_probe(JobOperator, bpy.types.Operator):
+    """Render the splats' light from the probe and write it into the GS-IBL World (bake or refresh). From the
+    panel it runs beside the UI, with its progress in the status bar; Esc cancels it"""
     bl_idname = "gs_ibl.bake_probe"
     bl_label = "Bake Probe"
     bl_options = {"REGISTER", "UNDO"}
+    job_title = "baking"
 
     @classmethod
     def poll(cls, context):
         return find_probe(context) is not None
 
-    def execute(self, context):
+    def make_job(self, context):
         probe = find_probe(context)
-        try:  # a deleted, unlinked, missing or ambiguous splat object is refused before any work
-            splats = gb.require_splats(context.scene, probe, context.active_object)
-        except ValueError as e:
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
-        wm = context.window_manager
-        wm.progress_begin(0, 100)
+        # a deleted, unlinked, missing or ambiguous splat object is refused before any work
+        splats = gb.require_splats(context.scene, probe, context.active_object)
+        return gb.bake_job(context.scene, probe, splats)
 
-        def progress(message: str, fraction: float) -> None:
-            wm.progress_update(int(100 * fraction))
-            if bpy.app.background:  # headless: the console is the only progress bar
-                print(f"GS-IBL: {message}")
-
-        try:
-            _result, text, warning = gb.bake_into_world(context.scene, probe, splats, progress)
-        except (ValueError, RuntimeError, OSError, MemoryError) as e:
-            # Core errors carry a complete message (what, where, what to do); no traceback for the user.
-            self.report({"ERROR"}, str(e))
-            return {"CANCELLED"}
-        finally:
-            wm.progress_end()
+    def finished(self, context, result):
+        _result, text, warning = result
         self.report({"INFO"}, text)
         if warning:
             self.report({"WARNING"}, warning)

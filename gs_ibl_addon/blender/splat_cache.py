@@ -1,7 +1,7 @@
 """One GPU copy of each splat object, shared by the viewport overlay and probe bakes.
 
-Reading a splat object (``scene_from_object``) and uploading it (``SplatRenderer``) cost about as much as a small
-bake, and a scene on the GPU twice costs twice the memory, so both are done once per object and reused until the
+Reading a splat object (``read_steps`` on the main thread, ``to_world`` and ``SplatRenderer`` on a worker: a job,
+blender/jobs.py) costs about as much as a small bake, and a scene on the GPU twice costs twice the memory, so both are done once per object and reused until the
 object changes: the entry's key is the object's geometry, our mesh or a native splat Point Cloud alike (identity,
 point count, a generation bumped by every geometry edit of it, seen by a depsgraph handler) and its world matrix.
 The object's colour space is not part of the key: it is a push constant of the renderer, set on every get().
@@ -22,7 +22,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from .splat_object import colour_space_of, scene_from_object, splat_count
+from .jobs import Job, Progress, Step, Work, busy, cancel_all, gpu, run_now
+from .splat_object import colour_space_of, read_steps, splat_count, to_world
 
 # What a splat object's data can be: a change to one of these is a geometry edit (PointCloud: Blender 5.3 splats).
 _GEOMETRY = tuple(t for t in (bpy.types.Mesh, getattr(bpy.types, "PointCloud", None)) if t is not None)
@@ -63,33 +64,75 @@ def data_key(obj: bpy.types.Object) -> tuple:
             np.array(obj.matrix_world, np.float64).tobytes())
 
 
-def get(obj: bpy.types.Object) -> CachedSplats:
-    """The object's splats in world space and on the GPU, read and uploaded on first use or after a change.
+def get_steps(obj: bpy.types.Object) -> Job:
+    """A job (blender/jobs.py) giving the object's splats in world space and on the GPU: read on the main thread
+    an attribute at a time, turned into world space and uploaded by a worker, on first use or after a change.
 
     Raises ValueError naming the object when it cannot be read (e.g. non-uniform scale).
     """
     global uploads
     key = data_key(obj)
-    entry = _entries.get(uid(obj))
+    object_uid, mesh_uid, name = uid(obj), uid(obj.data), obj.name
+    uploading = busy(upload_key(obj))  # the overlay's (Show Splats): wait for it rather than read twice
+    while uploading is not None and not uploading.done:
+        yield Step(f"waiting for {name!r}'s splats: {uploading.text}", wait=True)
+    entry = _entries.get(object_uid)
     if entry is None or entry.key != key:
-        release(uid(obj))
-        from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
-        scene = scene_from_object(obj)
-        entry = CachedSplats(key, SplatRenderer(scene), slim(scene))
-        del scene  # the higher SH bands go with it
-        _entries[uid(obj)] = entry
-        _fingerprints[uid(obj.data)] = fingerprint(obj.data)
+        local, matrix = yield from read_steps(obj)
+        digest = fingerprint_of(local.positions)
+        entry = yield Work(_build, key, local, matrix, name)
+        # The object may be gone by now (a Runner's job lets the user work meanwhile): only uids from here on.
+        release(object_uid)
+        _entries[object_uid] = entry
+        _fingerprints[mesh_uid] = digest
         uploads += 1
-    entry.renderer.colour_space = colour_space_of(obj)  # the colour rule: nothing uploaded again when it changes
-    if entry.host.colour_space != entry.renderer.colour_space:  # the host copy is the scene as rendered
-        entry.host = replace(entry.host, colour_space=entry.renderer.colour_space)
+        space = local.colour_space
+    else:
+        space = colour_space_of(obj)
+    entry.renderer.colour_space = space  # the colour rule: nothing uploaded again when it changes
+    if entry.host.colour_space != space:  # the host copy is the scene as rendered
+        entry.host = replace(entry.host, colour_space=space)
     return entry
+
+
+def _build(key: tuple, local, matrix: np.ndarray, name: str, progress: Progress) -> CachedSplats:
+    """The worker's part of get_steps: SH turned with the object, the splats uploaded."""
+    from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
+    progress(f"turning {local.count:,} splats of {name!r} into world space", 0.0)
+    scene = to_world(local, matrix, name)
+    del local
+    progress(f"uploading {scene.count:,} splats of {name!r}", 0.5)
+    entry = CachedSplats(key, SplatRenderer(scene), slim(scene))
+    progress(f"uploaded {scene.count:,} splats", 1.0)
+    return entry  # the higher SH bands go with ``scene``
+
+
+def upload_key(obj: bpy.types.Object) -> str:
+    """The key (blender/jobs.py start) of the background job that uploads ``obj``'s splats for the overlay."""
+    return f"upload:{uid(obj)}"
+
+
+def get(obj: bpy.types.Object) -> CachedSplats:
+    """get_steps, run now."""
+    return run_now(get_steps(obj))
+
+
+def current(obj: bpy.types.Object) -> CachedSplats | None:
+    """The object's entry if it holds the object as it is now (nothing read or uploaded), else None."""
+    entry = _entries.get(uid(obj))
+    return entry if entry is not None and entry.key == data_key(obj) else None
+
+
+def fingerprint_of(positions: np.ndarray) -> bytes:
+    """A digest of splat positions as Blender stores them (float32, (n, 3))."""
+    import hashlib
+    buf = np.ascontiguousarray(positions, np.float32)
+    return hashlib.blake2b(buf.tobytes(), digest_size=16, person=len(buf).to_bytes(8, "little")).digest()
 
 
 def fingerprint(data) -> bytes:
     """A digest of a splat object's geometry (point count and positions, ~50 ms for 3M): tells an undo that put
     back the same splats (Blender reports every restored mesh as updated) from one that undid an edit."""
-    import hashlib
     if isinstance(data, bpy.types.Mesh):
         co, n = data.vertices, len(data.vertices)
         buf = np.empty(3 * n, np.float32)
@@ -100,7 +143,7 @@ def fingerprint(data) -> bytes:
         buf = np.empty(3 * n, np.float32)
         if attr is not None:
             attr.data.foreach_get("vector", buf)
-    return hashlib.blake2b(buf.tobytes(), digest_size=16, person=n.to_bytes(8, "little")).digest()
+    return fingerprint_of(buf.reshape(n, 3))
 
 
 def undo_restored() -> None:
@@ -118,12 +161,34 @@ def proxy_switched(obj: bpy.types.Object) -> None:
 def release(key: int) -> None:
     entry = _entries.pop(key, None)
     if entry is not None:
-        entry.renderer.close()
+        _close_when_free(entry.renderer)
+
+
+_closing: list = []  # renderers dropped while a job's worker held the GPU (it may be rendering with them)
+
+
+def _close_when_free(renderer=None) -> float | None:
+    """Close ``renderer`` (and any left waiting) now if no worker holds the GPU, else from a timer once none does;
+    the main thread never waits for a worker here (a depsgraph update would freeze the UI for a whole bake)."""
+    if renderer is not None:
+        _closing.append(renderer)
+    if not gpu.acquire(blocking=False):
+        if renderer is not None and len(_closing) == 1:
+            bpy.app.timers.register(_close_when_free, first_interval=0.25)
+        return 0.25
+    try:
+        while _closing:
+            _closing.pop().close()
+    finally:
+        gpu.release()
+    return None
 
 
 def clear() -> None:
-    for key in list(_entries):
-        release(key)
+    cancel_all()  # jobs' workers may be using these renderers: stop them, then wait for the GPU
+    with gpu:
+        for key in list(_entries):
+            release(key)
     _mesh_generation.clear()
     _fingerprints.clear()
 

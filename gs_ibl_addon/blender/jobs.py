@@ -1,0 +1,361 @@
+"""Long work without freezing Blender: jobs that read Blender data on the main thread, hand the numpy/Vulkan work
+to a worker thread, and write their results back on the main thread.
+
+A job is a generator. What it runs between its yields runs on the main thread (it may use bpy). It yields:
+
+- ``Step(text, fraction)``: where it is; a Runner lets Blender draw the window before going on.
+- ``Work(fn, *args, **kwargs)``: ``fn(*args, **kwargs, progress=...)`` runs on a worker thread holding ``gpu`` (numpy
+  and Vulkan only: bpy is not thread-safe), and the generator resumes with its return value, or with its exception
+  raised at the yield. ``progress(text, fraction)`` is what core functions already take.
+
+The generator's return value is the job's result. Two drivers run the same generators:
+
+- ``run_now(job)``: in the calling thread, Work inline (scripts, ``blender -b``, operators' execute(), tests).
+- ``Runner``: advanced by timer ticks (modal operators, Update When Moved, the overlay's first upload). Each tick
+  runs main-thread parts until the job yields; Work runs beside the UI. ``cancel()`` (Esc) makes the worker's
+  next progress call raise Cancelled and then closes the generator (GeneratorExit at its yield, so its finally
+  blocks run). Jobs write Blender data only after their last Work, so a cancelled job leaves nothing half-made.
+
+``gpu`` is one lock for every use of the shared Vulkan renderers (bakes, uploads, the overlay's renders): a worker
+holds it for the whole of its Work, and the overlay, which draws on the main thread, draws its last images
+instead of waiting for it.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Generator
+
+Progress = Callable[[str, float], None]
+Job = Generator[Any, Any, Any]
+
+gpu = threading.RLock()  # held while the shared renderers are in use (see above)
+
+
+class Cancelled(Exception):
+    """Raised inside a worker by its progress callback once its job was cancelled."""
+
+
+@dataclass
+class Step:
+    text: str
+    fraction: float | None = None  # of the whole job; None: unchanged
+    wait: bool = False  # the job is waiting for another: a Runner gives the rest of this tick back to Blender
+
+
+@dataclass
+class Work:
+    """``fn(*args, **kwargs, progress=...)`` on a worker thread; ``span``: the part of the job's progress it fills;
+    ``uses_gpu=False`` for work that leaves the shared renderers alone (reading a file): the overlay keeps drawing."""
+    fn: Callable[..., Any]
+    args: tuple = ()
+    kwargs: dict = field(default_factory=dict)
+    span: tuple[float, float] | None = None
+    uses_gpu: bool = True
+
+    def __init__(self, fn: Callable[..., Any], *args, span: tuple[float, float] | None = None,
+                 uses_gpu: bool = True, **kwargs) -> None:
+        self.fn, self.args, self.kwargs, self.span, self.uses_gpu = fn, args, kwargs, span, uses_gpu
+
+    def __call__(self, progress: Progress) -> Any:
+        """Run it here (the caller's thread), holding ``gpu`` when it uses the GPU."""
+        if not self.uses_gpu:
+            return self.fn(*self.args, **self.kwargs, progress=_scaled(progress, self.span))
+        with gpu:
+            return self.fn(*self.args, **self.kwargs, progress=_scaled(progress, self.span))
+
+
+def _scaled(progress: Progress, span: tuple[float, float] | None) -> Progress:
+    if span is None:
+        return progress
+    a, b = span
+    return lambda text, fraction: progress(text, a + (b - a) * min(max(float(fraction), 0.0), 1.0))
+
+
+def run_now(job: Job, progress: Progress | None = None) -> Any:
+    """Run ``job`` to its end in this thread; returns its result, raises its error."""
+    say = progress or (lambda _text, _fraction: None)
+    value, error = None, None
+    while True:
+        try:
+            item = job.throw(error) if error is not None else job.send(value)
+        except StopIteration as stop:
+            return stop.value
+        value = error = None
+        if isinstance(item, Step):
+            say(item.text, item.fraction if item.fraction is not None else 0.0)
+        elif isinstance(item, Work):
+            try:
+                value = item(say)
+            except Exception as e:  # noqa: BLE001  handed to the job, which decides
+                error = e
+        else:
+            job.close()
+            raise TypeError(f"a job yielded {item!r}: only Step and Work")
+
+
+class Runner:
+    """Runs one job a tick at a time (see the module's docstring). ``text`` and ``fraction`` say where it is;
+    after ``tick()`` returned True, ``result``, ``error`` or ``cancelled`` say how it ended."""
+
+    def __init__(self, job: Job, title: str = "") -> None:
+        self.job, self.title = job, title
+        self.text, self.fraction = "starting", 0.0
+        self.done = self.cancelled = False
+        self.result: Any = None
+        self.error: BaseException | None = None
+        self.started = time.perf_counter()
+        self._cancel = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._outcome: tuple[Any, BaseException | None] = (None, None)
+        self._span: tuple[float, float] | None = None
+
+    # ---- called from the worker
+    def _progress(self, text: str, fraction: float) -> None:
+        if self._cancel.is_set():
+            raise Cancelled(text)
+        self.text, self.fraction = text, float(fraction)
+
+    def _work(self, item: Work) -> None:
+        try:
+            self._outcome = (item(self._progress), None)
+        except BaseException as e:  # noqa: BLE001  handed to the main thread
+            self._outcome = (None, e)
+
+    # ---- called from the main thread
+    @property
+    def working(self) -> bool:
+        """A worker is running."""
+        return self._thread is not None
+
+    def cancel(self) -> None:
+        """Stop as soon as the worker's next progress call (or now, between Work): nothing more is written."""
+        self._cancel.set()
+        if self._thread is None and not self.done:
+            self._end_cancelled()
+
+    def _end_cancelled(self) -> None:
+        self.job.close()
+        self.done = self.cancelled = True
+        self.text = "cancelled"
+
+    def tick(self, budget_s: float = 0.05) -> bool:
+        """Advance the job: main-thread parts until it yields a Step (the window gets drawn), starts Work, or has
+        used ``budget_s``; returns True once it has ended."""
+        until = time.perf_counter() + budget_s
+        while not self.done:
+            if self._thread is not None:
+                if self._thread.is_alive():
+                    return False
+                self._thread.join()
+                self._thread = None
+                value, error = self._outcome
+                self._outcome = (None, None)
+            else:
+                value, error = None, None
+            if self._cancel.is_set():
+                self._end_cancelled()
+                break
+            try:
+                item = self.job.throw(error) if error is not None else self.job.send(value)
+            except StopIteration as stop:
+                self.result, self.done = stop.value, True
+                break
+            except Exception as e:  # noqa: BLE001  the job's own error: the caller reports it
+                self.error, self.done = e, True
+                break
+            if isinstance(item, Step):
+                self.text = item.text
+                if item.fraction is not None:
+                    self.fraction = item.fraction
+                if item.wait or time.perf_counter() >= until:
+                    return False
+            elif isinstance(item, Work):
+                self._thread = threading.Thread(target=self._work, args=(item,), daemon=True,
+                                                name=f"gs-ibl {self.title}")
+                self._thread.start()
+                return False
+            else:
+                self.job.close()
+                self.error, self.done = TypeError(f"a job yielded {item!r}: only Step and Work"), True
+        return True
+
+    def status(self) -> str:
+        """One line for the status bar: what, where, how far, how to stop."""
+        if self._cancel.is_set():
+            return f"GS-IBL {self.title}: cancelling (waiting for the current step to end)"
+        return (f"GS-IBL {self.title}: {self.text} - {100 * self.fraction:.0f}%, "
+                f"{time.perf_counter() - self.started:.0f} s (Esc to cancel)")
+
+
+# ---------------------------------------------------------------------------------------- background jobs (timers)
+
+TICK_S = 0.1  # how often a background job or a modal operator looks at its worker: the UI redraws in between
+_background: dict[str, Runner] = {}  # key -> running job (one per key: a new one cancels the old)
+
+
+def show_status(text: str | None) -> None:
+    """Put ``text`` in the status bar of every window (None gives the status bar back to Blender)."""
+    import bpy
+    for window in getattr(bpy.context.window_manager, "windows", []):
+        workspace = window.workspace
+        if workspace is None:
+            continue
+        with bpy.context.temp_override(window=window):  # a timer's context has no window of its own
+            workspace.status_text_set(text)
+
+
+def _status_now() -> None:
+    lines = [r.status() for r in running()]
+    show_status("    ".join(lines) if lines else None)
+
+
+def start(key: str, job: Job, title: str, done: Callable[[Runner], None] | None = None) -> Runner | None:
+    """Run ``job`` in the background, driven by a timer, and call ``done(runner)`` on the main thread when it
+    ends. Without a window (``blender -b``, the bpy module) there is no event loop to drive timers and no UI to keep
+    responsive: it runs now, and done() is called before this returns. Returns the runner (None when run now)."""
+    import bpy
+    old = _background.pop(key, None)
+    if old is not None:
+        old.cancel()  # its worker notices at its next progress call; its timer still drains it
+    runner = Runner(job, title)
+    if bpy.app.background:
+        try:
+            runner.result = run_now(job)
+        except Exception as e:  # noqa: BLE001
+            runner.error = e
+        runner.done = True
+        if done is not None:
+            done(runner)
+        return None
+    _background[key] = runner
+
+    def step() -> float | None:
+        if not runner.tick():
+            _status_now()
+            return TICK_S
+        if _background.get(key) is runner:
+            del _background[key]
+        _status_now()
+        if done is not None and not runner.cancelled:
+            done(runner)
+        return None
+
+    bpy.app.timers.register(step, first_interval=0.0)
+    return runner
+
+
+def busy(key: str) -> Runner | None:
+    """The background job running under ``key``, if any."""
+    return _background.get(key)
+
+
+def cancel_all() -> None:
+    """Cancel every background job (a file is loaded, the extension is disabled): their results would land in
+    data that is no longer there."""
+    for runner in list(_background.values()):
+        runner.cancel()
+    _background.clear()
+
+
+# ------------------------------------------------------------------------------------------------ modal operators
+
+USER_ERRORS = (ValueError, RuntimeError, OSError, MemoryError)  # core errors carry a message meant for the user
+_NAVIGATION = {"MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "WHEELINMOUSE",
+               "WHEELOUTMOUSE", "TRACKPADPAN", "TRACKPADZOOM", "MOUSEROTATE", "MOUSESMARTZOOM", "WINDOW_DEACTIVATE",
+               "TIMER", "TIMER_REPORT", "NONE"}
+
+
+class JobOperator:
+    """Mixin for an operator whose work is a job: ``execute()`` runs it now (scripts, ``blender -b``, the Redo
+    panel); ``invoke()`` runs it modally: Blender's progress in the cursor and a status-bar line with the stage and
+    percentage, the viewport drawn and navigable meanwhile, Esc cancels with nothing changed. Other input waits
+    until the job ends: an edit or an undo under a running job would pull its data away.
+
+    Subclasses give ``job_title``, ``make_job(context)`` (check everything and raise a ValueError before any work;
+    return the job) and ``finished(context, result)`` (report; return the operator's set)."""
+
+    job_title = "working"
+    _runner: Runner | None = None
+    _timer = None
+
+    def make_job(self, context) -> Job:
+        raise NotImplementedError
+
+    def finished(self, context, result) -> set[str]:
+        return {"FINISHED"}
+
+    def execute(self, context):
+        import bpy
+
+        def say(text: str, _fraction: float) -> None:
+            if bpy.app.background:  # headless: the console is the only progress bar
+                print(f"GS-IBL: {text}")
+
+        try:
+            result = run_now(self.make_job(context), say)
+        except USER_ERRORS as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        return self.finished(context, result)
+
+    def invoke(self, context, event):
+        import bpy
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        key = type(self).__name__
+        if key in _modal:
+            self.report({"ERROR"}, f"GS-IBL is already {self.job_title} (Esc cancels it)")
+            return {"CANCELLED"}
+        try:
+            job = self.make_job(context)
+        except USER_ERRORS as e:
+            self.report({"ERROR"}, str(e))
+            return {"CANCELLED"}
+        self._runner = Runner(job, self.job_title)
+        _modal[key] = self._runner
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(TICK_S, window=context.window)
+        wm.modal_handler_add(self)
+        wm.progress_begin(0, 100)
+        self._show(context)
+        return {"RUNNING_MODAL"}
+
+    def _show(self, context) -> None:
+        context.window_manager.progress_update(int(100 * self._runner.fraction))
+        _status_now()
+
+    def modal(self, context, event):
+        r = self._runner
+        if event.type == "ESC" and event.value == "PRESS":
+            r.cancel()
+        elif event.type == "TIMER" and event.timer is self._timer:
+            r.tick()
+        if not r.done:
+            self._show(context)
+            return {"PASS_THROUGH"} if event.type in _NAVIGATION else {"RUNNING_MODAL"}
+        wm = context.window_manager
+        wm.event_timer_remove(self._timer)
+        wm.progress_end()
+        _modal.pop(type(self).__name__, None)
+        _status_now()
+        from .overlay import tag_redraw  # the overlay drew its last images while the worker held the GPU
+        tag_redraw()
+        if r.cancelled:
+            self.report({"WARNING"}, f"GS-IBL {self.job_title}: cancelled, nothing was changed")
+            return {"CANCELLED"}
+        if r.error is not None:
+            if not isinstance(r.error, USER_ERRORS):
+                raise r.error
+            self.report({"ERROR"}, str(r.error))
+            return {"CANCELLED"}
+        return self.finished(context, r.result)
+
+
+_modal: dict[str, Runner] = {}  # operator class name -> its running job (one at a time per operator)
+
+
+def running() -> list[Runner]:
+    """Every job running now, modal and background (the panel and tests read it)."""
+    return list(_modal.values()) + list(_background.values())

@@ -1,0 +1,97 @@
+"""Long work beside the UI, as a user sees it, in the real Blender 5.2 binary with its GUI (Debian sid root, Xvfb):
+the built zip installed by Blender's own installer, then gui_jobs.py run there (see its docstring). Checked:
+- the Bake button's operator runs as a modal job: its progress line (stage and percentage, "Esc to cancel") is in
+  the status bar while it runs, and the main thread keeps running (the heartbeat's gaps stay short; before, a bake
+  blocked it for its whole length);
+- a real Esc cancels it, and the World, the images and the probe's report are as before the bake;
+- the same bake left to finish writes the probe's World;
+- an import through the file browser's path reads beside the UI, and Show Splats' first upload is a background job
+  after which the splats are drawn.
+Skipped unless the sid root has been made (scripts/blender_roots.sh ensure sid). Screenshots land in
+build/matrix/gui-jobs/, the status-bar crop for docs/img in build/matrix/gui-jobs/docs/.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from test_matrix import OUT, REPO, Entry, Runner, _inputs_once, _install, require_root, xvfb_shell
+
+HERE = Path(__file__).resolve().parent
+ENTRY = Entry("gui-jobs", "sid", True, gui=True)
+BIG_SPLATS = 400_000  # an import and upload of some seconds on llvmpipe, a file of ~100 MB
+MAX_GAP_S = 1.5  # the longest the main thread may be away while a job runs (llvmpipe draws a frame in ~0.2-1 s)
+
+
+def _big_ply(path: Path) -> None:
+    from gs_ibl_addon.core.formats.ply import write_ply
+    from gs_ibl_addon.core.synthetic import random_scene
+    scene = random_scene(BIG_SPLATS, seed=3, sh_degree=3, extent=2.0)
+    rng = np.random.default_rng(0)
+    write_ply(str(path), scene.subset(rng.permutation(scene.count)))  # real files are unordered
+
+
+def _crop_status_bar(png: Path, docs: Path) -> None:
+    import OpenImageIO as oiio
+    buf = oiio.ImageBuf(str(png))
+    px = buf.get_pixels(oiio.UINT8)
+    strip = np.ascontiguousarray(px[-40:, :, :3])  # the window fills the screen: its status bar is at the bottom
+    out = oiio.ImageBuf(oiio.ImageSpec(strip.shape[1], strip.shape[0], 3, oiio.UINT8))
+    out.set_pixels(oiio.ROI(), strip)
+    docs.mkdir(parents=True, exist_ok=True)
+    out.write(str(docs / "blender_job_status_bar.png"))
+
+
+def test_gui_jobs(tmp_path_factory):
+    require_root(ENTRY.root)
+    zip_path = _inputs_once()["zip"]
+    runner = Runner(ENTRY, tmp_path_factory.mktemp("gui-jobs"))
+    for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_jobs.py", HERE / "gui_common.py"):
+        shutil.copy(src, runner.host / src.name)
+    _big_ply(runner.host / "big.ply")
+    keep = OUT / ENTRY.name
+    try:
+        r = _install(runner, str(runner.inner / zip_path.name))
+        assert r.returncode == 0, f"installing the zip failed: {r.stdout[-2000:]}\n{r.stderr[-2000:]}"
+        inner = runner.inner
+        r = runner.run(xvfb_shell(f"blender --python {inner / 'gui_jobs.py'} -- --out {inner / 'out'} "
+                                  f"--room {inner / 'room.ply'} --big {inner / 'big.ply'}"), "gui_jobs")
+    finally:
+        shutil.rmtree(keep, ignore_errors=True)
+        shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
+        runner.close()
+    out = keep / "out"
+    assert (out / "jobs.json").exists(), f"gui_jobs.py wrote no jobs.json (rc {r.returncode}); see {keep}"
+    result = json.loads((out / "jobs.json").read_text())
+    assert not result["error"], f"gui_jobs.py failed in Blender {result['blender']}:\n{result['error']}"
+    steps, before = result["steps"], result["before"]
+    for name in ("bake_running", "bake_running_2", "cancelling", "after_cancel", "bake_auto_running", "bake_done",
+                 "import_running", "import_read", "upload_running", "upload_done", "import_done"):
+        print(f"[gui-jobs] {name}: {json.dumps(steps.get(name))[:600]}")
+
+    running = steps["bake_running"]["status"] + steps["bake_running_2"]["status"]
+    assert any("GS-IBL baking" in s and "%" in s and "Esc to cancel" in s for s in running), running
+    fractions = steps["bake_running"]["fractions"] + steps["bake_running_2"]["fractions"]
+    assert fractions and max(fractions) > 0.0, fractions  # the worker's progress came back
+    _crop_status_bar(out / steps["bake_running_2"]["png"], keep / "docs")
+
+    cancel = steps["after_cancel"]
+    assert not cancel["running"], cancel
+    assert cancel["world"] == before["world"] and cancel["images"] == before["images"], (cancel, before)
+    assert cancel["report"] == before["report"] and cancel["probe_world"] is None, cancel
+    assert cancel["max_gap"] < MAX_GAP_S, f"the UI was blocked for {cancel['max_gap']:.2f} s during the bake"
+
+    done = steps["bake_done"]
+    assert not done["running"] and done["probe_world"] and done["world"] == done["probe_world"], done
+    assert done["report"].startswith("Baked "), done["report"]
+    assert done["max_gap"] < MAX_GAP_S, f"the UI was blocked for {done['max_gap']:.2f} s during the bake"
+
+    assert steps["import_call"] == ["RUNNING_MODAL"], steps["import_call"]
+    imported = steps["import_done"]
+    assert imported["new"] == ["big"] and imported["show"], imported
+    assert "big" in (imported["drawn"] or []) and imported["overlay_error"] is None, imported
+    for name in ("import_read", "upload_done"):
+        assert steps[name]["max_gap"] < MAX_GAP_S, (name, steps[name]["max_gap"])
