@@ -99,8 +99,8 @@ class Runner:
     """Runs one job a tick at a time (see the module's docstring). ``text`` and ``fraction`` say where it is;
     after ``tick()`` returned True, ``result``, ``error`` or ``cancelled`` say how it ended."""
 
-    def __init__(self, job: Job, title: str = "") -> None:
-        self.job, self.title = job, title
+    def __init__(self, job: Job, title: str = "", escapable: bool = False) -> None:
+        self.job, self.title, self.escapable = job, title, escapable  # escapable: a modal operator's (Esc)
         self.text, self.fraction = "starting", 0.0
         self.done = self.cancelled = False
         self.result: Any = None
@@ -186,7 +186,7 @@ class Runner:
         if self._cancel.is_set():
             return f"GS-IBL {self.title}: cancelling (waiting for the current step to end)"
         return (f"GS-IBL {self.title}: {self.text} - {100 * self.fraction:.0f}%, "
-                f"{time.perf_counter() - self.started:.0f} s (Esc to cancel)")
+                f"{time.perf_counter() - self.started:.0f} s" + (" (Esc to cancel)" if self.escapable else ""))
 
 
 # ---------------------------------------------------------------------------------------- background jobs (timers)
@@ -196,7 +196,8 @@ _background: dict[str, Runner] = {}  # key -> running job (one per key: a new on
 
 
 def show_status(text: str | None) -> None:
-    """Put ``text`` in the status bar of every window (None gives the status bar back to Blender)."""
+    """Put ``text`` in the status bar of every window (None gives the status bar back to Blender), and redraw the
+    3D Views' sidebars, whose GS-IBL panel lists running jobs (not their viewports: an overlay redraw is costly)."""
     import bpy
     for window in getattr(bpy.context.window_manager, "windows", []):
         workspace = window.workspace
@@ -204,6 +205,11 @@ def show_status(text: str | None) -> None:
             continue
         with bpy.context.temp_override(window=window):  # a timer's context has no window of its own
             workspace.status_text_set(text)
+        for area in window.screen.areas:
+            if area.type == "VIEW_3D":
+                for region in area.regions:
+                    if region.type == "UI":
+                        region.tag_redraw()
 
 
 def _status_now() -> None:
@@ -313,7 +319,7 @@ class JobOperator:
         except USER_ERRORS as e:
             self.report({"ERROR"}, str(e))
             return {"CANCELLED"}
-        self._runner = Runner(job, self.job_title)
+        self._runner = Runner(job, self.job_title, escapable=True)
         _modal[key] = self._runner
         wm = context.window_manager
         self._timer = wm.event_timer_add(TICK_S, window=context.window)
@@ -330,7 +336,7 @@ class JobOperator:
         r = self._runner
         if event.type == "ESC" and event.value == "PRESS":
             r.cancel()
-        elif event.type == "TIMER" and event.timer is self._timer:
+        elif event.type == "TIMER":  # ours or another's: ticking more often does no harm
             r.tick()
         if not r.done:
             self._show(context)

@@ -380,7 +380,7 @@ def _image_now(obj: bpy.types.Object, region_3d, width: int, height: int, scale:
 def _start_upload(obj: bpy.types.Object) -> None:
     key = splat_cache.upload_key(obj)
     if busy(key) is None:
-        start_job(key, splat_cache.get_steps(obj), f"showing {obj.name}", done=_uploaded)
+        start_job(key, splat_cache.get_steps(obj, wait_for_upload=False), f"showing {obj.name}", done=_uploaded)
 
 
 def _uploaded(runner) -> None:

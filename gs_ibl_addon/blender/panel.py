@@ -11,7 +11,7 @@ from mathutils import Vector
 from . import bake as gb
 from . import world as gw
 from .bake_undo import stale_images
-from .jobs import JobOperator
+from .jobs import JobOperator, running
 from .properties import PROBE_NAME, is_probe
 from .splat_object import is_native_splats, is_splat_object, splat_count
 
@@ -199,6 +199,8 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if s.auto_update:
             col.prop(s, "update_interval")
         layout.operator(GSIBL_OT_bake_probe.bl_idname, text="Bake / Refresh", icon="RENDER_STILL")
+        for runner in running():  # also in the status bar; here beside the button that started it
+            _label_block(layout.box(), context, runner.status(), icon="TIME")
         if s.last_report:
             col = layout.box().column(align=True)
             for line in s.last_report.split("\n"):

@@ -64,18 +64,20 @@ def data_key(obj: bpy.types.Object) -> tuple:
             np.array(obj.matrix_world, np.float64).tobytes())
 
 
-def get_steps(obj: bpy.types.Object) -> Job:
+def get_steps(obj: bpy.types.Object, wait_for_upload: bool = True) -> Job:
     """A job (blender/jobs.py) giving the object's splats in world space and on the GPU: read on the main thread
     an attribute at a time, turned into world space and uploaded by a worker, on first use or after a change.
 
-    Raises ValueError naming the object when it cannot be read (e.g. non-uniform scale).
+    With ``wait_for_upload``, a running overlay upload of the object (Show Splats) is waited for rather than
+    the object read twice (the upload job itself passes False). Raises ValueError naming the object when it cannot
+    be read (e.g. non-uniform scale).
     """
     global uploads
     key = data_key(obj)
     object_uid, mesh_uid, name = uid(obj), uid(obj.data), obj.name
-    uploading = busy(upload_key(obj))  # the overlay's (Show Splats): wait for it rather than read twice
+    uploading = busy(upload_key(obj)) if wait_for_upload else None
     while uploading is not None and not uploading.done:
-        yield Step(f"waiting for {name!r}'s splats: {uploading.text}", wait=True)
+        yield Step(f"waiting for the upload of {name}", wait=True)
     entry = _entries.get(object_uid)
     if entry is None or entry.key != key:
         local, matrix = yield from read_steps(obj)
