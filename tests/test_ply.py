@@ -319,3 +319,131 @@ def test_error_all_splats_nonfinite(tmp_path):
     cols = raw_columns(3, 0)
     cols["y"][:] = np.nan
     expect_error(write_raw(tmp_path / "n.ply", cols), "all 3 splats", "NaN")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The numpy ASCII reader against plyfile's own text parser (issue 23)
+
+def plyfile_reference(tmp_path, ascii_path) -> SplatScene:
+    """What plyfile's pure-Python text reader makes of ``ascii_path``, through the binary reader: its float32
+    columns written as a binary PLY and read back."""
+    data = PlyData.read(str(ascii_path))["vertex"].data
+    return read_ply(write_raw(tmp_path / "reference.ply", {n: data[n] for n in data.dtype.names}))
+
+
+def ascii_ply(path, names: list[str], lines: list[bytes], newline: bytes = b"\n", header_extra: tuple = (),
+              elements_after: bytes = b"", types: dict | None = None, count: int | None = None) -> str:
+    types = types or {}
+    head = [b"ply", b"format ascii 1.0", b"comment written by hand", b"obj_info a test", *header_extra,
+            f"element vertex {len(lines) if count is None else count}".encode()]
+    head += [f"property {types.get(n, 'float')} {n}".encode() for n in names]
+    if elements_after:
+        head += [b"element face 2", b"property list uchar int vertex_indices"]
+    head.append(b"end_header")
+    path.write_bytes(newline.join(head + lines) + newline + elements_after)
+    return str(path)
+
+
+def decimal_lines(n: int, names: list[str], seed: int = 0) -> list[bytes]:
+    """Values with 6 to 20 significant digits and exponents: most are no float32, some lie near a float32
+    rounding boundary (the double then float32 rounding both readers must agree on)."""
+    rng = np.random.default_rng(seed)
+    lines = []
+    for _ in range(n):
+        words = []
+        for name in names:
+            v = rng.normal() * 10.0 ** rng.integers(-6, 4)
+            if name.startswith("scale"):
+                v = -abs(v) - 3
+            if rng.random() < 0.2:  # a float32's midpoint to its neighbour, printed in full
+                f = np.float32(v)
+                v = (float(f) + float(np.nextafter(f, np.float32(np.inf)))) / 2
+                words.append(f"{v:.25g}")
+            else:
+                words.append(f"{v:.{rng.integers(6, 21)}g}")
+        lines.append(" ".join(words).encode())
+    return lines
+
+
+@pytest.mark.parametrize("newline", [b"\n", b"\r\n"])
+def test_ascii_same_as_plyfile_decimals_crlf_comments(tmp_path, newline, monkeypatch):
+    names = standard_names(3)
+    path = ascii_ply(tmp_path / "d.ply", names, decimal_lines(400, names), newline)
+    want = plyfile_reference(tmp_path, path)
+    assert_same(read_ply(path), want)
+    monkeypatch.setattr(plymod, "ASCII_BLOCK", 4096)  # blocks end mid-line: each is completed to its line end
+    assert_same(read_ply(path), want)
+
+
+def test_ascii_trailing_spaces_tabs_and_no_final_line_end(tmp_path):
+    names = standard_names(0)
+    lines = [b"\t" + ln.replace(b" ", b" \t ", 3) + b"  " for ln in decimal_lines(30, names, seed=2)]
+    path = ascii_ply(tmp_path / "t.ply", names, lines)
+    path_bytes = (tmp_path / "t.ply").read_bytes().rstrip()
+    (tmp_path / "t.ply").write_bytes(path_bytes)
+    assert_same(read_ply(path), plyfile_reference(tmp_path, path))
+
+
+@pytest.mark.parametrize("block", [1 << 20, 700])
+def test_ascii_faces_after_vertices(tmp_path, monkeypatch, block):
+    """A splat file with another element after the vertices (faces here): the vertices are read, the rest
+    left alone, in whichever block the vertices end."""
+    monkeypatch.setattr(plymod, "ASCII_BLOCK", block)
+    names = standard_names(1)
+    path = ascii_ply(tmp_path / "f.ply", names, decimal_lines(50, names, seed=3),
+                     elements_after=b"3 0 1 2\n3 2 3 4\n")
+    got = read_ply(path)
+    assert got.count == 50
+    assert_same(got, plyfile_reference(tmp_path, path))
+
+
+def test_ascii_integer_properties(tmp_path):
+    """Integer properties (an int position, uchar colours the layout ignores) read as plyfile reads them."""
+    names = standard_names(0) + ["red", "green", "blue"]
+    rng = np.random.default_rng(5)
+    lines = [ln + b" %d %d %d" % tuple(rng.integers(0, 256, 3)) for ln in decimal_lines(40, standard_names(0), 4)]
+    lines = [b"%d" % rng.integers(-(2 ** 30), 2 ** 30) + ln[ln.index(b" "):] for ln in lines]  # x: int32
+    path = ascii_ply(tmp_path / "i.ply", names, lines,
+                     types={"x": "int", "red": "uchar", "green": "uchar", "blue": "uchar"})
+    got = read_ply(path)
+    assert_same(got, plyfile_reference(tmp_path, path))
+    assert np.all(got.positions[:, 0] == np.round(got.positions[:, 0]))
+
+
+@pytest.mark.parametrize("block", [1 << 20, 2000])
+def test_ascii_garbled_line_named_in_any_block(tmp_path, monkeypatch, block):
+    monkeypatch.setattr(plymod, "ASCII_BLOCK", block)
+    names = standard_names(0)
+    lines = decimal_lines(60, names, seed=6)
+    for bad, why in ((b"1.5.2", "a word"), (b"0x1f", "hex"), (b"\xff", "not ASCII"), (b"", "a missing value")):
+        garbled = list(lines)
+        words = garbled[47].split()
+        garbled[47] = b" ".join(words[:5] + ([bad] if bad else []) + words[6:])
+        expect_error(ascii_ply(tmp_path / "g.ply", names, garbled), "line 48 after the header", "numbers")
+    extra = list(lines)
+    extra[47] += b" 1.0"
+    expect_error(ascii_ply(tmp_path / "e.ply", names, extra), "line 48 after the header")
+
+
+def test_ascii_truncated_mid_line_and_mid_file(tmp_path):
+    names = standard_names(2)
+    path = tmp_path / "t.ply"
+    ascii_ply(path, names, decimal_lines(20, names, seed=7))
+    data = path.read_bytes()
+    path.write_bytes(data[:-40])  # the last line cut short
+    expect_error(path, "line 20 after the header", "numbers")
+    lines = data.split(b"\n")
+    path.write_bytes(b"\n".join(lines[:-6]) + b"\n")  # whole lines missing
+    expect_error(path, "truncated", "promises 20 splats", "get the file again")
+
+
+def test_ascii_blank_lines_in_vertices_before_faces(tmp_path, monkeypatch):
+    monkeypatch.setattr(plymod, "ASCII_BLOCK", 900)
+    names = standard_names(0)
+    lines = decimal_lines(30, names, seed=8)
+    path = ascii_ply(tmp_path / "b.ply", names, lines, elements_after=b"3 0 1 2\n3 2 3 4\n")
+    want = read_ply(path)
+    blank = ascii_ply(tmp_path / "bb.ply", names, lines[:10] + [b""] + lines[10:29] + [b"  "] + lines[29:],
+                      elements_after=b"3 0 1 2\n3 2 3 4\n", count=30)
+    # plyfile refuses blank lines; ours reads past them (they change no value) and stops after the 30th splat
+    assert_same(read_ply(blank), want)

@@ -3,9 +3,12 @@
 Layout: one ``vertex`` element with float properties ``x y z``, optional ``nx ny nz`` (ignored),
 ``f_dc_0..2``, ``f_rest_0..R-1`` with R in {0, 9, 24, 45} (SH degree 0-3), ``opacity``, ``scale_0..2``,
 ``rot_0..3``. Extra properties are ignored; any numeric property type is accepted (cast to float32).
-Binary little/big-endian files are read through plyfile's header parser and memory-mapped in chunks (so a file
-of any size costs little more than the resulting arrays). ASCII files whose only element is ``vertex`` are parsed
-by numpy block by block (``_rows_ascii``: about 20x plyfile's pure-Python reader); other ASCII layouts by plyfile.
+Binary little/big-endian files are read through plyfile's header parser, then in chunks into one reused buffer
+(so a file of any size costs little more than the resulting arrays); a file whose properties share one type (the
+usual all-float32 one) has each chunk's columns gathered in one pass. ASCII files whose first element is
+``vertex`` (other elements, e.g. faces, may follow) are parsed by numpy's C parser a block at a time
+(``_rows_ascii``: 4-5x plyfile's pure-Python reader on 1M splats, values identical; docs/benchmarks.md); other
+ASCII layouts by plyfile.
 
 f_rest is stored channel-major: ``f_rest_{c * (K-1) + (k-1)}`` is coefficient k of channel c, where K is the
 number of SH coefficients per channel; ``SplatScene.sh[:, k, c]`` holds it and ``sh[:, 0]`` is f_dc.
@@ -35,6 +38,7 @@ from __future__ import annotations
 import difflib
 import os
 import re
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,7 +48,7 @@ from ..scene import SplatScene
 from . import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
-CHUNK_ROWS = 1 << 16  # splats converted per step: bounds temporaries to a few MB whatever the file size
+CHUNK_ROWS = 1 << 14  # splats converted per step: a few MB, so a chunk's temporaries stay in the CPU's cache
 ASCII_BLOCK = 32 << 20  # bytes of ASCII PLY text parsed per step
 F_REST_COUNTS = {0: 0, 9: 1, 24: 2, 45: 3}  # f_rest properties -> SH degree
 
@@ -153,8 +157,17 @@ def check_counts(path: str, ply: PlyData, offset: int) -> None:
                              "it: the file is truncated or its header is damaged", "get the file again or export it again")
 
 
+def _uniform_dtype(vertex: PlyElement, byte_order: str) -> np.dtype | None:
+    """The one scalar type of every vertex property (the usual all-float32 file), else None."""
+    types = {p.val_dtype for p in vertex.properties if not isinstance(p, PlyListProperty)}
+    if len(types) != 1 or len(vertex.properties) != len(vertex.dtype(byte_order)):
+        return None
+    return np.dtype(byte_order + types.pop())
+
+
 def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
-    """Yield the vertex rows as structured arrays, chunk by chunk, memory-mapped (or read) from the file."""
+    """Yield the vertex rows chunk by chunk: (rows, properties) arrays where every property has one type (so the
+    columns are gathered in one pass, not one strided pass per property), else structured arrays."""
     dtype = vertex.dtype(ply.byte_order)
     first = ply.elements[0].name == "vertex" and not any(isinstance(p, PlyListProperty) for p in vertex.properties)
     if not first:
@@ -169,46 +182,23 @@ def _rows_binary(path: str, ply: PlyData, vertex: PlyElement, offset: int):
         raise fail(path, f"the file is truncated: the header promises {vertex.count} splats ({need} bytes) but only "
                          f"{have} bytes follow ({have // dtype.itemsize} whole splats). The download or copy was "
                          f"probably cut off: get the file again")
-    for i in range(0, vertex.count, CHUNK_ROWS):
-        # A fresh small map per chunk, dropped after use, so resident memory never holds the whole file.
-        rows = np.memmap(path, dtype, "r", offset + i * dtype.itemsize, (min(CHUNK_ROWS, vertex.count - i),))
-        yield rows
-        del rows
-
-
-class _Columns:
-    """A block of rows as a (rows, properties) float array, read by property name like a structured array."""
-
-    def __init__(self, values: np.ndarray, names: dict[str, int]) -> None:
-        self.values, self.names = values, names
-
-    def __len__(self) -> int:
-        return len(self.values)
-
-    def __getitem__(self, name: str) -> np.ndarray:
-        return self.values[:, self.names[name]]
+    plain = _uniform_dtype(vertex, ply.byte_order)
+    # One reused buffer filled by readinto: resident memory stays one chunk whatever the file size, and a copy from
+    # the page cache costs less than faulting in a fresh memory map per chunk.
+    buf = np.empty(min(CHUNK_ROWS, vertex.count) * dtype.itemsize, np.uint8)
+    with open(path, "rb") as f:
+        f.seek(offset)
+        for i in range(0, vertex.count, CHUNK_ROWS):
+            rows = min(CHUNK_ROWS, vertex.count - i)
+            view = buf[:rows * dtype.itemsize]
+            if f.readinto(view) != view.size:
+                raise fail(path, f"the file is truncated: splat {i} onwards could not be read; get the file again")
+            yield view.view(plain).reshape(rows, -1) if plain is not None else view.view(dtype)
 
 
 def _ascii_fast(ply: PlyData, vertex: PlyElement) -> bool:
-    return len(ply.elements) == 1 and not any(isinstance(p, PlyListProperty) for p in vertex.properties)
-
-
-def _text_blocks(f, size: int):
-    """Blocks of about ``size`` bytes of a text file, each ending at a line end (the last one wherever it ends)."""
-    rest = b""
-    while True:
-        block = f.read(size)
-        if not block:
-            if rest.strip():
-                yield rest
-            return
-        text = rest + block
-        cut = text.rfind(b"\n") + 1
-        if cut == 0:
-            rest = text
-            continue
-        yield text[:cut]
-        rest = text[cut:]
+    """The vertex rows come first and have a fixed number of values (elements after them, e.g. faces, are fine)."""
+    return ply.elements[0] is vertex and not any(isinstance(p, PlyListProperty) for p in vertex.properties)
 
 
 def _parse_lines(path: str, text: bytes, width: int, first_line: int, want: int) -> np.ndarray:
@@ -232,35 +222,68 @@ def _parse_lines(path: str, text: bytes, width: int, first_line: int, want: int)
     return np.array(rows, np.float64).reshape(-1, width)
 
 
+def _parse_block(text: bytes, width: int, most: int) -> np.ndarray | None:
+    """The rows of a block of whole lines of numbers as (rows, width) float32, or None where it holds anything else
+    (a word, a byte that is not ASCII, a number of values that is not a whole number of rows) or more than ``most``
+    rows (other elements' lines after the vertices, which the caller cuts off).
+
+    One call of numpy's C parser for the whole block: each value is parsed to double and rounded to float32, as
+    plyfile's ``np.float32(word)`` does, so the values are identical. (np.loadtxt's C reader and splitting the bytes
+    were measured slower.) Lines are not counted here (that is a pass over the block of its own): blank lines change
+    no value, and a line short of a value makes the total no whole number of rows."""
+    with warnings.catch_warnings():
+        # numpy 1.x warns and returns what it read where 2.x raises ValueError: both mean "not only numbers"
+        warnings.simplefilter("error", DeprecationWarning)
+        try:
+            values = np.fromstring(text, dtype=np.float32, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    if values.size % width or values.size > most * width:
+        return None
+    return values.reshape(-1, width)
+
+
 def _rows_ascii(path: str, vertex: PlyElement, offset: int):
-    """Yield the vertex rows of an ASCII PLY with only that element, parsed by numpy a block of whole lines at a
-    time (np.fromstring's C parser; plyfile parses each value in Python: 53 s for 1M splats)."""
-    import warnings
-    names = {p.name: i for i, p in enumerate(vertex.properties)}
-    width, done, line = len(names), 0, 0
+    """Yield the vertex rows of an ASCII PLY whose first element is vertex, parsed by numpy a block of whole lines
+    at a time (plyfile parses each value in Python: about 20x slower). Each block is read once and parsed as it is:
+    no decoding, no joining of blocks. The block where the vertices end is cut after their last line (other
+    elements, e.g. faces, follow), and a block the fast parse refuses is read line by line, naming a bad line."""
+    width, done = len(vertex.properties), 0
     with open(path, "rb") as f:
         f.seek(offset)
-        for text in _text_blocks(f, ASCII_BLOCK):
-            lines = text.count(b"\n") + (0 if text.endswith(b"\n") else 1)
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", DeprecationWarning)  # numpy's "could not be read to its end"
-                try:
-                    values = np.fromstring(text.decode("ascii"), dtype=np.float64, sep=" ")
-                except (UnicodeDecodeError, ValueError):
-                    values = None
-            if values is not None and values.size == lines * width:
-                rows = values.reshape(lines, width)
-            else:  # blank lines, a bad value, or text after the last splat: line by line
-                rows = _parse_lines(path, text, width, line, vertex.count - done)
-            rows = rows[:vertex.count - done]
+        while done < vertex.count:
+            start = f.tell()
+            text = f.read(ASCII_BLOCK)
+            if not text:
+                break
+            if not text.endswith(b"\n"):
+                text += f.readline()  # whole lines only (the file's last line may lack its line end)
+            want = vertex.count - done
+            rows = _parse_block(text, width, want)
+            if rows is None:
+                ends = np.flatnonzero(np.frombuffer(text, np.uint8) == ord("\n"))
+                if len(ends) >= want and ends[want - 1] + 1 < len(text):  # the vertices end in this block
+                    text = text[:ends[want - 1] + 1]
+                    f.seek(start + len(text))
+                    rows = _parse_block(text, width, want)
+                if rows is None:  # blank lines or bad input
+                    rows = _parse_lines(path, text, width, _lines_before(path, offset, start), want)
             done += len(rows)
-            line += lines
             for i in range(0, len(rows), CHUNK_ROWS):
-                yield _Columns(rows[i:i + CHUNK_ROWS], names)
-            if done == vertex.count:
-                return
-    raise fail(path, f"the file is truncated: the header promises {vertex.count} splats but only {done} lines of "
-                     "them follow. The download or copy was probably cut off: get the file again")
+                yield rows[i:i + CHUNK_ROWS]
+    if done < vertex.count:
+        raise fail(path, f"the file is truncated: the header promises {vertex.count} splats but only {done} lines "
+                         "of them follow. The download or copy was probably cut off: get the file again")
+
+
+def _lines_before(path: str, offset: int, start: int) -> int:
+    """Lines between the header's end and byte ``start``: counted only where a message needs a line number."""
+    lines = 0
+    with open(path, "rb") as f:
+        f.seek(offset)
+        while f.tell() < start:
+            lines += f.read(min(ASCII_BLOCK, start - f.tell())).count(b"\n")
+    return lines
 
 
 def parse_header(path: str, check_sizes: bool = True) -> tuple[PlyData, int]:
@@ -305,10 +328,13 @@ def read_ply(path: str | os.PathLike) -> SplatScene:
         chunks = (data[i:i + CHUNK_ROWS] for i in range(0, len(data), CHUNK_ROWS))
     else:
         chunks = _rows_binary(path, ply, vertex, offset)
-    return _activate(path, chunks, vertex.count, layout)
+    props = [p.name for p in vertex.properties]
+    return _activate(path, chunks, vertex.count, layout, [props.index(name) for name in layout.names])
 
 
-def _activate(path: str, chunks, n: int, layout: _Layout) -> SplatScene:
+def _activate(path: str, chunks, n: int, layout: _Layout, columns: list[int]) -> SplatScene:
+    """``chunks`` yields (rows, file properties) arrays, whose ``columns`` are the layout's names, or arrays read by
+    property name (structured)."""
     k = layout.k
     pos = np.empty((n, 3), np.float32)
     sh = np.empty((n, k, 3), np.float32)
@@ -319,14 +345,20 @@ def _activate(path: str, chunks, n: int, layout: _Layout) -> SplatScene:
     m = 0  # rows kept so far: dropped splats are compacted away as we go, never copied twice
     e = layout.sh_end
     for rows in chunks:
-        raw = np.empty((len(rows), len(layout.names)), np.float32)
-        for j, name in enumerate(layout.names):
-            raw[:, j] = rows[name]
+        if isinstance(rows, np.ndarray) and rows.ndim == 2:
+            raw = rows[:, columns]  # one gather of every column, not a strided pass per column
+            if raw.dtype != np.float32:
+                raw = raw.astype(np.float32)
+        else:
+            raw = np.empty((len(rows), len(layout.names)), np.float32)
+            for j, name in enumerate(layout.names):
+                raw[:, j] = rows[name]
         s = _exp32(raw[:, e + 1:e + 4])
         keep = np.isfinite(raw).all(1) & np.isfinite(s).all(1)
         c = int(keep.sum())
         counts["dropped_nonfinite"] += len(raw) - c
-        raw, s = raw[keep], s[keep]
+        if c < len(raw):  # the usual file drops nothing: no compacting copy then
+            raw, s = raw[keep], s[keep]
 
         pos[m:m + c] = raw[:, 0:3]
         sh[m:m + c, 0] = raw[:, 3:6]
