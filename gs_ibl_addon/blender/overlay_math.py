@@ -31,6 +31,16 @@ from ..core.scene import SplatScene
 ORTHO_DISTANCE = 100.0
 MOVING_SCALE = 0.25  # resolution while the view moves: ~1/16 of the pixels
 SETTLE_S = 0.25  # a view unchanged this long is still: rendered at the full Resolution setting
+# Moving frames of a scene above MOTION_BUDGET splats draw a coarse copy of that many (SplatOverlay) where the full
+# scene's last render took over MOTION_FRAME_MS: on lavapipe (2 cores) a 3M-splat orbit goes from 0.3 to ~5
+# frames/s at 1311x878 (docs/benchmarks.md, "Overlay while the view moves"); a GPU that draws the full scene within
+# a 60 Hz frame keeps full detail.
+MOTION_BUDGET = 100_000
+MOTION_FRAME_MS = 1000.0 / 60.0
+# The copy is drawn at this fraction of MOVING_SCALE: its cells are wider than a pixel there already, so halving the
+# resolution again measured no added error and halves the raster and tile sort (docs/benchmarks.md)
+MOTION_RESOLUTION = 0.5
+MOTION_LOD_K = 2.0  # the copy's own octree cut, in rendered pixels: far parts of a scene seen whole merge further
 # Splats win depth ties within this fraction of their distance: a splat surface's depth is the mean over its
 # blurry splats, and lines Blender draws on that surface (an object's bounds at the walls of a room) would show
 # through it dashed; a mesh closer than 1 - DEPTH_PULL of the splat distance still hides the splats.
@@ -134,27 +144,40 @@ class ViewMotion:
 
     ``scale`` is called at every draw with the clock. A view that changed within the last SETTLE_S seconds is
     moving (a drag redraws it every frame: coarse frames keep it responsive); a region seen for the first time is
-    drawn at full resolution at once. ``refine_in`` says when a region drawn coarse will have been still long
-    enough for its full-resolution image: the handler schedules one redraw then.
+    drawn at full resolution at once. ``moving`` tells the draw whether that region is moving (SplatOverlay.image
+    then draws a big scene's coarse copy), also where the Resolution setting is already below MOVING_SCALE.
+    ``refine_in`` says when a region drawn while moving will have been still long enough for its full image: the
+    handler schedules one redraw then.
     """
 
     def __init__(self, settle_s: float = SETTLE_S, moving_scale: float = MOVING_SCALE) -> None:
         self.settle_s, self.moving_scale = settle_s, moving_scale
-        self._slots: dict[object, list] = {}  # slot -> [key, time of its last change, last drawn coarse]
+        # slot -> [key, time of its last change, last drawn at the moving scale, last drawn while moving]
+        self._slots: dict[object, list] = {}
 
     def scale(self, slot: object, key: bytes, now: float, full_scale: float) -> float:
         st = self._slots.get(slot)
         if st is None:
-            self._slots[slot] = [key, -math.inf, False]
+            self._slots[slot] = [key, -math.inf, False, False]
             return full_scale
         if st[0] != key:
             st[0], st[1] = key, now
-        st[2] = now - st[1] < self.settle_s and self.moving_scale < full_scale
+        st[3] = now - st[1] < self.settle_s
+        st[2] = st[3] and self.moving_scale < full_scale
         return self.moving_scale if st[2] else full_scale
 
+    def moving(self, slot: object) -> bool:
+        """Whether the region's last ``scale`` call found its view moving."""
+        st = self._slots.get(slot)
+        return bool(st is not None and st[3])
+
     def refine_in(self, now: float) -> float | None:
-        """Seconds until the earliest coarse region settles (0 if one already has), None when none is coarse."""
-        waits = [max(0.0, st[1] + self.settle_s - now) for st in self._slots.values() if st[2]]
+        """Seconds until the earliest region drawn while moving settles (0 if one already has), None when none is.
+
+        A region counts from its moving draw even at full scale: its splats may have been drawn coarse (a big
+        scene's motion copy); where they were not, the refining redraw finds its image unchanged and renders
+        nothing."""
+        waits = [max(0.0, st[1] + self.settle_s - now) for st in self._slots.values() if st[2] or st[3]]
         return min(waits) if waits else None
 
 
@@ -181,6 +204,8 @@ class OverlayImage:
     render_ms: float
     depth: np.ndarray | None = None  # (H, W) distance along the view axis (0: no splat), rows as rgba
     scale: float = 1.0
+    coarse: bool = False  # drawn from the motion copy (SplatOverlay), not the full scene
+    gpu_ms: float = math.nan  # with SplatOverlay.timestamps
 
     def window_depth(self, pull: float = 0.0) -> np.ndarray:
         return window_depth(self.depth, self.view, pull)
@@ -189,11 +214,23 @@ class OverlayImage:
 class SplatOverlay:
     """One splat object's GPU renderer (scene uploaded once) and its last image per viewport.
 
-    ``image`` re-renders only when the matrices, the region size or the scale changed; ``renders`` counts renders.
-    A renderer passed in stays its owner's (close() leaves it open); one made here is closed with the overlay.
+    ``image`` re-renders only when the matrices, the region size, the scale or the detail changed; ``renders``
+    counts renders. A renderer passed in stays its owner's (close() leaves it open); one made here is closed with
+    the overlay.
+
+    Motion copy. While a moving frame of the full scene cannot keep up (its last full-detail render took longer
+    than ``frame_ms``) and the scene has more than ``motion_budget`` splats, moving frames (``image(...,
+    moving=True)``) draw a coarse copy of at most that many instead (core/render/coarse.py: the cells of a uniform
+    grid merged by moment matching), at MOTION_RESOLUTION of the scale asked for. The copy is built from
+    ``motion_scene`` (default ``scene``; the draw handler passes splat_cache's host copy, whose SH is the base colour
+    only) on a worker thread started by the first slow render, and uploaded as a second small renderer (with its
+    own octree level of detail, drawn at MOTION_LOD_K) by the first frame that draws it. Until then, for scenes
+    within the budget and where the full scene fits the frame (a GPU), moving frames are the full scene as before.
+    A still frame is always the full scene through ``renderer``: the same image as without a copy, bit for bit.
     """
 
-    def __init__(self, scene: SplatScene | None = None, renderer=None) -> None:
+    def __init__(self, scene: SplatScene | None = None, renderer=None, motion_scene: SplatScene | None = None,
+                 motion_budget: int | None = None, frame_ms: float | None = None, background: bool = True) -> None:
         if scene is None and renderer is None:
             raise ValueError("SplatOverlay needs splats: a scene to upload or a renderer holding them")
         self._owns_renderer = renderer is None
@@ -203,24 +240,110 @@ class SplatOverlay:
         self.renderer = renderer
         self.renders = 0
         self._last: dict[object, tuple[bytes, OverlayImage]] = {}
+        self.motion_budget = MOTION_BUDGET if motion_budget is None else int(motion_budget)
+        self.frame_ms = MOTION_FRAME_MS if frame_ms is None else float(frame_ms)
+        self.full_ms: float | None = None  # wall time of the last full-detail render
+        self.timestamps = False  # benchmarks: GPU time of each render in OverlayImage.gpu_ms
+        self.motion_resolution = MOTION_RESOLUTION
+        self.motion: MotionCopy | None = None
+        self._motion_source = motion_scene if motion_scene is not None else scene
+        self._background = background
+
+    def coarse_when_moving(self) -> bool:
+        """Whether a moving frame drawn now would be the motion copy."""
+        return (self.motion is not None and self.motion.ready() and self.full_ms is not None
+                and self.full_ms > self.frame_ms)
 
     def image(self, view_matrix, window_matrix, width: int, height: int, scale: float = 1.0,
-              slot: object = 0) -> OverlayImage:
-        key = view_key(view_matrix, window_matrix, width, height) + np.float64(scale).tobytes()
+              slot: object = 0, moving: bool = False) -> OverlayImage:
+        coarse = moving and self.coarse_when_moving()
+        key = view_key(view_matrix, window_matrix, width, height) + np.float64(scale).tobytes() + bytes([coarse])
         last = self._last.get(slot)
         if last is not None and last[0] == key:
             return last[1]
+        if coarse:
+            scale = max(scale * self.motion_resolution, 1.0 / max(width, height))
         ov = overlay_view(view_matrix, window_matrix, width, height, scale)
-        res = self.renderer.render(ov.batch, depth=True)  # the overlay hides splats behind meshes by depth
+        if coarse:
+            r = self.motion.renderer(self.renderer)
+            res = r.render(ov.batch, depth=True, lod_k=MOTION_LOD_K, timestamps=self.timestamps)
+        else:  # the overlay hides splats behind meshes by depth
+            res = self.renderer.render(ov.batch, depth=True, timestamps=self.timestamps)
+            self.full_ms = res.wall_ms
+            src = self._motion_source
+            if (self.motion is None and src is not None and src.count > self.motion_budget
+                    and self.full_ms > self.frame_ms):  # too slow to follow the mouse: make the copy, once
+                self.motion = MotionCopy(src, self.motion_budget, self._background)
         self.renders += 1
-        img = OverlayImage(res.images[0], ov, res.wall_ms, res.depths[0], scale)
+        img = OverlayImage(res.images[0], ov, res.wall_ms, res.depths[0], scale, coarse,
+                           res.timings_ms.get("total", math.nan) if self.timestamps else math.nan)
         self._last[slot] = (key, img)
         return img
 
     def close(self) -> None:
         self._last.clear()
+        if self.motion is not None:
+            self.motion.close()
         if self._owns_renderer:
             self.renderer.close()
+
+
+class MotionCopy:
+    """A scene's coarse copy for moving frames (see SplatOverlay): built in numpy (on a daemon thread when
+    ``background``), uploaded on first use by the thread that draws, so only that thread touches the GPU."""
+
+    def __init__(self, scene: SplatScene, budget: int, background: bool = True) -> None:
+        import threading
+        self.budget = budget
+        self.coarse = None  # core.render.coarse.CoarseScene, once built
+        self.tree = None  # its octree level of detail
+        self.build_s = 0.0  # coarse copy and its tree, numpy
+        self.error: BaseException | None = None
+        self._renderer = None
+        self._closed = False
+        self._thread = None
+        if background:
+            self._thread = threading.Thread(target=self._build, args=(scene,), name="gs-ibl motion copy",
+                                            daemon=True)
+            self._thread.start()
+        else:
+            self._build(scene)
+
+    def _build(self, scene: SplatScene) -> None:
+        import time
+        from ..core.render.coarse import coarse_scene
+        from ..core.render.lod import build_lod
+        try:
+            t = time.perf_counter()
+            coarse = coarse_scene(scene, self.budget)
+            self.tree = build_lod(coarse.scene)
+            self.build_s = time.perf_counter() - t
+            self.coarse = coarse  # last: ready() reads it without a lock
+        except Exception as e:  # noqa: BLE001  a failed copy leaves moving frames at full detail
+            self.error = e
+
+    def ready(self) -> bool:
+        return self.coarse is not None and not self._closed
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait for the build (tests, benchmarks); True once the copy is ready."""
+        if self._thread is not None:
+            self._thread.join(timeout)
+        return self.ready()
+
+    def renderer(self, like):
+        """The copy's renderer, made on first use on ``like``'s Vulkan context with its colour rule."""
+        if self._renderer is None:
+            from ..core.render.renderer import SplatRenderer
+            self._renderer = SplatRenderer(self.coarse.scene, like.ctx, near=like.near, lod=self.tree)
+        self._renderer.colour_space = like.colour_space  # a push constant: follows the object's setting
+        return self._renderer
+
+    def close(self) -> None:
+        self._closed = True
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
 
 def perspective_matrix(fov_x_deg: float, width: int, height: int, near: float = 0.1, far: float = 100.0,
