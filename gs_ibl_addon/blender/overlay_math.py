@@ -32,8 +32,8 @@ ORTHO_DISTANCE = 100.0
 MOVING_SCALE = 0.25  # resolution while the view moves: ~1/16 of the pixels
 SETTLE_S = 0.25  # a view unchanged this long is still: rendered at the full Resolution setting
 # Moving frames of a scene above MOTION_BUDGET splats draw a coarse copy of that many (SplatOverlay) where the full
-# scene's last render took over MOTION_FRAME_MS: on lavapipe (2 cores) a 3M-splat orbit goes from 0.3 to ~5
-# frames/s at 1311x878 (docs/benchmarks.md, "Overlay while the view moves"); a GPU that draws the full scene within
+# scene's last render took over MOTION_FRAME_MS: on lavapipe (2 cores) a 3M-splat orbit went from 0.15 to ~9
+# frames/s at 1311x878 (core, load ~3.5) (docs/benchmarks.md, "Overlay while the view moves"); a GPU that draws the full scene within
 # a 60 Hz frame keeps full detail.
 MOTION_BUDGET = 100_000
 MOTION_FRAME_MS = 1000.0 / 60.0
