@@ -32,9 +32,9 @@ ORTHO_DISTANCE = 100.0
 MOVING_SCALE = 0.25  # resolution while the view moves: ~1/16 of the pixels
 SETTLE_S = 0.25  # a view unchanged this long is still: rendered at the full Resolution setting
 # Moving frames of a scene above MOTION_BUDGET splats draw a coarse copy of that many (SplatOverlay) where the full
-# scene's last render took over MOTION_FRAME_MS: on lavapipe (2 cores) a 3M-splat orbit went from 0.15 to ~9
-# frames/s at 1311x878 (core, load ~3.5) (docs/benchmarks.md, "Overlay while the view moves"); a GPU that draws the full scene within
-# a 60 Hz frame keeps full detail.
+# scene's last render took over MOTION_FRAME_MS: on lavapipe (2 cores, load ~3.5) a 3M-splat orbit went from 0.15
+# to ~9 frames/s at 1311x878, core only (docs/benchmarks.md, "Overlay while the view moves"); a GPU that draws the
+# full scene within a 60 Hz frame keeps full detail.
 MOTION_BUDGET = 100_000
 MOTION_FRAME_MS = 1000.0 / 60.0
 # The copy is drawn at this fraction of MOVING_SCALE: its cells are wider than a pixel there already, so halving the

@@ -11,8 +11,8 @@ holding two or more splats becomes one splat by lod.py's moment matching (weight
 weighted mean, second moment and SH; the random-medium opacity), which keeps a cell's coverage, so surfaces stay
 closed where a random subset of the same size would turn see-through. A cell holding one splat keeps it unchanged.
 
-Built in numpy with no GPU work, so it can run on a worker thread: on this 2-core machine, at load ~3.5: 2.1-2.4 s at 1M splats, 6.7-8.4 s at 3M with the copy's octree (docs/benchmarks.md,
-"Overlay while the view moves").
+Built in numpy with no GPU work, so it can run on a worker thread: on this 2-core machine, at load ~3.5, 2.1-2.4 s
+at 1M splats and 6.7-8.4 s at 3M with the copy's octree (docs/benchmarks.md, "Overlay while the view moves").
 """
 from __future__ import annotations
 
