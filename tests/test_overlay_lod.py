@@ -124,7 +124,8 @@ def test_switch_follows_view_motion():
     plain = SplatRenderer(s)
     np.testing.assert_array_equal(settled.rgba, plain.render(overlay_view(vs[3], p, W, H, full).batch).images[0])
     assert draw(vs[0], 12.0).coarse  # moved back: coarse again, then still: full detail again
-    np.testing.assert_array_equal(draw(vs[0], 12.5).rgba, plain.render(overlay_view(vs[0], p, W, H, full).batch).images[0])
+    want = plain.render(overlay_view(vs[0], p, W, H, full).batch).images[0]
+    np.testing.assert_array_equal(draw(vs[0], 12.5).rgba, want)
 
     # A Resolution already below the moving scale: the scale stays, the detail still drops while moving, and the
     # region is refined once still (the copy was drawn at full scale).
