@@ -30,7 +30,6 @@ to DIR/error.txt; Blender quits at the end.
 """
 from __future__ import annotations
 
-import importlib
 import json
 import math
 import os
@@ -42,6 +41,9 @@ import traceback
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gui_common import focus as _focus, mod, package, run_steps, view3d, xdo as _xdo  # noqa: E402
 
 ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
 
@@ -76,33 +78,6 @@ def log(msg: str) -> None:
     line = f"[gui_overlay {time.strftime('%H:%M:%S')}] {msg}"
     print(line, flush=True)
     state["log"].append(line)
-
-
-def package():
-    """The extension's package: the installed one (bl_ext.<repo>.gs_ibl) or the checkout's with --src."""
-    if SRC:
-        sys.path.insert(0, SRC)
-        import gs_ibl_addon
-        gs_ibl_addon.register()
-        return "gs_ibl_addon"
-    names = [m for m in bpy.context.preferences.addons.keys() if m.endswith("gs_ibl")]
-    if not names:
-        raise RuntimeError("the gs_ibl extension is not enabled in this Blender "
-                           f"(enabled: {sorted(bpy.context.preferences.addons.keys())})")
-    return names[0]
-
-
-def mod(pkg: str, name: str):
-    return importlib.import_module(f"{pkg}.{name}")
-
-
-def view3d():
-    for window in bpy.context.window_manager.windows:
-        for area in window.screen.areas:
-            if area.type == "VIEW_3D":
-                region = next(r for r in area.regions if r.type == "WINDOW")
-                return window, area, area.spaces.active, region
-    raise RuntimeError("no 3D Viewport in the window")
 
 
 def blob_scene(pkg: str):
@@ -368,20 +343,6 @@ def composite_offscreen_check(pkg: str, w: int = 80, h: int = 56, n_layers: int 
     return {"max_error": float(err.max()), "over_1e-3": int((err > 1e-3).sum()), "pixels": w * h,
             "written": int(written.sum()), "kinds_written": kinds,
             "in_discs": int((om.disc_mask(w, h, discs) & line).sum())}
-
-
-def _focus() -> None:
-    if "xwin" not in state:
-        r = subprocess.run(["xdotool", "search", "--name", "Blender"], capture_output=True, text=True)
-        ids = r.stdout.split()
-        if not ids:
-            raise RuntimeError(f"xdotool finds no Blender window: {r.stdout} {r.stderr}")
-        state["xwin"] = ids[-1]
-    subprocess.run(["xdotool", "windowfocus", "--sync", state["xwin"]], check=True)
-
-
-def _xdo(*args) -> None:
-    subprocess.run(["xdotool", *map(str, args)], check=True)
 
 
 def _pixel(point) -> tuple[int, int]:
@@ -949,42 +910,12 @@ def finish(error: str | None = None) -> None:
 
 
 def main() -> None:
-    bpy.context.preferences.view.show_splash = False  # a fresh user directory would open on the splash
     try:
-        pkg = package()
+        pkg = package(SRC)
     except Exception:  # noqa: BLE001
         finish(traceback.format_exc())
         return
-    it = steps(pkg)
-    pending = []
-
-    busy = []
-
-    def tick():
-        # run the action that was waiting, then wait as long as the next one asks before running it
-        if busy:  # a blocking render lets Blender run timers meanwhile: not this one again
-            return 1.0
-        if pending:
-            busy.append(True)
-            try:
-                pending.pop()()
-            except BaseException:  # noqa: BLE001  (a StopIteration inside an action is a failure too)
-                finish(traceback.format_exc())
-                return None
-            finally:
-                busy.clear()
-        try:
-            delay, action = next(it)
-        except StopIteration:
-            finish()
-            return None
-        except Exception:  # noqa: BLE001
-            finish(traceback.format_exc())
-            return None
-        pending.append(action)
-        return delay
-
-    bpy.app.timers.register(tick, first_interval=1.0)
+    run_steps(steps(pkg), finish)
 
 
 main()

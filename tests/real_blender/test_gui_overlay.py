@@ -156,7 +156,7 @@ def test_gui_overlay(tmp_path_factory):
     require_root(ENTRY.root)
     zip_path = _inputs_once()["zip"]
     runner = Runner(ENTRY, tmp_path_factory.mktemp("gui"))
-    for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_overlay.py"):
+    for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_overlay.py", HERE / "gui_common.py"):
         shutil.copy(src, runner.host / src.name)
     keep = OUT / ENTRY.name
     try:
