@@ -15,10 +15,11 @@ from gs_ibl_addon.blender import jobs  # noqa: E402
 from gs_ibl_addon.core.synthetic import SkyGradient, shell_scene  # noqa: E402
 
 
-def _drive(runner: jobs.Runner, timeout: float = 300.0, on_tick=None) -> int:
-    """Tick ``runner`` as the modal operator's timer would, until it ends; returns how many ticks it took."""
+def _drive(runner: jobs.Runner, timeout: float = 300.0, on_tick=None, budget_s: float = 0.05) -> int:
+    """Tick ``runner`` as the modal operator's timer would, until it ends; returns how many ticks it took.
+    ``budget_s=0``: a tick at every Step (as on a slow machine, where each main-thread piece fills a tick)."""
     ticks, end = 0, time.monotonic() + timeout
-    while not runner.tick():
+    while not runner.tick(budget_s):
         ticks += 1
         if on_tick is not None:
             on_tick(runner, ticks)
@@ -200,3 +201,26 @@ def test_start_without_a_window_runs_now():
 
     assert jobs.start("test", job(), "testing", done=lambda r: done.append(r.result)) is None
     assert done == [5] and jobs.busy("test") is None
+
+
+def test_an_import_cancelled_while_it_makes_its_objects_leaves_no_datablock(blender, tmp_path, write_3dgs_ply):
+    """Two files: the first object made, the second cancelled between two of its attributes: neither stays."""
+    from gs_ibl_addon.blender.importer import _import_steps
+    paths = []
+    for i in range(2):
+        paths.append(str(tmp_path / f"shell{i}.ply"))
+        write_3dgs_ply(paths[-1], shell_scene(SkyGradient(), 3000, 5.0, (0.0, 0.0, 0.0)))
+    before = (set(bpy.data.objects.keys()), set(bpy.data.meshes.keys()))
+    job = _import_steps(paths, [np.identity(4)] * 2, None, False, False, False)
+    runner = jobs.Runner(job, "importing")
+
+    def cancel(r, _n):
+        if "making shell1" in r.text:
+            r.cancel()
+
+    _drive(runner, on_tick=cancel, budget_s=0.0)
+    assert runner.cancelled
+    assert (set(bpy.data.objects.keys()), set(bpy.data.meshes.keys())) == before
+    # the same import left to finish makes both
+    assert len(jobs.run_now(_import_steps(paths, [np.identity(4)] * 2, None, False, False, False))) == 2
+    assert {"shell0", "shell1"} <= set(bpy.data.objects.keys())

@@ -12,7 +12,7 @@ from ..core.formats import EXTENSIONS, read_scene
 from ..core.formats.axes import declared_axes
 from ..core.formats.spz import read_spz
 from .jobs import JobOperator, Step, Work
-from .splat_object import create_splat_object, native_splats_supported
+from .splat_object import create_steps, native_splats_supported
 
 _AXES = [(a, a, "") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
 
@@ -177,16 +177,26 @@ def _import_steps(paths: list[str], matrices: list[np.ndarray], spz_coordinates:
     for i, path in enumerate(paths):
         span = (0.8 * i / len(paths), 0.8 * (i + 1) / len(paths))
         scenes.append((yield Work(_read_file, path, spz_coordinates, span=span, uses_gpu=False)))
-    lines = []
-    for (path, scene), matrix in zip(zip(paths, scenes), matrices):
-        yield Step(f"making the splat object of {os.path.basename(path)} ({scene.count:,} splats)", 0.8)
-        context = bpy.context
-        name = os.path.splitext(os.path.basename(path))[0] or "Splats"
-        obj = create_splat_object(context, scene, name, matrix, proxy=proxy, native=native)
-        repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
-        kind = "Blender splats" if native else "a mesh for the GS-IBL overlay"
-        lines.append(f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r} ({kind})"
-                     + (f"; repaired {repaired}" if repaired else ""))
+    lines, made = [], []
+    try:
+        for (path, scene), matrix in zip(zip(paths, scenes), matrices):
+            yield Step(f"making the splat object of {os.path.basename(path)} ({scene.count:,} splats)", 0.8)
+            name = os.path.splitext(os.path.basename(path))[0] or "Splats"
+            obj = yield from create_steps(bpy.context, scene, name, matrix, proxy=proxy, native=native)
+            made.append(obj.name)
+            repaired = ", ".join(f"{k}: {v}" for k, v in scene.repairs.items())
+            kind = "Blender splats" if native else "a mesh for the GS-IBL overlay"
+            lines.append(f"Imported {scene.count:,} splats (SH degree {scene.sh_degree}) as {obj.name!r} ({kind})"
+                         + (f"; repaired {repaired}" if repaired else ""))
+    except BaseException:  # a failure or a cancel while making the second file's object: none stays
+        for name in made:
+            obj = bpy.data.objects.get(name)
+            if obj is not None:
+                data = obj.data
+                bpy.data.objects.remove(obj)
+                (bpy.data.pointclouds if native else bpy.data.meshes).remove(data)
+        bpy.context.view_layer.update()  # its selection would list the removed objects as None until synced
+        raise
     if scenes and not native and show_splats:
         bpy.context.scene.gs_ibl_overlay.show = True  # seen at once, not as a grey pin-cushion of proxy points
     return lines

@@ -80,15 +80,25 @@ def _new_attr(mesh: bpy.types.Mesh, name: str, kind: str, field: str, values: np
     attr.data.foreach_set(field, np.ascontiguousarray(values, np.float32).ravel())
 
 
-def _fill_mesh(mesh: bpy.types.Mesh, scene: SplatScene) -> None:
+def _filled(name: str, i: int, total: int) -> Step:
+    return Step(f"making {name}: {i} of {total} attributes")
+
+
+def _fill_mesh(mesh: bpy.types.Mesh, scene: SplatScene) -> Generator[Step, None, None]:
+    """Our mesh's vertices and attributes from ``scene``, an attribute at a time (a Runner lets the window draw
+    between them: at 3M splats each is ~0.1 s)."""
     n = scene.count
+    total = 5 + scene.sh.shape[1]
     mesh.vertices.add(n)
     mesh.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(scene.positions, np.float32).ravel())
+    yield _filled(mesh.name, 1, total)
     _new_attr(mesh, "gs_scale", "FLOAT_VECTOR", "vector", scene.scales)
     _new_attr(mesh, "gs_rotation", "QUATERNION", "value", scene.rotations)
     _new_attr(mesh, "gs_opacity", "FLOAT", "value", scene.opacities)
+    yield _filled(mesh.name, 4, total)
     for k in range(scene.sh.shape[1]):
         _new_attr(mesh, _SH_NAME.format(k), "FLOAT_VECTOR", "vector", scene.sh[:, k])
+        yield _filled(mesh.name, 5 + k, total)
     rgba = np.empty((n, 4), np.float32)
     rgba[:, :3] = np.maximum(sh_dc_to_rgb(scene.sh[:, 0]), 0.0)
     rgba[:, 3] = scene.opacities
@@ -163,14 +173,15 @@ def native_splats_supported() -> bool:
     return prop is not None and "GAUSSIAN_SPLAT" in prop.enum_items.keys()
 
 
-def _fill_pointcloud(cloud, scene: SplatScene) -> str:
+def _fill_pointcloud(cloud, scene: SplatScene) -> Generator[Step, None, str]:
     """Blender's own splat attributes from ``scene``; returns the colour space the stored colours are in.
 
     Blender reads every splat's colour as sRGB (radiance = srgb_to_linear(SH + 0.5)). A linear scene is stored
     re-encoded (core/colour.py linear_sh_for_srgb_rule: the DC colour exact, view dependence to first order), so that
     Blender's renders show the radiance the file meant, and the object's colour space is then sRGB: our bake reads
-    the stored colours as Blender does."""
+    the stored colours as Blender does. An attribute at a time, as _fill_mesh."""
     n = scene.count
+    total = 3 + scene.sh.shape[1]
     cloud.type = "GAUSSIAN_SPLAT"
     cloud.resize(n)
     cloud.attributes["position"].data.foreach_set("vector", np.ascontiguousarray(scene.positions, np.float32).ravel())
@@ -179,10 +190,13 @@ def _fill_pointcloud(cloud, scene: SplatScene) -> str:
     base[:, :3] = sh[:, 0]
     base[:, 3] = scene.opacities
     _new_attr(cloud, "radiance:base", "FLOAT4", "vector", base)
+    yield _filled(cloud.name, 2, total)
     _new_attr(cloud, "scale", "FLOAT_VECTOR", "vector", scene.scales)
     _new_attr(cloud, "rotation", "QUATERNION", "value", scene.rotations)
+    yield _filled(cloud.name, 4, total)
     for k, plane in enumerate(_sh_planes(sh), 1):
         _new_attr(cloud, _NATIVE_SH.format(k - 1), "FLOAT_VECTOR", "vector", plane)
+        yield _filled(cloud.name, 4 + k, total)
     return "srgb"
 
 
@@ -200,12 +214,20 @@ def _sh_planes(sh: np.ndarray, step: int = 1 << 13) -> np.ndarray:
 def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str,
                         matrix: np.ndarray | None = None, proxy: bool = True,
                         native: bool = False) -> bpy.types.Object:
-    """A new splat object holding ``scene``, linked to the active collection, selected and active.
+    """A new splat object holding ``scene``, linked to the active collection, selected and active (create_steps
+    run now)."""
+    return run_now(create_steps(context, scene, name, matrix, proxy, native))
+
+
+def create_steps(context: bpy.types.Context, scene: SplatScene, name: str, matrix: np.ndarray | None = None,
+                 proxy: bool = True, native: bool = False) -> Generator[Step, None, bpy.types.Object]:
+    """create_splat_object as a job (blender/jobs.py), an attribute at a time.
 
     native=True (Blender 5.3+, native_splats_supported()): a Gaussian-splat Point Cloud that Blender draws and
     renders itself (viewport, EEVEE, Cycles), with no proxy or overlay of ours; otherwise our mesh of loose vertices
     (never rendered: its light reaches meshes through a baked probe) with a point proxy if ``proxy``.
-    On any failure every datablock made here is removed again, so the file is as it was.
+    On any failure, and when the job is cancelled between two attributes, every datablock made here is removed
+    again, so the file is as it was. The datablocks belong to no object until the last step: nothing draws them.
     """
     if native and not native_splats_supported():
         raise ValueError(f"Blender {bpy.app.version_string} has no native Gaussian splats (5.3 and later do): "
@@ -214,10 +236,11 @@ def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str
     obj = None
     try:
         if native:
-            space = _fill_pointcloud(data, scene)
+            space = yield from _fill_pointcloud(data, scene)
         else:
-            _fill_mesh(data, scene)
+            yield from _fill_mesh(data, scene)
             space = scene.colour_space
+        collection = context.collection
         obj = bpy.data.objects.new(name, data)
         obj[MARKER] = {"source": scene.source, "sh_degree": scene.sh_degree, "version": 1,
                        "declared_colour_space": scene.colour_space}
@@ -230,8 +253,8 @@ def create_splat_object(context: bpy.types.Context, scene: SplatScene, name: str
             obj.hide_render = True
             if proxy:
                 _add_proxy(obj, scene)
-        context.collection.objects.link(obj)
-    except BaseException:
+        collection.objects.link(obj)
+    except BaseException:  # GeneratorExit too: a cancelled import leaves nothing behind
         if obj is not None:
             bpy.data.objects.remove(obj)
         (bpy.data.pointclouds if native else bpy.data.meshes).remove(data)
