@@ -63,6 +63,17 @@ def gaps_since(t0: float) -> list[float]:
     return [b - a for a, b in zip(beats, beats[1:])]
 
 
+def longest_gaps(pkg: str, t0: float, n: int = 4) -> list[dict]:
+    """The ``n`` longest gaps since ``t0`` (seconds after t0), with the overlay draws that ended inside each (their
+    draw ms): what held the main thread."""
+    beats = [t for t in state["beats"] if t >= t0]
+    draws = list(mod(pkg, "blender.overlay").draw_log)  # (time.monotonic(), region, scale, render ms, draw ms)
+    shift = time.perf_counter() - time.monotonic()
+    gaps = sorted(zip(beats, beats[1:]), key=lambda ab: ab[0] - ab[1])[:n]
+    return [{"at": round(a - t0, 2), "gap": round(b - a, 3),
+             "draws": [(round(d[3]), round(d[4])) for d in draws if a <= d[0] + shift <= b]} for a, b in gaps]
+
+
 def screenshot(name: str) -> str:
     path = os.path.join(OUT, f"{name}.png")
     subprocess.run(["import", "-window", "root", path], check=True)
@@ -146,6 +157,7 @@ def record_end(pkg: str, name: str) -> None:
         "seconds": time.perf_counter() - since, "max_gap": max(gaps, default=0.0), "beats": len(gaps),
         "gaps_over_0.2": sum(g > 0.2 for g in gaps), "gaps_over_0.5": sum(g > 0.5 for g in gaps),
         "escape_to_end": (time.perf_counter() - state["t_escape"]) if "t_escape" in state else None,
+        "longest": longest_gaps(pkg, since), "load": os.getloadavg()[0],
         "png": screenshot(name)}
     log(f"{name}: {state['steps'][name]}")
 
