@@ -156,7 +156,8 @@ def filter_gpu_ms(timings: dict[str, float]) -> float:
 
 def summary(result, seconds: float, stages: dict[str, float] | None = None) -> tuple[list[str], str | None]:
     """(lines saying what the bake did and how long each part took, hole warning or None). ``stages``: wall
-    seconds of the bake's parts, in order; with "other" (what they leave of ``seconds``) they add up to it."""
+    seconds of the bake's parts, in order (reading, turning SH and upload when this bake made the splats' GPU copy;
+    bake; writing; each mesh's light); with "other" (what they leave of ``seconds``) they add up to it."""
     t = result.timings_ms
     render_ms = t.get("render_total", sum(v for k, v in t.items() if k.startswith("render_")))
     filter_ms = filter_gpu_ms(t)
@@ -252,10 +253,12 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
         return now
 
     splats_name = splats.name
-    t = time.perf_counter()
     yield Step(f"reading {splat_count(splats):,} splats", 0.0)
+    uploads = splat_cache.uploads
     cached = yield from splat_cache.get_steps(splats)  # read and uploaded once, shared with the overlay and re-bakes
-    t = lap("reading and upload", t)
+    if splat_cache.uploads != uploads:  # this bake read them: reading, turning SH, upload (a wait is "other")
+        stages.update(cached.timings)
+    t = time.perf_counter()
     scene, probe, splats = _named(scene_name, probe_name, splats_name)
     check_fits_device(settings, cached.renderer.ctx, cached.renderer.scene_count)
     where = np.array(probe.matrix_world.translation, np.float64)

@@ -16,7 +16,8 @@ without reading the object again.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import time
+from dataclasses import dataclass, field, replace
 
 import bpy
 import numpy as np
@@ -35,6 +36,7 @@ class CachedSplats:
     renderer: object  # core.render.renderer.SplatRenderer holding the object's splats in world space (no full
     # CPU copy is kept, which for millions of splats would double what Blender's mesh already holds)
     host: object = None  # core.scene.SplatScene without the higher SH bands: bake_probe's host_splats
+    timings: dict = field(default_factory=dict)  # wall s of making it: reading, turning SH, upload (bake reports)
 
 
 def slim(scene):
@@ -80,9 +82,12 @@ def get_steps(obj: bpy.types.Object, wait_for_upload: bool = True) -> Job:
         yield Step(f"waiting for the upload of {name}", wait=True)
     entry = _entries.get(object_uid)
     if entry is None or entry.key != key:
+        t = time.perf_counter()
         local, matrix = yield from read_steps(obj)
         digest = fingerprint_of(local.positions)
+        reading = time.perf_counter() - t
         entry = yield Work(_build, key, local, matrix, name)
+        entry.timings = {"reading": reading, **entry.timings}
         # The object may be gone by now (a Runner's job lets the user work meanwhile): only uids from here on.
         release(object_uid)
         _entries[object_uid] = entry
@@ -101,10 +106,13 @@ def _build(key: tuple, local, matrix: np.ndarray, name: str, progress: Progress)
     """The worker's part of get_steps: SH turned with the object, the splats uploaded."""
     from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
     progress(f"turning {local.count:,} splats of {name!r} into world space", 0.0)
+    t0 = time.perf_counter()
     scene = to_world(local, matrix, name)
     del local
     progress(f"uploading {scene.count:,} splats of {name!r}", 0.5)
+    t1 = time.perf_counter()
     entry = CachedSplats(key, SplatRenderer(scene), slim(scene))
+    entry.timings = {"turning SH": t1 - t0, "upload": time.perf_counter() - t1}
     progress(f"uploaded {scene.count:,} splats", 1.0)
     return entry  # the higher SH bands go with ``scene``
 
