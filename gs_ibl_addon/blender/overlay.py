@@ -5,7 +5,11 @@ extras) have drawn, with the scene's depth buffer bound. Per splat object it kee
 object's shared GPU renderer (splat_cache: uploaded once, shared with probe bakes, re-uploaded only when the
 object moves or its mesh changes) and per viewport region the last image, re-rendered only when the view, the
 region size or the resolution changed (overlay_math). While a view moves it is rendered at a quarter of the
-resolution and refined by one timed redraw once the view has been still for SETTLE_S (overlay_math.ViewMotion).
+resolution and refined by one timed redraw once the view has been still for SETTLE_S (overlay_math.ViewMotion);
+a scene too big to follow the mouse draws its motion copy meanwhile (overlay_math.MotionCopy). The handler never
+waits for the GPU: a frame whose object last rendered slower than STILL_ON_MAIN_MS (a CPU device: a still frame of
+3M splats takes seconds), the first upload of an object and any frame while a job's worker holds the GPU are left
+to a worker (blender/jobs.py), and the region's last image is drawn until the new one is ready.
 
 The splats are drawn into Blender's overlay layer by one pass of a shader of ours (overlay_math.composite is its
 numpy reference): it reads back what Blender drew there and the scene depth (8-bit colour and float depth), turns
@@ -34,7 +38,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from . import splat_cache
-from .jobs import busy, gpu, running
+from .jobs import Work, busy, gpu, running
 from .jobs import start as start_job
 from ..core.colour import linear_to_srgb, srgb_to_linear
 from .overlay_math import (BACKGROUND_KINDS, COVERAGE_EPS, DEPTH_PULL, EDGE_REACH, GRID_TOLERANCE, LINE_CUT,
@@ -340,7 +344,8 @@ def overlay_for(obj: bpy.types.Object) -> SplatOverlay:
         return ov
     if ov is not None:
         ov.close()  # its images only: the renderer belongs to splat_cache
-    ov = SplatOverlay(renderer=splats.renderer)
+    # the host copy (base colour only) is what a big scene's motion copy is merged from (overlay_math.MotionCopy)
+    ov = SplatOverlay(renderer=splats.renderer, motion_scene=splats.host)
     _overlays[splat_cache.uid(obj)] = ov
     return ov
 
@@ -354,27 +359,50 @@ def clear_cache() -> None:
 
 
 def splat_image(obj: bpy.types.Object, region_3d, width: int, height: int, scale: float, slot: object = 0):
-    """The OverlayImage the handler would draw for ``obj`` in a view (works in background mode)."""
+    """The OverlayImage the handler would draw for ``obj`` in a view, rendered now (works in background mode)."""
     return overlay_for(obj).image(np.array(region_3d.view_matrix), np.array(region_3d.window_matrix),
-                                  width, height, scale, slot)
+                                  width, height, scale, slot, moving=_motion.moving(slot))
 
 
-def _image_now(obj: bpy.types.Object, region_3d, width: int, height: int, scale: float, slot: object):
-    """The image to draw for ``obj`` now, never waiting: rendered when its splats are on the GPU and no job holds
-    it; otherwise the last one drawn in this region (None before the first) while a background job uploads the
-    splats (Show Splats on a 3M-splat object: seconds of reading and upload) or a bake's worker uses the GPU."""
+STILL_ON_MAIN_MS = 60.0  # a frame whose object last rendered slower than this is rendered by a worker instead
+
+
+def _image_now(obj: bpy.types.Object, region_3d, width: int, height: int, scale: float, slot: object,
+               wait: bool = False):
+    """The image to draw for ``obj`` now. Rendered here when its splats are on the GPU, no job holds it and the
+    render is quick (the object's last full render took under STILL_ON_MAIN_MS, or the frame is the motion copy's);
+    otherwise the last image drawn in this region (None before the first) is drawn while a background job uploads
+    the splats (Show Splats on a 3M-splat object: seconds of reading and upload), a bake's worker uses the GPU, or
+    a worker renders the frame (a still frame of 3M splats takes seconds on a CPU device): the main thread never
+    waits for one. ``wait``: render here whatever it costs (picking needs this view's image)."""
     last = _textures.get((splat_cache.uid(obj), slot))
+    last = last[0] if last else None
     if splat_cache.current(obj) is None:
         _start_upload(obj)  # without a window (blender -b) it has run now
         if splat_cache.current(obj) is None:
-            return last[0] if last else None
+            return last
     if not gpu.acquire(blocking=False):
         _schedule_retry()
-        return last[0] if last else None
+        return last
     try:
-        return splat_image(obj, region_3d, width, height, scale, slot)
+        ov = overlay_for(obj)
+        view, window = np.array(region_3d.view_matrix), np.array(region_3d.window_matrix)
+        moving = _motion.moving(slot)
+        quick = (ov.full_ms is not None and ov.full_ms <= STILL_ON_MAIN_MS) or (moving and ov.coarse_when_moving())
+        if wait or quick or ov.cached(view, window, width, height, scale, slot, moving) is not None:
+            return ov.image(view, window, width, height, scale, slot, moving=moving)
     finally:
         gpu.release()
+    key = f"render:{splat_cache.uid(obj)}:{slot}"
+    if busy(key) is None:
+        start_job(key, _render_job(ov, view, window, width, height, scale, slot, moving), f"drawing {obj.name}",
+                  done=lambda _runner: tag_redraw())
+    return last
+
+
+def _render_job(ov: SplatOverlay, view, window, width: int, height: int, scale: float, slot: object, moving: bool):
+    """One overlay frame rendered by a worker; the next draw of the same view finds it in ``ov``'s images."""
+    yield Work(lambda progress: ov.image(view, window, width, height, scale, slot, moving=moving))
 
 
 def _start_upload(obj: bpy.types.Object) -> None:
@@ -805,7 +833,7 @@ def last_images(context, region, rv3d) -> list[tuple]:
     settings = context.scene.gs_ibl_overlay
     slot = region.as_pointer()
     scale = last_draw.get(slot, {}).get("scale", settings.resolution_scale)
-    images = [(o, _image_now(o, rv3d, region.width, region.height, scale, slot))
+    images = [(o, _image_now(o, rv3d, region.width, region.height, scale, slot, wait=True))
               for o in context.visible_objects if is_mesh_splats(o)]
     return [(o, img) for o, img in images if img is not None]
 

@@ -254,13 +254,24 @@ class SplatOverlay:
         return (self.motion is not None and self.motion.ready() and self.full_ms is not None
                 and self.full_ms > self.frame_ms)
 
+    def _key(self, view_matrix, window_matrix, width: int, height: int, scale: float, moving: bool) -> bytes:
+        coarse = moving and self.coarse_when_moving()
+        return view_key(view_matrix, window_matrix, width, height) + np.float64(scale).tobytes() + bytes([coarse])
+
+    def cached(self, view_matrix, window_matrix, width: int, height: int, scale: float = 1.0,
+               slot: object = 0, moving: bool = False) -> OverlayImage | None:
+        """The image ``image`` would return without rendering, or None when it would render."""
+        last = self._last.get(slot)
+        key = self._key(view_matrix, window_matrix, width, height, scale, moving)
+        return last[1] if last is not None and last[0] == key else None
+
     def image(self, view_matrix, window_matrix, width: int, height: int, scale: float = 1.0,
               slot: object = 0, moving: bool = False) -> OverlayImage:
+        hit = self.cached(view_matrix, window_matrix, width, height, scale, slot, moving)
+        if hit is not None:
+            return hit
         coarse = moving and self.coarse_when_moving()
-        key = view_key(view_matrix, window_matrix, width, height) + np.float64(scale).tobytes() + bytes([coarse])
-        last = self._last.get(slot)
-        if last is not None and last[0] == key:
-            return last[1]
+        key = self._key(view_matrix, window_matrix, width, height, scale, moving)
         if coarse:
             scale = max(scale * self.motion_resolution, 1.0 / max(width, height))
         ov = overlay_view(view_matrix, window_matrix, width, height, scale)
