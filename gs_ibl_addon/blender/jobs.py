@@ -142,7 +142,15 @@ class Runner:
 
     def tick(self, budget_s: float = 0.05) -> bool:
         """Advance the job: main-thread parts until it yields a Step (the window gets drawn), starts Work, or has
-        used ``budget_s``; returns True once it has ended."""
+        used ``budget_s``; returns True once it has ended. Never raises: a failure ends the job with ``error`` (a
+        timer or modal handler that raised would be dropped by Blender with the job still listed as running)."""
+        try:
+            return self._tick(budget_s)
+        except Exception as e:  # noqa: BLE001
+            self.error, self.done = e, True
+            return True
+
+    def _tick(self, budget_s: float) -> bool:
         until = time.perf_counter() + budget_s
         while not self.done:
             if self._thread is not None:
@@ -258,11 +266,13 @@ def busy(key: str) -> Runner | None:
 
 
 def cancel_all() -> None:
-    """Cancel every background job (a file is loaded, the extension is disabled): their results would land in
-    data that is no longer there."""
-    for runner in list(_background.values()):
+    """Cancel every job (a file is loaded, the extension is disabled): their results would land in data that is no
+    longer there. Loading a file also drops modal handlers without telling them: their jobs are forgotten here, or
+    their operator would refuse to run again ("already baking")."""
+    for runner in list(_background.values()) + list(_modal.values()):
         runner.cancel()
     _background.clear()
+    _modal.clear()
 
 
 # ------------------------------------------------------------------------------------------------ modal operators
