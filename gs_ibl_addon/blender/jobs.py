@@ -350,7 +350,8 @@ class JobOperator:
             r.tick()
         if not r.done:
             self._show(context)
-            return {"PASS_THROUGH"} if event.type in _NAVIGATION else {"RUNNING_MODAL"}
+            navigation = event.type in _NAVIGATION or event.type.startswith(("NUMPAD_", "NDOF_"))
+            return {"PASS_THROUGH"} if navigation else {"RUNNING_MODAL"}
         wm = context.window_manager
         wm.event_timer_remove(self._timer)
         wm.progress_end()
