@@ -13,6 +13,8 @@ llvmpipe. Then, with steps scheduled by bpy.app.timers so the window draws betwe
   import_*       BIG.PLY imported through the path the file browser takes (execute after invoke: from_ui), with
                  Show Splats on: the read on a worker, the object made on the main thread, then the overlay's first
                  upload as a background job; screenshots while it reads and once drawn
+  drop_*         ROOM.PLY as a dropped file: invoke with the path opens the options popup, a real Return key
+                 confirms it, and the import runs as a modal job
 
 A heartbeat timer (every 50 ms) records when the main thread ran it: the gaps between its calls are how long
 Blender's event loop was blocked (a frozen UI shows as a gap as long as the freeze). DIR/jobs.json holds what each
@@ -184,6 +186,24 @@ def import_record(pkg: str) -> None:
                                          overlay_error=overlay.last_error)
 
 
+def drop_import(pkg: str) -> None:
+    """What a file dropped on the viewport does: invoke with the path known opens the options popup."""
+    state["objects_before_drop"] = sorted(o.name for o in bpy.data.objects)
+    invoke("import_splats", filepath=ROOM)
+
+
+def confirm() -> None:
+    focus()
+    xdo("key", "Return")  # the popup's OK: execute(), which from a window runs the import as a modal job
+
+
+def drop_record(pkg: str) -> None:
+    new = sorted(set(o.name for o in bpy.data.objects) - set(state["objects_before_drop"]))
+    state["steps"]["drop_done"] = {"new": new, "png": screenshot("drop_done"),
+                                   "running": [r.status() for r in mod(pkg, "blender.jobs").running()]}
+    log(f"drop: {state['steps']['drop_done']}")
+
+
 def steps(pkg: str):
     yield 1.0, lambda: build(pkg)
     yield 3.0, lambda: start_bake(pkg, 1024)
@@ -202,6 +222,11 @@ def steps(pkg: str):
     yield 1.0, lambda: look(pkg, "upload_running")
     yield from wait_for_jobs(pkg, "upload_done")
     yield 8.0, lambda: import_record(pkg)
+    yield 0.5, lambda: drop_import(pkg)
+    yield 2.0, lambda: look(pkg, "drop_popup")
+    yield 0.5, confirm
+    yield from wait_for_jobs(pkg, "drop_jobs")
+    yield 1.0, lambda: drop_record(pkg)
 
 
 def finish(error: str | None = None) -> None:

@@ -6,7 +6,9 @@ the built zip installed by Blender's own installer, then gui_jobs.py run there (
 - a real Esc cancels it, and the World, the images and the probe's report are as before the bake;
 - the same bake left to finish writes the probe's World;
 - an import through the file browser's path reads beside the UI, and Show Splats' first upload is a background job
-  after which the splats are drawn.
+  after which the splats are drawn;
+- a dropped file's options popup confirmed with a real Return key imports it (execute() from the popup runs the
+  modal job).
 Skipped unless the sid root has been made (scripts/blender_roots.sh ensure sid). Screenshots land in
 build/matrix/gui-jobs/, the status-bar crop for docs/img in build/matrix/gui-jobs/docs/.
 """
@@ -95,3 +97,6 @@ def test_gui_jobs(tmp_path_factory):
     assert "big" in (imported["drawn"] or []) and imported["overlay_error"] is None, imported
     for name in ("import_read", "upload_done"):
         assert steps[name]["max_gap"] < MAX_GAP_S, (name, steps[name]["max_gap"])
+    # a dropped file: the options popup, Return, then the import as a modal job
+    drop = steps["drop_done"]  # the overlay's upload or first frame of the new object may still run: not the import
+    assert drop["new"] == ["room.001"] and not any("importing" in s for s in drop["running"]), drop
