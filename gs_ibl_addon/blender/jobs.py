@@ -203,9 +203,11 @@ TICK_S = 0.1  # how often a background job or a modal operator looks at its work
 _background: dict[str, Runner] = {}  # key -> running job (one per key: a new one cancels the old)
 
 
-def show_status(text: str | None) -> None:
-    """Put ``text`` in the status bar of every window (None gives the status bar back to Blender), and redraw the
-    3D Views' sidebars, whose GS-IBL panel lists running jobs (not their viewports: an overlay redraw is costly)."""
+def show_status(text: str | None, sidebars: bool = False) -> None:
+    """Put ``text`` in the status bar of every window (None gives the status bar back to Blender); ``sidebars``:
+    also redraw the 3D Views' sidebars, whose GS-IBL panel lists running jobs. Only when that list changes: with
+    Region Overlap (the default) a sidebar's redraw redraws the viewport under it, overlay and all, which at once a
+    second took as much CPU as the bake it reported on (capture_bench, 2026-12-03)."""
     import bpy
     for window in getattr(bpy.context.window_manager, "windows", []):
         workspace = window.workspace
@@ -213,6 +215,8 @@ def show_status(text: str | None) -> None:
             continue
         with bpy.context.temp_override(window=window):  # a timer's context has no window of its own
             workspace.status_text_set(text)
+        if not sidebars:
+            continue
         for area in window.screen.areas:
             if area.type == "VIEW_3D":
                 for region in area.regions:
@@ -220,9 +224,14 @@ def show_status(text: str | None) -> None:
                         region.tag_redraw()
 
 
+_listed: list[str] = []  # the titles of the jobs the sidebars last listed
+
+
 def _status_now() -> None:
-    lines = [r.status() for r in running()]
-    show_status("    ".join(lines) if lines else None)
+    runners = running()
+    titles = [r.title for r in runners]
+    show_status("    ".join(r.status() for r in runners) if runners else None, sidebars=titles != _listed)
+    _listed[:] = titles
 
 
 def start(key: str, job: Job, title: str, done: Callable[[Runner], None] | None = None) -> Runner | None:

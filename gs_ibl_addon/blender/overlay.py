@@ -346,6 +346,8 @@ def overlay_for(obj: bpy.types.Object) -> SplatOverlay:
         ov.close()  # its images only: the renderer belongs to splat_cache
     # the host copy (base colour only) is what a big scene's motion copy is merged from (overlay_math.MotionCopy)
     ov = SplatOverlay(renderer=splats.renderer, motion_scene=splats.host)
+    if splats.renderer.ctx.is_cpu:  # every big scene's frame is slow there: the copy is needed, build it now
+        ov.prepare_motion()
     _overlays[splat_cache.uid(obj)] = ov
     return ov
 

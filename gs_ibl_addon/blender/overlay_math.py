@@ -249,6 +249,14 @@ class SplatOverlay:
         self._motion_source = motion_scene if motion_scene is not None else scene
         self._background = background
 
+    def prepare_motion(self) -> None:
+        """Start building the motion copy now rather than at the first slow frame: on a CPU device every frame of
+        a scene over the budget is slow, and the copy takes seconds to build (3M splats: ~7 s), seconds in which
+        an orbit would see no new frame."""
+        src = self._motion_source
+        if self.motion is None and src is not None and src.count > self.motion_budget:
+            self.motion = MotionCopy(src, self.motion_budget, self._background)
+
     def coarse_when_moving(self) -> bool:
         """Whether a moving frame drawn now would be the motion copy."""
         return (self.motion is not None and self.motion.ready() and self.full_ms is not None
@@ -281,10 +289,8 @@ class SplatOverlay:
         else:  # the overlay hides splats behind meshes by depth
             res = self.renderer.render(ov.batch, depth=True, timestamps=self.timestamps)
             self.full_ms = res.wall_ms
-            src = self._motion_source
-            if (self.motion is None and src is not None and src.count > self.motion_budget
-                    and self.full_ms > self.frame_ms):  # too slow to follow the mouse: make the copy, once
-                self.motion = MotionCopy(src, self.motion_budget, self._background)
+            if self.full_ms > self.frame_ms:  # too slow to follow the mouse: make the copy, once
+                self.prepare_motion()
         self.renders += 1
         img = OverlayImage(res.images[0], ov, res.wall_ms, res.depths[0], scale, coarse,
                            res.timings_ms.get("total", math.nan) if self.timestamps else math.nan)

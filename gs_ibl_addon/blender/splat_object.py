@@ -271,8 +271,9 @@ _FIELDS = {"FLOAT": ("value", 1), "FLOAT_VECTOR": ("vector", 3), "QUATERNION": (
            "FLOAT_COLOR": ("color", 4), "FLOAT4": ("vector", 4), "FLOAT2": ("vector", 2)}
 
 
-def _read_attr(geometry, name: str, n: int, width: int) -> np.ndarray:
-    """Attribute ``name`` of ``n`` points as (n, width) float32 (n,) for width 1, without a Python list."""
+def _read_attr(geometry, name: str, n: int, width: int, out: np.ndarray | None = None) -> np.ndarray:
+    """Attribute ``name`` of ``n`` points as (n, width) float32 (n,) for width 1, without a Python list; into
+    ``out`` (C-contiguous float32 of that size) when given."""
     attr = geometry.attributes.get(name)
     if attr is None:
         raise ValueError(f"splat object {geometry.name!r} lacks attribute {name!r}: re-import the splat file")
@@ -280,9 +281,9 @@ def _read_attr(geometry, name: str, n: int, width: int) -> np.ndarray:
     if w != width:
         raise ValueError(f"splat object {geometry.name!r}: attribute {name!r} is {attr.data_type}, expected "
                          f"{width} floats per point: re-import the splat file")
-    out = np.empty(n * width, np.float32)
-    attr.data.foreach_get(key, out)
-    return out.reshape((n, width)) if width > 1 else out
+    flat = np.empty(n * width, np.float32) if out is None else out.reshape(-1)
+    attr.data.foreach_get(key, flat)
+    return flat.reshape((n, width)) if width > 1 else flat
 
 
 def _mesh_steps(mesh: bpy.types.Mesh, source: str) -> Generator[Step, None, SplatScene]:
@@ -295,13 +296,19 @@ def _mesh_steps(mesh: bpy.types.Mesh, source: str) -> Generator[Step, None, Spla
     if k not in (1, 4, 9, 16):
         raise ValueError(f"splat object {mesh.name!r} has {k} SH attributes (expected 1, 4, 9 or 16): re-import it")
     fields = [("position", 3), ("gs_scale", 3), ("gs_rotation", 4), ("gs_opacity", 1)]
-    fields += [(_SH_NAME.format(i), 3) for i in range(k)]
+    total = len(fields) + k
     read = {}
     for i, (name, width) in enumerate(fields):
         read[name] = _read_attr(mesh, name, n, width)
-        yield Step(f"reading {n:,} splats of {mesh.name!r} ({i + 1}/{len(fields)})")
-    sh = np.stack([read.pop(_SH_NAME.format(i)) for i in range(k)], 1)
-    return SplatScene(read["position"], read["gs_scale"], read["gs_rotation"], read["gs_opacity"], sh, source=source)
+        yield Step(f"reading {n:,} splats of {mesh.name!r} ({i + 1}/{total})")
+    # Each SH attribute straight into its own plane: no stacking copy here on the main thread (0.5 s at 1M); the
+    # scene's sh is a (N, K, 3) view of the planes, made contiguous by whoever needs it (to_world, on a worker).
+    planes = np.empty((k, n, 3), np.float32)
+    for i in range(k):
+        _read_attr(mesh, _SH_NAME.format(i), n, 3, out=planes[i])
+        yield Step(f"reading {n:,} splats of {mesh.name!r} ({len(fields) + i + 1}/{total})")
+    return SplatScene(read["position"], read["gs_scale"], read["gs_rotation"], read["gs_opacity"],
+                      planes.transpose(1, 0, 2), source=source)
 
 
 def scene_from_mesh(mesh: bpy.types.Mesh, source: str = "<blender>") -> SplatScene:
@@ -374,6 +381,8 @@ def to_world(local: SplatScene, matrix: np.ndarray, name: str) -> SplatScene:
 
     Raises ValueError naming the object when its transform cannot move splats (non-uniform or mirrored scale).
     """
+    if not local.sh.flags.c_contiguous:  # read_steps hands over the SH as a view of per-coefficient planes
+        local.sh = np.ascontiguousarray(local.sh)
     try:
         return local.transformed(matrix)
     except ValueError as e:
