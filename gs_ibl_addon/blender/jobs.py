@@ -382,6 +382,12 @@ class JobOperator:
 _modal: dict[str, Runner] = {}  # operator class name -> its running job (one at a time per operator)
 
 
+def modal_running() -> bool:
+    """A modal job (a bake or an import the user started and can Esc) is running: background work that would
+    compete with it for the GPU or the CPU (an overlay frame) waits until it ends."""
+    return bool(_modal)
+
+
 def running() -> list[Runner]:
     """Every job running now, modal and background (the panel and tests read it)."""
     return list(_modal.values()) + list(_background.values())

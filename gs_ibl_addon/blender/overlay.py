@@ -38,7 +38,7 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from . import splat_cache
-from .jobs import Work, busy, gpu, running
+from .jobs import Work, busy, gpu, modal_running, running
 from .jobs import start as start_job
 from ..core.colour import linear_to_srgb, srgb_to_linear
 from .overlay_math import (BACKGROUND_KINDS, COVERAGE_EPS, DEPTH_PULL, EDGE_REACH, GRID_TOLERANCE, LINE_CUT,
@@ -396,7 +396,7 @@ def _image_now(obj: bpy.types.Object, region_3d, width: int, height: int, scale:
     finally:
         gpu.release()
     key = f"render:{splat_cache.uid(obj)}:{slot}"
-    if busy(key) is None:
+    if busy(key) is None and not modal_running():  # a bake the user waits for goes first; its end redraws
         start_job(key, _render_job(ov, view, window, width, height, scale, slot, moving), f"drawing {obj.name}",
                   done=lambda _runner: tag_redraw())
     return last
