@@ -345,9 +345,9 @@ def overlay_for(obj: bpy.types.Object) -> SplatOverlay:
     if ov is not None:
         ov.close()  # its images only: the renderer belongs to splat_cache
     # the host copy (base colour only) is what a big scene's motion copy is merged from (overlay_math.MotionCopy)
+    # The motion copy is built after the first full frame (SplatOverlay.image, when that frame was slow), not now:
+    # built beside it, on a CPU device, it delayed the first sight of a 3M-splat scene by ~7 s (capture_bench).
     ov = SplatOverlay(renderer=splats.renderer, motion_scene=splats.host)
-    if splats.renderer.ctx.is_cpu:  # every big scene's frame is slow there: the copy is needed, build it now
-        ov.prepare_motion()
     _overlays[splat_cache.uid(obj)] = ov
     return ov
 

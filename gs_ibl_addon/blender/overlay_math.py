@@ -250,9 +250,8 @@ class SplatOverlay:
         self._background = background
 
     def prepare_motion(self) -> None:
-        """Start building the motion copy now rather than at the first slow frame: on a CPU device every frame of
-        a scene over the budget is slow, and the copy takes seconds to build (3M splats: ~7 s), seconds in which
-        an orbit would see no new frame."""
+        """Start building the motion copy (once) if the scene is over the budget: a thread of its own, seconds of
+        numpy (3M splats: ~7 s on this CPU)."""
         src = self._motion_source
         if self.motion is None and src is not None and src.count > self.motion_budget:
             self.motion = MotionCopy(src, self.motion_budget, self._background)
