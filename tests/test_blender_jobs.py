@@ -224,3 +224,25 @@ def test_an_import_cancelled_while_it_makes_its_objects_leaves_no_datablock(blen
     # the same import left to finish makes both
     assert len(jobs.run_now(_import_steps(paths, [np.identity(4)] * 2, None, False, False, False))) == 2
     assert {"shell0", "shell1"} <= set(bpy.data.objects.keys())
+
+
+def test_a_bake_run_now_advances_the_upload_it_waits_for(shell_probe):
+    """A script's bake (run now, the main thread held) while Show Splats' upload of the same object is a background
+    job: the bake advances that job itself (its timer cannot run meanwhile) instead of waiting forever, and the
+    splats are read and uploaded once. (A reload in Blender 5.2's GUI once hung here: the redraw after loading
+    started the upload, the scenario's next step baked.)"""
+    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender import splat_cache
+    probe, splats = shell_probe
+    key = splat_cache.upload_key(splats)
+    uploads = splat_cache.uploads
+    runner = jobs.Runner(splat_cache.get_steps(splats, wait_for_upload=False), "showing")
+    runner.tick(0.0)  # begun: it has read a piece
+    assert not runner.done
+    jobs._background[key] = runner
+    try:
+        _result, text, _warning = gb.bake_into_world(bpy.context.scene, probe, splats)
+    finally:
+        jobs._background.pop(key, None)
+    assert runner.done and runner.error is None and text.startswith("Baked 6,000 splats")
+    assert splat_cache.uploads == uploads + 1

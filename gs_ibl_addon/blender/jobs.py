@@ -41,7 +41,9 @@ class Cancelled(Exception):
 class Step:
     text: str
     fraction: float | None = None  # of the whole job; None: unchanged
-    wait: bool = False  # the job is waiting for another: a Runner gives the rest of this tick back to Blender
+    # the job waits for this other job (a background one): a Runner gives the rest of its tick back to Blender,
+    # whose timer advances the other; run_now, which holds the main thread, advances the other itself
+    wait_for: "Runner | None" = None
 
 
 @dataclass
@@ -85,6 +87,8 @@ def run_now(job: Job, progress: Progress | None = None) -> Any:
         value = error = None
         if isinstance(item, Step):
             say(item.text, item.fraction if item.fraction is not None else 0.0)
+            while item.wait_for is not None and not item.wait_for.tick():
+                time.sleep(0.01)  # its timer cannot run while this thread is here
         elif isinstance(item, Work):
             try:
                 value = item(say)
@@ -177,7 +181,7 @@ class Runner:
                 self.text = item.text
                 if item.fraction is not None:
                     self.fraction = item.fraction
-                if item.wait or time.perf_counter() >= until:
+                if item.wait_for is not None or time.perf_counter() >= until:
                     return False
             elif isinstance(item, Work):
                 self._thread = threading.Thread(target=self._work, args=(item,), daemon=True,

@@ -79,7 +79,7 @@ def get_steps(obj: bpy.types.Object, wait_for_upload: bool = True) -> Job:
     object_uid, mesh_uid, name = uid(obj), uid(obj.data), obj.name
     uploading = busy(upload_key(obj)) if wait_for_upload else None
     while uploading is not None and not uploading.done:
-        yield Step(f"waiting for the upload of {name}", wait=True)
+        yield Step(f"waiting for the upload of {name}", wait_for=uploading)
     entry = _entries.get(object_uid)
     if entry is None or entry.key != key:
         t = time.perf_counter()
