@@ -24,30 +24,21 @@ Blender quits at the end. A stage that does not end within --stage-limit is reco
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import subprocess
 import sys
 import time
-import traceback
 
 import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gui_common import mod, package, run_steps, view3d  # noqa: E402
+from gui_common import arg, mod, start, view3d, write_result  # noqa: E402
 
-ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-
-
-def _arg(name: str, default=None):
-    return ARGS[ARGS.index(name) + 1] if name in ARGS else default
-
-
-OUT = os.path.abspath(_arg("--out", "/tmp/capture_gui"))
-PLY = _arg("--ply")
-STAGE_LIMIT_S = float(_arg("--stage-limit", 300))
-ORBIT_S = float(_arg("--orbit-s", 8))
+OUT = os.path.abspath(arg("--out", "/tmp/capture_gui"))
+PLY = arg("--ply")
+STAGE_LIMIT_S = float(arg("--stage-limit", 300))
+ORBIT_S = float(arg("--orbit-s", 8))
 PROBE = (0.0, 0.0, 0.0)
 os.makedirs(OUT, exist_ok=True)
 state: dict = {"log": [], "beats": [], "cpu": [], "stages": {}, "draws": []}
@@ -325,21 +316,11 @@ def steps(pkg: str):
 
 def finish(error: str | None = None) -> None:
     state["orbiting"] = False
-    with open(os.path.join(OUT, "capture.json"), "w") as f:
-        json.dump({"stages": state["stages"], "info": state.get("info"), "log": state["log"], "error": error,
-                   "probe_settings": state.get("probe_settings"), "object": state.get("obj")}, f, indent=1)
     if error:
         log(f"failed: {error}")
-    bpy.ops.wm.quit_blender()
+    write_result(os.path.join(OUT, "capture.json"), {
+        "stages": state["stages"], "info": state.get("info"), "log": state["log"],
+        "probe_settings": state.get("probe_settings"), "object": state.get("obj")}, error)
 
 
-def main() -> None:
-    try:
-        pkg = package()
-    except Exception:  # noqa: BLE001
-        finish(traceback.format_exc())
-        return
-    run_steps(steps(pkg), finish)
-
-
-main()
+start(steps, finish)

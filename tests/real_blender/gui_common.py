@@ -4,12 +4,45 @@ one after the other while the window draws between them."""
 from __future__ import annotations
 
 import importlib
+import json
+import os
 import subprocess
 import sys
 import traceback
 from typing import Callable, Iterator
 
 import bpy
+
+
+ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []  # the script's own, after Blender's "--"
+
+
+def arg(name: str, default=None):
+    """The value after ``name`` among the script's arguments (``blender --python script.py -- --out DIR``)."""
+    return ARGS[ARGS.index(name) + 1] if name in ARGS else default
+
+
+def write_result(path: str, result: dict, error: str | None) -> None:
+    """The check's JSON (with Blender's and Python's versions and the error), error.txt beside it on failure; then
+    Blender quits."""
+    with open(path, "w") as f:
+        json.dump({**result, "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error},
+                  f, indent=1)
+    if error:
+        with open(os.path.join(os.path.dirname(path), "error.txt"), "w") as f:
+            f.write(error)
+    bpy.ops.wm.quit_blender()
+
+
+def start(steps_of: Callable[[str], Iterator[tuple[float, Callable[[], None]]]],
+          finish: Callable[[str | None], None], src: str | None = None) -> None:
+    """Find the extension's package, then run_steps(steps_of(package), finish); a failure to find it finishes."""
+    try:
+        pkg = package(src)
+    except Exception:  # noqa: BLE001
+        finish(traceback.format_exc())
+        return
+    run_steps(steps_of(pkg), finish)
 
 
 def package(src: str | None = None) -> str:

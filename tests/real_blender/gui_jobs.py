@@ -22,7 +22,6 @@ step saw; failures go to DIR/error.txt; Blender quits at the end.
 """
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
@@ -31,19 +30,12 @@ import time
 import bpy
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gui_common import focus, mod, package, run_steps, view3d, xdo  # noqa: E402
+from gui_common import arg, focus, mod, start, view3d, write_result, xdo  # noqa: E402
 
-ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-
-
-def _arg(name: str, default=None):
-    return ARGS[ARGS.index(name) + 1] if name in ARGS else default
-
-
-OUT = os.path.abspath(_arg("--out", "/tmp/gui_jobs"))
-SRC = _arg("--src")
-ROOM = _arg("--room")
-BIG = _arg("--big")
+OUT = os.path.abspath(arg("--out", "/tmp/gui_jobs"))
+SRC = arg("--src")
+ROOM = arg("--room")
+BIG = arg("--big")
 PROBE = (0.0, 0.45, 0.9)
 os.makedirs(OUT, exist_ok=True)
 state: dict = {"log": [], "beats": [], "steps": {}}
@@ -230,23 +222,8 @@ def steps(pkg: str):
 
 
 def finish(error: str | None = None) -> None:
-    with open(os.path.join(OUT, "jobs.json"), "w") as f:
-        json.dump({"steps": state["steps"], "before": state.get("before"), "log": state["log"],
-                   "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error}, f, indent=1)
-    if error:
-        with open(os.path.join(OUT, "error.txt"), "w") as f:
-            f.write(error)
-    bpy.ops.wm.quit_blender()
+    write_result(os.path.join(OUT, "jobs.json"), {"steps": state["steps"], "before": state.get("before"),
+                                                  "log": state["log"]}, error)
 
 
-def main() -> None:
-    try:
-        pkg = package(SRC)
-    except Exception:  # noqa: BLE001
-        import traceback
-        finish(traceback.format_exc())
-        return
-    run_steps(steps(pkg), finish)
-
-
-main()
+start(steps, finish, SRC)

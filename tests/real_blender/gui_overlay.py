@@ -30,33 +30,24 @@ to DIR/error.txt; Blender quits at the end.
 """
 from __future__ import annotations
 
-import json
 import math
 import os
 import subprocess
 import sys
 import time
-import traceback
 
 import bpy
 import numpy as np
-from mathutils import Matrix, Vector
+from mathutils import Vector
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from gui_common import focus as _focus, mod, package, run_steps, view3d, xdo as _xdo  # noqa: E402
+from gui_common import ARGS, arg, focus as _focus, mod, start, view3d, write_result, xdo as _xdo  # noqa: E402
 
-ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-
-
-def _arg(name: str, default=None):
-    return ARGS[ARGS.index(name) + 1] if name in ARGS else default
-
-
-OUT = os.path.abspath(_arg("--out", "/tmp/gui_overlay"))
-SRC = _arg("--src")
-ROOM = _arg("--room")
+OUT = os.path.abspath(arg("--out", "/tmp/gui_overlay"))
+SRC = arg("--src")
+ROOM = arg("--room")
 PICTURES = "--pictures" in ARGS
-SETTLE = float(_arg("--settle", "6"))  # seconds the window gets to draw before a screenshot (llvmpipe is slow)
+SETTLE = float(arg("--settle", "6"))  # seconds the window gets to draw before a screenshot (llvmpipe is slow)
 os.makedirs(OUT, exist_ok=True)
 
 # The views: eye, target. A looks into the room past the Occluder and at the Blob in front of the Backdrop;
@@ -895,27 +886,12 @@ def pictures(pkg: str):
 
 def finish(error: str | None = None) -> None:
     state["error"] = error
-    with open(os.path.join(OUT, "shots.json"), "w") as f:
-        json.dump({"shots": state["shots"], "log": state["log"], "proxy": state.get("proxy"),
-                   "shader_check": state.get("shader_check"), "composite_check": state.get("composite_check"),
-                   "composite_real": state.get("composite_real"), "clicks": state.get("clicks"),
-                   "selects": state.get("selects"), "theme": state.get("theme"), "import": state.get("import"),
-                   "auto": state.get("auto"), "draw_log": state.get("draw_log"),
-                   "motion": state.get("motion"),
-                   "blender": bpy.app.version_string, "python": sys.version.split()[0], "error": error}, f, indent=1)
-    if error:
-        with open(os.path.join(OUT, "error.txt"), "w") as f:
-            f.write(error)
-    bpy.ops.wm.quit_blender()
+    write_result(os.path.join(OUT, "shots.json"), {
+        "shots": state["shots"], "log": state["log"], "proxy": state.get("proxy"),
+        "shader_check": state.get("shader_check"), "composite_check": state.get("composite_check"),
+        "composite_real": state.get("composite_real"), "clicks": state.get("clicks"), "selects": state.get("selects"),
+        "theme": state.get("theme"), "import": state.get("import"), "auto": state.get("auto"),
+        "draw_log": state.get("draw_log"), "motion": state.get("motion")}, error)
 
 
-def main() -> None:
-    try:
-        pkg = package(SRC)
-    except Exception:  # noqa: BLE001
-        finish(traceback.format_exc())
-        return
-    run_steps(steps(pkg), finish)
-
-
-main()
+start(steps, finish, SRC)
