@@ -15,14 +15,12 @@ build/matrix/gui-jobs/, the status-bar crop for docs/img in build/matrix/gui-job
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
 
-from test_matrix import OUT, REPO, Entry, Runner, _inputs_once, _install, require_root, xvfb_shell
+from test_matrix import REPO, Entry, run_gui_script
 
-HERE = Path(__file__).resolve().parent
 ENTRY = Entry("gui-jobs", "sid", True, gui=True)
 BIG_SPLATS = 400_000  # an import and upload of some seconds on llvmpipe, a file of ~100 MB
 MAX_GAP_S = 1.5  # the longest the main thread may be away while a job runs (llvmpipe draws a frame in ~0.2-1 s)
@@ -48,27 +46,10 @@ def _crop_status_bar(png: Path, docs: Path) -> None:
 
 
 def test_gui_jobs(tmp_path_factory):
-    require_root(ENTRY.root)
-    zip_path = _inputs_once()["zip"]
-    runner = Runner(ENTRY, tmp_path_factory.mktemp("gui-jobs"))
-    for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_jobs.py", HERE / "gui_common.py"):
-        shutil.copy(src, runner.host / src.name)
-    _big_ply(runner.host / "big.ply")
-    keep = OUT / ENTRY.name
-    try:
-        r = _install(runner, str(runner.inner / zip_path.name))
-        assert r.returncode == 0, f"installing the zip failed: {r.stdout[-2000:]}\n{r.stderr[-2000:]}"
-        inner = runner.inner
-        r = runner.run(xvfb_shell(f"blender --python {inner / 'gui_jobs.py'} -- --out {inner / 'out'} "
-                                  f"--room {inner / 'room.ply'} --big {inner / 'big.ply'}"), "gui_jobs")
-    finally:
-        shutil.rmtree(keep, ignore_errors=True)
-        shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
-        runner.close()
-    out = keep / "out"
-    assert (out / "jobs.json").exists(), f"gui_jobs.py wrote no jobs.json (rc {r.returncode}); see {keep}"
-    result = json.loads((out / "jobs.json").read_text())
-    assert not result["error"], f"gui_jobs.py failed in Blender {result['blender']}:\n{result['error']}"
+    result, out, keep = run_gui_script(ENTRY, tmp_path_factory.mktemp("gui-jobs"), "gui_jobs.py", "jobs.json",
+                                       "--room {inner}/room.ply --big {inner}/big.ply",
+                                       inputs=(REPO / "samples" / "room.ply",),
+                                       prepare=lambda host: _big_ply(host / "big.ply"))
     steps, before = result["steps"], result["before"]
     for name in ("bake_running", "bake_running_2", "cancelling", "after_cancel", "bake_auto_running", "bake_done",
                  "import_running", "import_read", "upload_running", "upload_done", "import_done"):

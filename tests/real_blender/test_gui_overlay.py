@@ -28,16 +28,14 @@ build/matrix/gui-overlay/, crops for docs/img in build/matrix/gui-overlay/docs/.
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from gs_ibl_addon.blender.overlay_math import MOVING_SCALE
-from test_matrix import OUT, REPO, Entry, Runner, _inputs_once, _install, require_root, xvfb_shell
+from test_matrix import REPO, Entry, run_gui_script
 
-HERE = Path(__file__).resolve().parent
 ENTRY = Entry("gui-overlay", "sid", True, gui=True)
 HEADER_PX = 60  # the region's top rows hold the header's buttons, whose highlight follows the overlays toggle
 COVERED = 0.95  # the splat region: pixels the room's splats cover at least this much
@@ -153,26 +151,8 @@ def _crop_around(img: np.ndarray, cx: float, cy: float, w: int, h: int) -> np.nd
 
 
 def test_gui_overlay(tmp_path_factory):
-    require_root(ENTRY.root)
-    zip_path = _inputs_once()["zip"]
-    runner = Runner(ENTRY, tmp_path_factory.mktemp("gui"))
-    for src in (zip_path, REPO / "samples" / "room.ply", HERE / "gui_overlay.py", HERE / "gui_common.py"):
-        shutil.copy(src, runner.host / src.name)
-    keep = OUT / ENTRY.name
-    try:
-        r = _install(runner, str(runner.inner / zip_path.name))
-        assert r.returncode == 0, f"installing the zip failed: {r.stdout[-2000:]}\n{r.stderr[-2000:]}"
-        inner = runner.inner
-        r = runner.run(xvfb_shell(f"blender --python {inner / 'gui_overlay.py'} -- --out {inner / 'out'} "
-                                  f"--room {inner / 'room.ply'}"), "gui_overlay")
-    finally:
-        shutil.rmtree(keep, ignore_errors=True)
-        shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
-        runner.close()
-    out = keep / "out"
-    assert (out / "shots.json").exists(), f"gui_overlay.py wrote no shots.json (rc {r.returncode}); see {keep}"
-    result = json.loads((out / "shots.json").read_text())
-    assert not result["error"], f"gui_overlay.py failed in Blender {result['blender']}:\n{result['error']}"
+    result, out, keep = run_gui_script(ENTRY, tmp_path_factory.mktemp("gui"), "gui_overlay.py", "shots.json",
+                                       "--room {inner}/room.ply", inputs=(REPO / "samples" / "room.ply",))
     problems = analyse(result, out, keep / "docs")
     assert not problems, f"Blender {result['blender']} (screenshots in {keep}):\n" + "\n".join(problems)
 

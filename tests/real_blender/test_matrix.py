@@ -214,6 +214,39 @@ def _scenario_cmd(runner: Runner, args_inner: str) -> list[str]:
     return xvfb_shell(f"blender --python {script} -- {args_inner}")
 
 
+def run_gui_script(entry: Entry, tmp: Path, script: str, result_name: str, args: str = "",
+                   inputs: tuple[Path, ...] = (), prepare=None) -> tuple[dict, Path, Path]:
+    """A GUI check's run: the built zip installed by Blender's installer in ``entry``'s root, then
+    ``blender --python SCRIPT -- --out OUT ARGS`` under Xvfb (``script`` and gui_common.py from this folder,
+    ``inputs`` copied beside them; ``prepare(host_folder)`` may write more). What the run left is kept in
+    build/matrix/<entry>/ (no user dir, splat files, zips or .blend files). Returns (the script's ``result_name``
+    JSON, its out folder, the kept folder); fails when the script wrote none or reported an error."""
+    require_root(entry.root)
+    zip_path = _inputs_once()["zip"]
+    runner = Runner(entry, tmp)
+    here = Path(__file__).resolve().parent
+    for src in (zip_path, here / script, here / "gui_common.py", *inputs):
+        shutil.copy(src, runner.host / Path(src).name)
+    if prepare is not None:
+        prepare(runner.host)
+    keep = OUT / entry.name
+    try:
+        r = _install(runner, str(runner.inner / zip_path.name))
+        assert r.returncode == 0, f"installing the zip failed: {r.stdout[-2000:]}\n{r.stderr[-2000:]}"
+        inner = runner.inner
+        r = runner.run(xvfb_shell(f"blender --python {inner / script} -- --out {inner / 'out'} "
+                                  + args.format(inner=inner)), Path(script).stem)
+    finally:
+        shutil.rmtree(keep, ignore_errors=True)
+        shutil.copytree(runner.host, keep, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
+        runner.close()
+    out = keep / "out"
+    assert (out / result_name).exists(), f"{script} wrote no {result_name} (rc {r.returncode}); see {keep}"
+    result = json.loads((out / result_name).read_text())
+    assert not result["error"], f"{script} failed in Blender {result['blender']}:\n{result['error']}"
+    return result, out, keep
+
+
 def xvfb_shell(command: str, screen: str = "1600x1000x24") -> list[str]:
     """`sh -c` running COMMAND with DISPLAY set to a new Xvfb, which picks a free display itself (-displayfd) and
     is stopped afterwards; the exit status is COMMAND's."""
