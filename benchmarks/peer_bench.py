@@ -343,10 +343,14 @@ def main() -> None:
     ap.add_argument("--warmup", type=float, default=1.0, help="seconds of warm-up per renderer and configuration")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--block", type=int, default=10)
+    ap.add_argument("--coalesce", type=int, choices=(0, 1), help="radix8_scatter's way of writing (gpu_sort.COALESCE)")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
     ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
     args = ap.parse_args()
+    if args.coalesce is not None:
+        from gs_ibl_addon.core.render import gpu_sort
+        gpu_sort.COALESCE = args.coalesce
     {"bench": run_bench, "plot": run_plot}[args.mode](args)
 
 

@@ -88,9 +88,12 @@ def test_long_sorts_scan_their_histogram():
     np.testing.assert_array_equal(k, keys[order])
 
 
-def test_a_short_list_in_a_large_sorter():
+@pytest.mark.parametrize("short", [False, True])
+def test_a_short_list_in_a_large_sorter(monkeypatch, short):
     # a level-of-detail cut: the sorter is sized for the whole tree, the count (on the GPU) is a small part of it
+    from gs_ibl_addon.core.render import gpu_sort
     from gs_ibl_addon.core.render.gpu_sort import RadixSorter
+    monkeypatch.setattr(gpu_sort, "short_blocks", lambda _ctx, _cap, bits, *_: short and bits == 8)
     from gs_ibl_addon.core.vk import Buffer, Recorder
     ctx = get_context()
     cap, n = 120_000, 13_001
@@ -109,3 +112,29 @@ def test_a_short_list_in_a_large_sorter():
     sorter.destroy()
     for b in (kb, vb, cb):
         b.destroy()
+
+
+@pytest.mark.parametrize("short", [False, True])
+@pytest.mark.parametrize("coalesce", [0, 1])
+@pytest.mark.parametrize("n", [3001, 600_001])
+def test_both_ways_of_writing_a_block(monkeypatch, coalesce, n, short):
+    # radix8_scatter writes a block from shared memory digit by digit (the default) or each key from its register;
+    # both are the same stable sort, with dropped keys left out, in short blocks and long ones, unscanned (few
+    # blocks) and scanned
+    from gs_ibl_addon.core.render import gpu_sort
+    ctx = get_context()
+    if digit_bits_for(ctx) != 8:
+        pytest.skip("no 8-bit sorter on this device")
+    monkeypatch.setattr(gpu_sort, "COALESCE", coalesce)
+    # 512-key blocks (GPUs: short sorts and level-of-detail cuts) or 4096-key ones, whatever this device would use
+    monkeypatch.setattr(gpu_sort, "short_blocks", lambda _ctx, _cap, bits, *_: short and bits == 8)
+    rng = np.random.default_rng(n + coalesce)
+    keys = rng.integers(0, 1 << 20, n).astype(np.uint32)
+    keys[rng.random(n) < 0.1] = 77
+    keys[rng.random(n) < 0.1] = 5
+    vals = rng.permutation(n).astype(np.uint32)
+    k, v = sort_pairs(ctx, keys, vals, 20, drop_key=77)
+    kept = np.flatnonzero(keys != 77)
+    order = kept[np.argsort(keys[kept], kind="stable")]
+    np.testing.assert_array_equal(k, keys[order])
+    np.testing.assert_array_equal(v, vals[order])

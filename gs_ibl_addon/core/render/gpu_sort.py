@@ -63,27 +63,38 @@ def digit_bits_for(ctx) -> int:
 # summing cost more than the scan saved (0.22 -> 0.28 ms), so long blocks go unscanned only up to 128 of them.
 UNSCANNED_MAX_BLOCKS = 128
 UNSCANNED_MAX_SHORT_BLOCKS = 256  # 512-key blocks: each block sums only the blocks that hold keys
-# A block's 128-key rounds run one after another (each a few barriers), so a block's latency is what a short sort
-# costs: sorts of up to SHORT_SORT_MAX keys use blocks of SHORT_BLOCK_ROUNDS rounds (512 keys) instead of 32 (a
-# level-of-detail cut of 13k nodes: 4 busy blocks of 32 rounds took ~35 us a pass on an H200).
-SHORT_SORT_MAX = 1 << 19
+# A short sort costs what its blocks' latency does, so sorts of up to SHORT_SORT_MAX keys (and sorters told their
+# lists are usually far shorter than their capacity: a level-of-detail cut) use blocks of SHORT_BLOCK_ROUNDS x 128
+# keys (512) instead of 32 x 128. Measured on an H200 with radix8_scatter ranking 16 keys a lane (2026-12-03,
+# sort_bench): 13k keys 0.064 ms short, 0.092 long; 100k keys 0.141 short, 0.107 long.
+SHORT_SORT_MAX = 1 << 15
 SHORT_BLOCK_ROUNDS = 4
+# radix8_scatter writes a block digit by digit from shared memory (1) or each key from its register (0).
+COALESCE = 1
+
+
+def short_blocks(ctx, capacity: int, digit_bits: int, short_lists: bool = False) -> bool:
+    """Whether a sorter for ``capacity`` keys uses 512-key blocks. Not on a CPU device: it runs a block's lanes one
+    after another, and a short block's fixed cost (zeroing, scans, summing the counts of every block before it)
+    is all it would save there (lavapipe, 100k keys: 183 ms with short blocks, 47 ms with long ones)."""
+    return digit_bits == 8 and (short_lists or capacity <= SHORT_SORT_MAX) and not getattr(ctx, "is_cpu", False)
 
 
 class RadixSorter:
     """Stable sort of (key, value) uint32 pairs by the low ``bits`` bits of the key, for up to ``capacity`` pairs.
 
     ``digit_bits`` 8 uses shaders/radix8_*.comp (subgroup ballots); 4 uses shaders/radix_*.comp (no subgroups).
+    ``short_lists``: the counts it sorts are usually a small part of ``capacity`` (short blocks on a GPU).
     """
 
-    def __init__(self, ctx, capacity: int, digit_bits: int | None = None) -> None:
+    def __init__(self, ctx, capacity: int, digit_bits: int | None = None, short_lists: bool = False) -> None:
         self.ctx = ctx
         self.digit_bits = digit_bits or digit_bits_for(ctx)
         if self.digit_bits not in (4, 8):
             raise ValueError(f"radix digits are 4 or 8 bits, not {self.digit_bits}")
         self.bins = 1 << self.digit_bits
         self.capacity = max(1, int(capacity))
-        self.block_rounds = SHORT_BLOCK_ROUNDS if self.digit_bits == 8 and self.capacity <= SHORT_SORT_MAX else 32
+        self.block_rounds = SHORT_BLOCK_ROUNDS if short_blocks(ctx, self.capacity, self.digit_bits, short_lists) else 32
         self.block_keys = SORT_BLOCK if self.digit_bits != 8 else 128 * self.block_rounds
         self.n_blocks = -(-self.capacity // self.block_keys)
         self.keys_tmp = Buffer(ctx, self.capacity * 4, "sort-keys-tmp")
@@ -124,7 +135,8 @@ class RadixSorter:
             else:
                 total, total_at = self.hist, 4 * self.bins * self.n_blocks
             rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g,
-                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds, scanned=int(scan))))
+                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds, scanned=int(scan),
+                                                                 coalesce=COALESCE)))
             if drop:  # the histogram's total is what the first pass kept
                 rec.copy(total, count, 4, src_offset=total_at, dst_offset=4 * count_index)
             stamp("scatter")

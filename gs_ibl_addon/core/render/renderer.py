@@ -433,7 +433,7 @@ class SplatRenderer:
     def _grow_cut(self, need: int) -> None:
         self._drop(self.cut_sorter)
         self.cut_capacity = int(min(self.lod.count * self.slots, need))
-        self.cut_sorter = self._own(RadixSorter(self.ctx, self.cut_capacity))
+        self.cut_sorter = self._own(RadixSorter(self.ctx, self.cut_capacity, short_lists=True))
 
     def _frame_buffer(self, name: str, nbytes: int) -> Buffer:
         """The named frame buffer, at least ``nbytes`` (grown by 1.5x when too small, never shrunk)."""

@@ -64,7 +64,8 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("radix_hist", "Keys Hist Count", _SORT_PUSH),
     _k("radix_scatter", "KeysIn ValsIn KeysOut ValsOut Hist Count", _SORT_PUSH),
     _k("radix8_hist", "Keys Hist Count", _SORT_PUSH + " block_rounds", (128,)),
-    _k("radix8_scatter", "KeysIn ValsIn KeysOut ValsOut Hist Count", _SORT_PUSH + " block_rounds scanned", (128,)),
+    _k("radix8_scatter", "KeysIn ValsIn KeysOut ValsOut Hist Count", _SORT_PUSH + " block_rounds scanned coalesce",
+       (256,)),
     # probe filters (probe/gpu_filters.py)
     _k("probe_split_alpha", "Frame Omega Cube Partial", "n n_groups"),
     _k("probe_sh_project", "Cube Omega Partial", "n n_groups"),
