@@ -226,6 +226,8 @@ def main() -> None:
     ap.add_argument("--places", default=",".join(PLACES))
     ap.add_argument("--meshes", default=",".join(MESHES))
     ap.add_argument("--steps", default="native,world,auto")
+    ap.add_argument("--eevee-set", default="", metavar="KEY=VALUE,...",
+                    help="EEVEE options for a trial (scene.eevee, e.g. use_fast_gi=False,clamp_surface_indirect=0)")
     ap.add_argument("--no-write", action="store_true", help="leave docs/ alone (a trial run)")
     ap.add_argument("--replot", metavar="RUN", help="tables, CSV and chart again from a kept run folder")
     a = ap.parse_args()
@@ -257,7 +259,9 @@ def main() -> None:
                 "radius": 0.25, "suzanne_size": 0.4, "fov_deg": 40.0, "places": places,
                 "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": a.native_samples,
                 "samples": a.samples, "eevee_samples": a.eevee_samples, "threads": a.threads,
-                "steps": a.steps.split(","), "date": time.strftime("%Y-%m-%d")}
+                "steps": a.steps.split(","), "date": time.strftime("%Y-%m-%d"),
+                "eevee_settings": {k: json.loads(v.lower() if v in ("True", "False") else v)
+                                   for k, v in (kv.split("=", 1) for kv in a.eevee_set.split(",") if kv)}}
         result = matrix.run_script(runner, HERE / "auto_light_scene.py", args, RESULT_TAG, "auto")
         result["wall_s"] = time.perf_counter() - t_start
         head = np.asarray(result.get("positions_head", []))

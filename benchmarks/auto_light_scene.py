@@ -126,6 +126,8 @@ def _render(name: str, engine: str, samples: int) -> float:
         scene.cycles.samples = samples
     else:
         scene.eevee.taa_render_samples = samples
+        for key, value in ARGS.get("eevee_settings", {}).items():  # a trial of EEVEE's own options
+            setattr(scene.eevee, key, value)
     path = os.path.join(ARGS["work"], f"{name}.exr")
     scene.render.filepath = path
     t0 = time.perf_counter()

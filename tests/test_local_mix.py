@@ -43,9 +43,29 @@ def test_eevee_world_is_the_order_one_part_clamped():
     both engines."""
     n = _normals(500, 2)
     w = np.zeros((9, 3))
-    w[0], w[2] = 0.3, (0.5, 0.2, 0.1)  # strong z slope: negative below in red
+    w[0], w[2] = 0.3, (0.15, 0.2, 0.1)  # a z slope EEVEE keeps (2/3 x 0.3 >= 0.2)
     e = local_mix.world_diffuse(w, n, "EEVEE")
     np.testing.assert_allclose(e, np.maximum(eval_irradiance(w, n), 0.0), atol=1e-12)
     w[6] = 0.1
     np.testing.assert_allclose(local_mix.world_diffuse(w, n, "EEVEE"), e, atol=1e-12)
     assert not np.allclose(local_mix.world_diffuse(w, n, "CYCLES"), e)
+
+
+def test_eevee_derings_a_steep_world():
+    """EEVEE scales every channel's order-1 band by one factor when any channel's largest L1 component would make
+    its lobe negative (spherical_harmonics_dering): f = min_c 2/3 a0 / max_i |a_i|; our model of its light follows."""
+    w = np.zeros((9, 3))
+    w[0] = (0.3, 0.3, 0.6)
+    w[1], w[2], w[3] = (0.05, 0.0, 0.1), (0.5, 0.1, -0.2), (0.0, 0.3, 0.1)  # red limits: 2/3 x 0.3 / 0.5 = 0.4
+    order1 = local_mix.eevee_world_order1(w)
+    np.testing.assert_allclose(order1[0], w[0])
+    np.testing.assert_allclose(order1[1:], 0.4 * w[1:4])
+    n = _normals(300, 4)
+    np.testing.assert_allclose(local_mix.world_diffuse(w, n, "EEVEE"),
+                               np.maximum(order1[0] + n[:, [1, 2, 0]] @ order1[1:], 0.0), atol=1e-12)
+    # EEVEE's own test in radiance SH terms: L0 Y00 against the largest L1 coefficient times Y1, per channel
+    c0 = w[0] / 0.282094792
+    c1 = np.abs(w[1:4]) / (2.0 / 3.0 * 0.488602512)
+    assert np.isclose(min(1.0, float((c0 / c1.max(0) * 0.282094792 / 0.488602512).min())), 0.4)
+    black = np.zeros((9, 3))
+    np.testing.assert_array_equal(local_mix.eevee_world_order1(black), black[:4])

@@ -16,12 +16,15 @@ not for emission; on a convex mesh it is 1, which is what this twin models.
 
 B differs by engine. Cycles integrates the World image: B = E, and H = E + D. EEVEE lights from an order-1 SH of
 the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1, clamped at 0)
-once the World's sun extraction is off (World.sun_threshold = 0, blender/world.py): B = max(0, the first four
-monomial terms of W, the World probe's order-2 coefficients), and H = W + D, our order-2 light. Checked: on smooth
-Worlds (radiance a + b z, a + c z^2) EEVEE's own light is this B within 1% and the group's result H within 0.5%.
-Measured, not explained: for the sample room's World (a lamp of radiance 40, a window) EEVEE's own light falls
-1-3% (a bpy 5.0 view of the window side) to ~10% (the five-place bench, bpy 5.3) below B, red most; aiming EEVEE
-at E + D put the five places' spheres 4-14% below native Cycles, at W + D 0-6% (docs/blender.md).
+once the World's sun extraction is off (World.sun_threshold = 0, blender/world.py), and H = W + D, our order-2
+light. Before storing the World's order-1 SH, EEVEE "derings" it (spherical_harmonics_dering, applied to the
+World's volume-probe brick): where any channel's largest L1 component exceeds what keeps that channel's lobe
+non-negative, every channel's L1 band is scaled by one factor, f = min over channels of L0 Y00 / (max_i |L1_i|
+Y1), which in our monomial terms is f = min_c 2/3 a0_c / max_i |a_ic|. So B = max(0, a0 + min(1, f) a.n), a
+from the first four monomial terms of W (eevee_world_order1). Checked: on smooth Worlds (radiance a + b z,
+a + c z^2) EEVEE's own light is this B within 1% and the group's result H within 0.5%. The sample room's World
+(a lamp of radiance 40, a window) has f = 0.94 at the room's centre (blue limits it): before the dering was
+modelled, EEVEE's own light fell 1-10% below an un-deringed B and the five places' spheres 1-7% below Cycles.
 """
 from __future__ import annotations
 
@@ -33,6 +36,16 @@ EPS = 1e-6  # a World channel darker than this is treated as black: any light of
 L1_TERMS = 4  # monomials 1, y, z, x: the order-1 part of an order-2 irradiance
 
 
+def eevee_world_order1(world: np.ndarray) -> np.ndarray:
+    """The (4, C) order-1 monomial coefficients (1, y, z, x) of EEVEE's World light for World coefficients
+    ``world`` (9, C): the linear terms scaled by EEVEE's dering factor when it is below 1."""
+    w = np.array(np.asarray(world, np.float64)[:L1_TERMS])
+    slope = np.abs(w[1:]).max(axis=0)
+    ratio = np.where(slope > 0.0, (2.0 / 3.0) * np.abs(w[0]) / np.maximum(slope, 1e-300), np.inf)
+    w[1:] *= min(1.0, float(ratio.min()))
+    return w
+
+
 def world_diffuse(world: np.ndarray, normals: np.ndarray, engine: str,
                   irradiance: np.ndarray | None = None) -> np.ndarray:
     """E(n)/pi the user's shader gets from the World in ``engine`` ("CYCLES" or "EEVEE"): world (9, 3) monomial
@@ -41,7 +54,7 @@ def world_diffuse(world: np.ndarray, normals: np.ndarray, engine: str,
     w = np.asarray(world, np.float64)
     if engine == "CYCLES":
         return eval_irradiance(w, normals) if irradiance is None else np.asarray(irradiance, np.float64)
-    return np.maximum(monomials(normals)[..., :L1_TERMS] @ w[:L1_TERMS], 0.0)
+    return np.maximum(monomials(normals)[..., :L1_TERMS] @ eevee_world_order1(w), 0.0)
 
 
 def mix(here: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
