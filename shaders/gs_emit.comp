@@ -82,8 +82,7 @@ void main() {
     uint r = q - offsets[lo];
     for (uint v = 0u; v < p.n_views; ++v) {
         uvec2 pr = rects[i * MAX_VIEWS + v];
-        uvec4 t = pr.x == NO_RECT ? uvec4(0u) : tiles_of(views[v], uvec4(pr.x & 0xFFFFu, pr.x >> 16, pr.y & 0xFFFFu, pr.y >> 16));
-        uint x0 = t.x, y0 = t.y, w = t.z - x0, h = t.w - y0;
+        uint x0 = pr.x & 0xFFFFu, y0 = pr.x >> 16, w = (pr.y & 0xFFFFu) - x0, h = (pr.y >> 16) - y0;
         if (r < w * h) {
             uint tx = x0 + r % w, ty = y0 + r / w;
             mat3 g;

@@ -20,7 +20,7 @@ layout(std430, binding = 5) writeonly buffer Prepared { vec4 prepared[]; };
 layout(std430, binding = 6) writeonly buffer TileCount { uint tile_count[]; };
 layout(std430, binding = 7) writeonly buffer DepthKey { uint depth_key[]; };
 layout(std430, binding = 8) writeonly buffer DepthVal { uint depth_val[]; };
-layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // pixels per splat and view (view_rect)
+layout(std430, binding = 9) writeonly buffer Rects { uvec2 rects[]; };  // per splat and view, for gs_emit
 // The origin travels in a buffer, not a push constant, so a recorded command buffer serves any probe position.
 layout(std430, binding = 10) readonly buffer Origin { vec4 origins[]; };  // one per probe (workgroup z)
 // Per node: x = cell x | cell y << 16, y = cell z | level << 16 | parent level << 24 (LodTree.words()).
@@ -155,9 +155,8 @@ void main() {
     for (uint v = 0u; v < p.n_views; ++v) {
         uvec4 rc;
         bool hit = view_rect(views[v], mu, cov, rc);
-        uvec4 tr = tiles_of(views[v], rc);
-        if (hit) count += (tr.z - tr.x) * (tr.w - tr.y);
-        rects[q * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(NO_RECT);
+        if (hit) count += (rc.z - rc.x) * (rc.w - rc.y);
+        rects[q * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
     }
     if (count == 0u) return;
     if (p.lod != 0u) live[q] = 1u;

@@ -18,16 +18,11 @@ layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks
 // the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
 layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
 // write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
-// Each pair's pixel rectangle in its view (gs_preprocess view_rect): pixels outside it skip the ray test. Most
-// pairs of a capture-sized scene at large faces are a few pixels wide, so most of a tile's pixels (and whole
-// warps of them) skip most pairs.
-layout(std430, binding = 6) readonly buffer Rects { uvec2 rects[]; };
 layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
 shared float s_cut[256];
-shared uint s_box[256];  // the pair's pixels in this tile, inclusive: x0 | x1 << 8 | y0 << 16 | y1 << 24
 shared uint s_done;
 
 void main() {
@@ -41,9 +36,8 @@ void main() {
     View last = views[p.n_views - 1u];
     uint probe_pixels = last.extra.x + last.dims.x * last.dims.y;
     uint local_tile = g - vw.dims.w;
-    ivec2 tile0 = ivec2(local_tile % vw.dims.z, local_tile / vw.dims.z) * int(TILE);
-    uint lx = gl_LocalInvocationID.x, ly = gl_LocalInvocationID.y;
-    uint px = uint(tile0.x) + lx, py = uint(tile0.y) + ly;
+    uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
+    uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
     bool inside = px < vw.dims.x && py < vw.dims.y;
     float s = ((float(px) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w;
     float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
@@ -68,18 +62,11 @@ void main() {
             s_w0[lid] = prepared[PREP * i]; s_w1[lid] = prepared[PREP * i + 1u];
             s_w2[lid] = prepared[PREP * i + 2u]; s_col[lid] = prepared[PREP * i + 3u];
             s_cut[lid] = prepared[PREP * i + 4u].x;
-            // view_rect floors its bounds' ends: one pixel more on each side keeps float rounding inside
-            uvec2 r = rects[i * MAX_VIEWS + v];
-            ivec4 b = clamp(ivec4(r.x & 0xFFFFu, r.y & 0xFFFFu, r.x >> 16, r.y >> 16) - ivec4(tile0.x, tile0.x, tile0.y, tile0.y)
-                            + ivec4(-1, 1, -1, 1), ivec4(0), ivec4(int(TILE) - 1));
-            s_box[lid] = uint(b.x) | (uint(b.y) << 8) | (uint(b.z) << 16) | (uint(b.w) << 24);
         }
         barrier();
         if (s_done == 256u) break;
         uint batch = min(256u, range.y - start);
         for (uint k = 0u; k < batch && !done; ++k) {
-            uint box = s_box[k];
-            if (lx < (box & 0xFFu) || lx > ((box >> 8) & 0xFFu) || ly < ((box >> 16) & 0xFFu) || ly > (box >> 24)) continue;
             vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
             vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
             if (dot(ol, dl) >= 0.0) continue;  // the closest approach lies behind the origin

@@ -26,16 +26,7 @@ vec3 dilated_scale2(vec3 s, float dist, float dilation_angle) {
     return s * s + vec3(DILATION_PX2 * d * d);
 }
 
-const uint NO_RECT = 0xFFFFFFFFu;  // a view the splat does not touch (in both words of its rects entry)
-
-// The tiles of view v a pixel rectangle (x0, y0, x1, y1; x1 and y1 the last pixel, floored) lies on, end exclusive.
-uvec4 tiles_of(View v, uvec4 px) {
-    return uvec4(px.x / TILE, px.y / TILE, min(px.z / TILE + 1u, v.dims.z), min(px.w / TILE + 1u, v.extra.y));
-}
-
-// Pixels of view v touched by the ellipsoid {x : (x - mu)^T cov^-1 (x - mu) <= 1} (mu relative to the origin),
-// as (x0, y0, x1, y1): the pixel indices of its bounds' ends, floored and clamped to the view (the tiles are
-// tiles_of(rect); gs_raster tests pixels against it, one pixel wider on each side for float rounding).
+// Tiles of view v touched by the ellipsoid {x : (x - mu)^T cov^-1 (x - mu) <= 1} (mu relative to the origin).
 // Tight bounds from the tangent planes through the origin (the projected quadric); the whole view when the
 // ellipsoid straddles the plane through the origin facing the view. Returns false when it touches no tile.
 bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
@@ -53,7 +44,7 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
         if (dot(n, mu) + sqrt(max(dot(n, cov * n), 0.0)) < 0.0) return false;
     }
     float a = ff - z * z;
-    if (a >= -1e-6 * z * z) { rect = uvec4(0u, 0u, v.dims.x, v.dims.y); return true; }
+    if (a >= -1e-6 * z * z) { rect = uvec4(0u, 0u, tx, ty); return true; }
     float x = dot(r, mu), y = dot(dn, mu);
     float bx = dot(r, cf) - x * z, cx = dot(r, cov * r) - x * x;
     float by = dot(dn, cf) - y * z, cy = dot(dn, cov * dn) - y * y;
@@ -64,9 +55,11 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
     float px0 = (ux.x / v.right_tanx.w + 1.0) * 0.5 * w - 0.5, px1 = (ux.y / v.right_tanx.w + 1.0) * 0.5 * w + 0.5;
     float py0 = (uy.x / v.down_tany.w + 1.0) * 0.5 * h - 0.5, py1 = (uy.y / v.down_tany.w + 1.0) * 0.5 * h + 0.5;
     if (px1 < 0.0 || py1 < 0.0 || px0 > w || py0 > h) return false;
-    rect = uvec4(uint(max(px0, 0.0)), uint(max(py0, 0.0)), uint(min(px1, w)), uint(min(py1, h)));
-    uvec4 t = tiles_of(v, rect);
-    return t.x < t.z && t.y < t.w;
+    uint x0 = uint(max(px0, 0.0)) / TILE, y0 = uint(max(py0, 0.0)) / TILE;
+    uint x1 = min(uint(min(px1, w)) / TILE + 1u, tx), y1 = min(uint(min(py1, h)) / TILE + 1u, ty);
+    if (x0 >= x1 || y0 >= y1) return false;
+    rect = uvec4(x0, y0, x1, y1);
+    return true;
 }
 
 // The ellipsoid beyond which the splat's alpha falls below 1/255: cutoff * Sigma'.

@@ -390,7 +390,7 @@ class SplatRenderer:
         self.prepared = buf(m * PREP * 16, "prepared")
         self.tile_count = buf(m * 4, "tile_count")
         self.depth_key, self.depth_val = buf(m * 4, "depth_key"), buf(m * 4, "depth_val")
-        self.rects = buf(m * MAX_VIEWS * 8, "rects")  # pixel rectangle per pair and view
+        self.rects = buf(m * MAX_VIEWS * 8, "rects")  # tile rectangle per pair and view
         self.offsets = buf(m * 4, "offsets")
         self.scanner = self._own(Scanner(self.ctx, m))
         if self.lod is None:
@@ -591,7 +591,7 @@ class SplatRenderer:
                 self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp)
             rec.dispatch(KERNELS["gs_raster"],
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
-                          partial_depth if chunks > 1 else depth_buf, self.rects],
+                          partial_depth if chunks > 1 else depth_buf],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
                          chunks=chunks, total_pixels=pixels, write_depth=int(depth))
             if chunks > 1:

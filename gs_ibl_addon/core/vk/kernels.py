@@ -55,7 +55,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("gs_emit", "Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects",
        "n capacity n_views n_tiles"),
     _k("gs_ranges", "InstKey Count Ranges"),
-    _k("gs_raster", "Views Ranges InstVal Prepared Image Depth Rects",
+    _k("gs_raster", "Views Ranges InstVal Prepared Image Depth",
        "n_views total_tiles chunks total_pixels write_depth", (16, 16)),
     _k("gs_merge", "Partial Image PartialDepth Depth", "chunks total_pixels write_depth"),
     # prefix sums and radix sorts (render/gpu_sort.py)
