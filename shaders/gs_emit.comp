@@ -19,6 +19,7 @@ layout(std430, binding = 6) writeonly buffer InstVal { uint inst_val[]; };
 layout(std430, binding = 7) writeonly buffer Count { uint count[]; };  // [0] kept instances, [1] all instances
 layout(std430, binding = 8) readonly buffer Prepared { vec4 prepared[]; };
 layout(std430, binding = 9) readonly buffer Rects { uvec2 rects[]; };  // from gs_preprocess
+layout(std430, binding = 10) readonly buffer Owners { uint owners[]; };  // from gs_emit_owners
 layout(push_constant) uniform P { uint n; uint capacity; uint n_views; uint n_tiles; } p;
 
 // The rays d inside the splat's footprint satisfy m(d) <= c, i.e. d^T G d <= 0 with
@@ -72,8 +73,10 @@ void main() {
     if (q == 0u) { count[0] = min(all_instances, p.capacity); count[1] = all_instances; }
     if (q >= min(all_instances, p.capacity)) return;
     // the owner of slot q: the last splat (in depth order) whose first slot is <= q; empty splats share a start
-    // with their successor and so are never the last
-    uint lo = 0u, hi = p.n - 1u;
+    // with their successor and so are never the last. It lies between this block's owner and the next block's
+    // (gs_emit_owners.comp).
+    uint block = q / 256u, used = min(all_instances, p.capacity);
+    uint lo = owners[block], hi = (block + 1u) * 256u < used ? owners[block + 1u] : p.n - 1u;
     while (lo < hi) {
         uint mid = (lo + hi + 1u) >> 1;
         if (offsets[mid] <= q) lo = mid; else hi = mid - 1u;

@@ -413,7 +413,7 @@ class SplatRenderer:
         for b in self._frame.values():
             self._drop(b)
         self._frame.clear()
-        for name in self._PAIR_BUFFERS + ("inst_key", "inst_val", "tile_sorter", "cut_sorter"):
+        for name in self._PAIR_BUFFERS + ("inst_key", "inst_val", "owners", "tile_sorter", "cut_sorter"):
             self._drop(getattr(self, name, None))
             setattr(self, name, None)
         self.slots = self.capacity = self.cut_capacity = 0
@@ -423,11 +423,12 @@ class SplatRenderer:
     def _ensure_capacity(self, need: int) -> None:
         if need <= self.capacity:
             return
-        for name in ("inst_key", "inst_val", "tile_sorter"):
+        for name in ("inst_key", "inst_val", "owners", "tile_sorter"):
             self._drop(getattr(self, name, None))
         self.capacity = int(need)
         self.inst_key = self._buffer(self.capacity * 4, "inst_key")
         self.inst_val = self._buffer(self.capacity * 4, "inst_val")
+        self.owners = self._buffer((self.capacity // 256 + 2) * 4, "emit-owners")  # a splat per 256 slots
         self.tile_sorter = self._own(RadixSorter(self.ctx, self.capacity))
 
     def _grow_cut(self, need: int) -> None:
@@ -643,9 +644,11 @@ class SplatRenderer:
         rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                      groups(pairs, 256, c), n=pairs, count_index=count_index)
         total_buf = self.scanner.record(rec, self.offsets, pairs)
+        rec.dispatch(KERNELS["gs_emit_owners"], [self.offsets, total_buf, self.owners], groups(pairs, 256, c),
+                     n=pairs, capacity=self.capacity)
         rec.dispatch(KERNELS["gs_emit"],
                      [self.views, keys, vals, self.offsets, total_buf, self.inst_key,
-                      self.inst_val, self.count, self.prepared, self.rects],
+                      self.inst_val, self.count, self.prepared, self.rects, self.owners],
                      groups(self.capacity, 256, c), n=pairs, capacity=self.capacity, n_views=nv, n_tiles=tiles)
         stamp("emit")
         # `tiles` is the key of instances whose tile the footprint missed: the sort drops them (count[0] becomes
