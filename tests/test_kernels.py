@@ -74,6 +74,11 @@ def reflect(path: pathlib.Path) -> dict:
     return out
 
 
+def _with_includes(path) -> str:
+    """The shader's text with its local #includes spliced in (two kernels share gs_raster.glsl)."""
+    return re.sub(r'#include "([^"]+)"', lambda m: _with_includes(path.parent / m.group(1)), path.read_text())
+
+
 @pytest.mark.parametrize("name", sorted(KERNELS))
 def test_kernel_table_matches_the_spirv(name):
     k = KERNELS[name]
@@ -82,7 +87,7 @@ def test_kernel_table_matches_the_spirv(name):
     # glslc -O strips names: the SPIR-V gives the binding numbers, the GLSL source the block names
     # (a binding the shader never reads is dropped by the optimiser: gs_emit's DepthKey)
     assert set(r["bindings"]) <= set(range(len(k.buffers))), f"{name}: SPIR-V binds {sorted(r['bindings'])}"
-    src = (ROOT / "shaders" / f"{name}.comp").read_text()
+    src = _with_includes(ROOT / "shaders" / f"{name}.comp")
     named = {int(b): n for b, n in re.findall(r"binding\s*=\s*(\d+)\)\s*(?:\w+\s+)*buffer\s+(\w+)", src)}
     assert named == dict(enumerate(k.buffers)), f"{name}: GLSL binds {named}, table {k.buffers}"
     assert r["push"] == [(4 * i, t) for i, (_, t) in enumerate(k.push)], f"{name}: push {r['push']} vs {k.push}"

@@ -88,6 +88,18 @@ def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk
 
 # Benchmarks only: a timestamp after each step of both sorts (labels "<stage>.hist", ".scan", ".scatter").
 PROFILE_SORTS = False
+# Faces up to this size raster with each pair's footprint conic tested before the ray test (gs_raster_conic):
+# their tiles hold many pairs for 256 pixels, and the cheap test is what a pixel mostly does. Measured on an H200
+# (docs/benchmarks.md, 2026-12-03), raster ms at 6M splats: 64² random 3.52 -> 2.37, shell 12.67 -> 8.27; at 256²
+# slower (1.31 -> 1.66, 5.50 -> 6.05) and at 1024² more so, where each tile's few batches of pairs are bound by
+# their loads and the conic's setup and registers cost more than the test saves. Lavapipe: 32² -10%, 64²-128² -2%,
+# 256² +11%.
+CONIC_MAX_FACE = 128
+
+
+def raster_conic(batch: ViewBatch) -> bool:
+    """Whether ``batch`` rasters with the conic pre-test (every view no larger than CONIC_MAX_FACE)."""
+    return max(max(v.width, v.height) for v in batch.views) <= CONIC_MAX_FACE
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
@@ -590,7 +602,7 @@ class SplatRenderer:
             n = tree.count if tree is not None else self.scene_count
             if n:
                 self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp)
-            rec.dispatch(KERNELS["gs_raster"],
+            rec.dispatch(KERNELS["gs_raster_conic" if raster_conic(batch) else "gs_raster"],
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,

@@ -58,6 +58,8 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("gs_ranges", "InstKey Count Ranges"),
     _k("gs_raster", "Views Ranges InstVal Prepared Image Depth",
        "n_views total_tiles chunks total_pixels write_depth", (16, 16)),
+    _k("gs_raster_conic", "Views Ranges InstVal Prepared Image Depth",
+       "n_views total_tiles chunks total_pixels write_depth", (16, 16)),
     _k("gs_merge", "Partial Image PartialDepth Depth", "chunks total_pixels write_depth"),
     # prefix sums and radix sorts (render/gpu_sort.py)
     _k("scan_block", "Data Sums", "n"),

@@ -1,0 +1,150 @@
+// One workgroup per 16x16 tile of any view: front-to-back compositing of the tile's splats, each evaluated along
+// the pixel's ray, in batches staged through shared memory; stops when every pixel of the tile is opaque.
+// Small images have few tiles, too few to fill a GPU: then each tile's list is cut into `chunks` consecutive
+// pieces composited by separate workgroups into (colour, transmittance) partials, which gs_merge.comp joins in
+// order (front-to-back compositing is associative).
+// Several probes (SplatRenderer.render_probes): workgroup z is the probe; total_tiles counts one probe's tiles and
+// total_pixels every probe's pixels; probe k's tiles and pixels follow probe k-1's.
+#include "splat_common.glsl"
+layout(local_size_x = 16, local_size_y = 16) in;
+layout(std430, binding = 0) readonly buffer Views { View views[]; };
+layout(std430, binding = 1) readonly buffer Ranges { uvec2 ranges[]; };
+layout(std430, binding = 2) readonly buffer InstVal { uint inst_val[]; };
+layout(std430, binding = 3) readonly buffer Prepared { vec4 prepared[]; };
+layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks > 1: partials, chunk-major
+// Depth: the alpha-weighted sum of each contribution's distance along the view axis, sum(T alpha z); divided by
+// the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
+layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
+// write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
+layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; } p;
+
+const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
+shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
+shared float s_cut[256];
+#ifdef RASTER_CONIC
+// Per pair, its footprint as a conic in this view's image plane, centred on the splat (footprint_conic): a pixel
+// tests it (two loads, a few multiply-adds) before the ray test, which most pairs fail in most of a tile when the
+// tile holds many pairs for its pixels (small faces). Large faces use the kernel without it (renderer.py
+// CONIC_MAX_FACE says why). Testing 32 pairs' conics first and then ray-testing the passes (a bitmask) was faster on
+// an H200 but gave wrong images on lavapipe, for a reason not found (one tile of the guitar test; the same tests
+// one pair at a time are right): not kept.
+shared vec4 s_qa[256], s_qb[256];
+
+// The rays d = fwd + s right + t down that the ray test accepts, m(d) = |o' x Wd|^2 / |Wd|^2 <= c, are those with
+// Q(d) = |o' x Wd|^2 - c |Wd|^2 <= 0. Expanded about the splat's centre, d0 = mu / z (z = fwd . mu, s0 and t0 its
+// image coordinates), with ds = s - s0, dt = t - t0, a = W right, b = W down, u = ds a.o' + dt b.o' and
+// V = |ds a + dt b|^2, it is exactly Q = |o' x (ds a + dt b)|^2 - c V + 2 c u / z - c |o'|^2 / z^2: every term of the
+// footprint's own size, so float keeps it where the unexpanded quadric (gs_emit's) cancels for tiny far splats.
+// c is inflated as gs_emit inflates it, so rounding never rejects a pixel the ray test would light. Gives
+// (s0, t0, A, B) and (2C, 2D, 2E, F) of Q = A ds^2 + 2C ds dt + B dt^2 + 2D ds + 2E dt + F; a splat not well in
+// front of the view gets Q = -1 everywhere (the ray test alone decides).
+void footprint_conic(View vw, vec4 w0, vec4 w1, vec4 w2, float cut, out vec4 qa, out vec4 qb) {
+    vec3 ol = vec3(w0.w, w1.w, w2.w);
+    // W's rows are R's columns over the dilated scales, so mu = -W^-1 o' = -sum_k w_k o'_k / |w_k|^2
+    vec3 mu = -(w0.xyz * (ol.x / dot(w0.xyz, w0.xyz)) + w1.xyz * (ol.y / dot(w1.xyz, w1.xyz))
+                + w2.xyz * (ol.z / dot(w2.xyz, w2.xyz)));
+    float z = dot(vw.fwd.xyz, mu);
+    qa = vec4(0.0);
+    qb = vec4(0.0, 0.0, 0.0, -1.0);
+    if (!(z > 0.2 * length(mu))) return;
+    float c = cut * 1.02 + 1e-3;
+    vec3 r = vw.right_tanx.xyz, dn = vw.down_tany.xyz;
+    vec3 a = vec3(dot(w0.xyz, r), dot(w1.xyz, r), dot(w2.xyz, r));
+    vec3 b = vec3(dot(w0.xyz, dn), dot(w1.xyz, dn), dot(w2.xyz, dn));
+    // |o'|^2 V - u^2 = |o' x (ds a + dt b)|^2 (Lagrange): taken as cross products, since for a thin splat o', a
+    // and b are all dominated by the thin axis and |o'|^2 |a|^2 - (a.o')^2 would cancel to nothing in float
+    vec3 xa = cross(ol, a), xb = cross(ol, b);
+    float oo = dot(ol, ol), iz = 1.0 / z;
+    qa = vec4(dot(r, mu) * iz, dot(dn, mu) * iz, dot(xa, xa) - c * dot(a, a), dot(xb, xb) - c * dot(b, b));
+    qb = vec4(2.0 * (dot(xa, xb) - c * dot(a, b)), 2.0 * c * dot(a, ol) * iz, 2.0 * c * dot(b, ol) * iz, -c * oo * iz * iz);
+}
+#endif
+shared uint s_done;
+
+// Pair k of the batch along the pixel's ray d: composited front to back if the ray passes within its footprint.
+// Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then
+// composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance behind.
+#ifdef RASTER_CONIC
+// Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may).
+bool conic_hit(uint k, float s, float t) {
+    vec4 qa = s_qa[k], qb = s_qb[k];
+    float ds = s - qa.x, dt = t - qa.y;
+    return !(ds * (qa.z * ds + qb.x * dt + qb.y) + dt * (qa.w * dt + qb.z) + qb.w > 0.0);
+}
+#endif
+
+bool composite(uint k, vec3 d, inout vec3 color, inout float T, inout float zsum) {
+    vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
+    vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
+    if (dot(ol, dl) >= 0.0) return false;  // the closest approach lies behind the origin
+    vec3 cr = cross(ol, dl);
+    float cc = dot(cr, cr), dd = dot(dl, dl);
+    if (cc > s_cut[k] * dd) return false;  // outside the footprint (3DGS: alpha < 1/255); m = cc / dd
+    float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * cc / dd));
+    color += T * alpha * s_col[k].rgb;
+    if (p.write_depth != 0u) zsum += T * alpha * (-dot(ol, dl) / dd);  // closest approach along d; d's forward part is 1
+    T *= 1.0 - alpha;
+    return T < T_MIN;
+}
+
+void main() {
+    uint wg = linear_group();
+    if (wg >= p.total_tiles * p.chunks) return;  // uniform per workgroup
+    uint g = wg % p.total_tiles, chunk = wg / p.total_tiles;
+    uint probe = gl_WorkGroupID.z;
+    uint v = 0u;
+    for (uint k = 1u; k < p.n_views; ++k) if (g >= views[k].dims.w) v = k;
+    View vw = views[v];
+    View last = views[p.n_views - 1u];
+    uint probe_pixels = last.extra.x + last.dims.x * last.dims.y;
+    uint local_tile = g - vw.dims.w;
+    uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
+    uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
+    bool inside = px < vw.dims.x && py < vw.dims.y;
+    float s = ((float(px) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w;
+    float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
+    vec3 d = vw.fwd.xyz + s * vw.right_tanx.xyz + t * vw.down_tany.xyz;
+
+    uvec2 whole = ranges[probe * p.total_tiles + g];
+    uint len = whole.y - whole.x;
+    uint q = len / p.chunks, rem = len % p.chunks;  // chunk c starts at c*q + min(c, rem): no overflow
+    uvec2 range = whole.x + uvec2(chunk * q + min(chunk, rem), (chunk + 1u) * q + min(chunk + 1u, rem));
+    uint lid = gl_LocalInvocationIndex;
+    bool done = !inside;
+    vec3 color = vec3(0.0);
+    float T = 1.0, zsum = 0.0;
+    for (uint start = range.x; start < range.y; start += 256u) {
+        barrier();
+        if (lid == 0u) s_done = 0u;
+        barrier();
+        if (done) atomicAdd(s_done, 1u);
+        uint j = start + lid;
+        if (j < range.y) {
+            uint i = inst_val[j];
+            s_w0[lid] = prepared[PREP * i]; s_w1[lid] = prepared[PREP * i + 1u];
+            s_w2[lid] = prepared[PREP * i + 2u]; s_col[lid] = prepared[PREP * i + 3u];
+            s_cut[lid] = prepared[PREP * i + 4u].x;
+#ifdef RASTER_CONIC
+            footprint_conic(vw, s_w0[lid], s_w1[lid], s_w2[lid], s_cut[lid], s_qa[lid], s_qb[lid]);
+#endif
+        }
+        barrier();
+        if (s_done == 256u) break;
+        uint batch = min(256u, range.y - start);
+#ifdef RASTER_CONIC
+        for (uint k = 0u; k < batch && !done; ++k) if (conic_hit(k, s, t)) done = composite(k, d, color, T, zsum);
+#else
+        for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, color, T, zsum);
+#endif
+    }
+    uint pixel = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;
+    if (inside) {
+        if (p.chunks == 1u) {
+            image[pixel] = vec4(color, 1.0 - T);
+            if (p.write_depth != 0u) depth[pixel] = T < 1.0 ? zsum / (1.0 - T) : 0.0;
+        } else {
+            image[chunk * p.total_pixels + pixel] = vec4(color, T);
+            if (p.write_depth != 0u) depth[chunk * p.total_pixels + pixel] = zsum;
+        }
+    }
+}
