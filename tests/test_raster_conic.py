@@ -29,6 +29,7 @@ def _scene():
 def _both(monkeypatch, scene, batch, read):
     out = []
     for limit in (0, 1 << 20):  # the ray test alone, then the conic first; a renderer each (it keeps its programs)
+        monkeypatch.setattr(R, "CONIC_MIN_FACE", 1)
         monkeypatch.setattr(R, "CONIC_MAX_FACE", limit)
         out.append(np.asarray(read(R.SplatRenderer(scene).render(batch))))
     return out
@@ -55,6 +56,8 @@ def test_both_rasters_on_a_real_capture(monkeypatch):
     assert plain[..., 3].mean() > 0.1
 
 
-def test_small_faces_use_the_conic_kernel():
-    small, large = ViewBatch.cubemap(np.zeros(3), R.CONIC_MAX_FACE), ViewBatch.cubemap(np.zeros(3), 2 * R.CONIC_MAX_FACE)
-    assert R.raster_conic(small) and not R.raster_conic(large)
+def test_which_faces_use_the_conic_kernel():
+    def conic(face):
+        return R.raster_conic(ViewBatch.cubemap(np.zeros(3), face))
+    assert conic(R.CONIC_MIN_FACE) and conic(R.CONIC_MAX_FACE)
+    assert not conic(R.CONIC_MIN_FACE - 1) and not conic(R.CONIC_MAX_FACE + 1)

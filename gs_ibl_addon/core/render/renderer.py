@@ -88,18 +88,20 @@ def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk
 
 # Benchmarks only: a timestamp after each step of both sorts (labels "<stage>.hist", ".scan", ".scatter").
 PROFILE_SORTS = False
-# Faces up to this size raster with each pair's footprint conic tested before the ray test (gs_raster_conic):
-# their tiles hold many pairs for 256 pixels, and the cheap test is what a pixel mostly does. Measured on an H200
-# (docs/benchmarks.md, 2026-12-03), raster ms at 6M splats: 64² random 3.52 -> 2.37, shell 12.67 -> 8.27; at 256²
-# slower (1.31 -> 1.66, 5.50 -> 6.05) and at 1024² more so, where each tile's few batches of pairs are bound by
-# their loads and the conic's setup and registers cost more than the test saves. Lavapipe: 32² -10%, 64²-128² -2%,
-# 256² +11%.
-CONIC_MAX_FACE = 128
+# Faces from CONIC_MIN_FACE to CONIC_MAX_FACE raster with each pair's footprint conic tested before the ray test
+# (gs_raster_conic): their tiles hold many pairs for 256 pixels, and the cheap test is what a pixel mostly does.
+# Measured on an H200 (docs/benchmarks.md, 2026-12-03), raster ms at 6M splats, ray test alone -> conic first:
+# 64² random 3.52 -> 2.47, shell 12.67 -> 8.73; 128² 1.78 and 6.59 with it; at 256² slower (random 1.31 -> 1.66,
+# shell 5.50 -> 6.05) and at 1024² more so, where each tile's few batches of pairs are bound by their loads and the
+# conic's setup and registers cost more than the test saves; at 32² slower too (1M splats 0.66 -> 0.78, a 13k-node
+# level-of-detail cut 0.031 -> 0.044). Lavapipe: within +-10% everywhere up to 256².
+CONIC_MIN_FACE, CONIC_MAX_FACE = 64, 128
 
 
 def raster_conic(batch: ViewBatch) -> bool:
-    """Whether ``batch`` rasters with the conic pre-test (every view no larger than CONIC_MAX_FACE)."""
-    return max(max(v.width, v.height) for v in batch.views) <= CONIC_MAX_FACE
+    """Whether ``batch`` rasters with the conic pre-test (every view's larger side within the conic's range)."""
+    sides = [max(v.width, v.height) for v in batch.views]
+    return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
