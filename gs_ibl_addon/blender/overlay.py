@@ -442,17 +442,26 @@ def _schedule_retry() -> None:
     bpy.app.timers.register(retry, first_interval=0.25)
 
 
+def _quad_info(iface_name: str):
+    """A shader description for a screen quad: position and texture coordinate in, uv out, _VERTEX as its vertex
+    stage; the caller adds its samplers, constants and fragment stage."""
+    import gpu
+    iface = gpu.types.GPUStageInterfaceInfo(iface_name)
+    iface.smooth("VEC2", "uv")
+    info = gpu.types.GPUShaderCreateInfo()
+    info.vertex_in(0, "VEC2", "pos")
+    info.vertex_in(1, "VEC2", "texCoord")
+    info.vertex_out(iface)
+    info.vertex_source(_VERTEX)
+    return info
+
+
 def _shader_get():
     """Our image shader: display colour and gl_FragDepth from the renderer's images (made once per session)."""
     global _shader
     if _shader is None:
         import gpu
-        iface = gpu.types.GPUStageInterfaceInfo("gs_ibl_overlay_iface")
-        iface.smooth("VEC2", "uv")
-        info = gpu.types.GPUShaderCreateInfo()
-        info.vertex_in(0, "VEC2", "pos")
-        info.vertex_in(1, "VEC2", "texCoord")
-        info.vertex_out(iface)
+        info = _quad_info("gs_ibl_overlay_iface")
         info.sampler(0, "FLOAT_2D", "image")
         info.sampler(1, "FLOAT_2D", "depth_image")
         info.push_constant("FLOAT", "alpha_cut")
@@ -463,7 +472,6 @@ def _shader_get():
         info.fragment_out(0, "VEC4", "fragColor")
         if hasattr(info, "depth_write"):  # Vulkan/Metal backends must be told; OpenGL needs no declaration
             info.depth_write("ANY")
-        info.vertex_source(_VERTEX)
         info.fragment_source(_FRAGMENT)
         _shader = gpu.shader.create_from_info(info)
     return _shader
@@ -474,12 +482,7 @@ def _composite_shader_get():
     global _composite_shader
     if _composite_shader is None:
         import gpu
-        iface = gpu.types.GPUStageInterfaceInfo("gs_ibl_composite_iface")
-        iface.smooth("VEC2", "uv")
-        info = gpu.types.GPUShaderCreateInfo()
-        info.vertex_in(0, "VEC2", "pos")
-        info.vertex_in(1, "VEC2", "texCoord")
-        info.vertex_out(iface)
+        info = _quad_info("gs_ibl_composite_iface")
         info.sampler(0, "FLOAT_2D", "snapshot_ba")  # b + 256 a
         info.sampler(11, "FLOAT_2D", "snapshot_rg")  # r + 256 g
         info.sampler(1, "FLOAT_2D", "scene_depth_tx")
@@ -504,7 +507,6 @@ def _composite_shader_get():
         info.push_constant("VEC4", "eye")
         info.push_constant("MAT4", "view_inv")
         info.fragment_out(0, "VEC4", "fragColor")
-        info.vertex_source(_VERTEX)
         info.fragment_source(_COMPOSITE_FRAGMENT)
         _composite_shader = gpu.shader.create_from_info(info)
     return _composite_shader
