@@ -222,16 +222,21 @@ def _grid(scene: SplatScene) -> tuple[np.ndarray, float, int]:
 
 
 def _moments_of_splats(scene: SplatScene, sel: np.ndarray) -> tuple[_Moments, np.ndarray]:
+    # Millions of splats (a capture's motion copy, coarse.py; a tree): only the covariance's six entries are formed,
+    # and the SH, the largest part, stay float32 per splat (np.bincount sums them in float64 when merging): the
+    # (N, 3, 3) covariances and a float64 copy of the SH took most of a 3M-splat copy's build.
     rot = quat_to_matrix(scene.rotations[sel])
     q = scene.scales[sel].astype(np.float64) ** 2
-    cov = np.einsum("nij,nj,nkj->nik", rot, q, rot)
     w = scene.opacities[sel].astype(np.float64) * mean_footprint(scene.scales[sel])
     mu = scene.positions[sel].astype(np.float64)
-    m2 = np.stack([w * (cov[:, i, j] + mu[:, i] * mu[:, j]) for i, j in _PAIRS], 1)
-    sh = scene.sh[sel].astype(np.float64)
+    m2 = np.stack([w * (np.sum(rot[:, i] * rot[:, j] * q, 1) + mu[:, i] * mu[:, j]) for i, j in _PAIRS], 1)
+    every = bool(sel.all())  # a boolean selection copies (N, K, 3) floats: skip it when it takes them all
+    sh = scene.sh if every else scene.sh[sel]
     if scene.colour_space == "srgb":
-        sh = _sh_to_linear(sh)
-    sh = sh.reshape(int(sel.sum()), -1) * w[:, None]
+        sh = _sh_to_linear(sh).astype(np.float32)
+        every = False  # a fresh array: weighted in place
+    sh = sh.reshape(len(w), -1)
+    sh = sh * w.astype(np.float32)[:, None] if every else np.multiply(sh, w.astype(np.float32)[:, None], out=sh)
     return _Moments(w, mu * w[:, None], m2, sh), w
 
 
