@@ -11,8 +11,9 @@ holding two or more splats becomes one splat by lod.py's moment matching (weight
 weighted mean, second moment and SH; the random-medium opacity), which keeps a cell's coverage, so surfaces stay
 closed where a random subset of the same size would turn see-through. A cell holding one splat keeps it unchanged.
 
-Built in numpy with no GPU work, so it can run on a worker thread: on this 2-core machine, at load ~3.5, 2.1-2.4 s
-at 1M splats and 6.7-8.4 s at 3M with the copy's octree (docs/benchmarks.md, "Overlay while the view moves").
+Built in numpy with no GPU work, so it can run on a worker thread: on this 2-core machine, idle, 1.1 s at 1M splats
+and 4.1 s at 3M (DC-only, as the overlay's host copy is; 2.3 and 5.9 s before lod.py's moments were made lean,
+2026-12-03; docs/benchmarks.md, "Overlay while the view moves").
 """
 from __future__ import annotations
 
