@@ -61,18 +61,21 @@ void footprint_conic(View vw, vec4 w0, vec4 w1, vec4 w2, float cut, out vec4 qa,
 #endif
 shared uint s_done;
 
-// Pair k of the batch along the pixel's ray d: composited front to back if the ray passes within its footprint.
-// Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then
-// composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance behind.
-#ifdef RASTER_CONIC
-// Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may).
+// Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may); without the
+// conic, every pair may.
 bool conic_hit(uint k, float s, float t) {
+#ifdef RASTER_CONIC
     vec4 qa = s_qa[k], qb = s_qb[k];
     float ds = s - qa.x, dt = t - qa.y;
     return !(ds * (qa.z * ds + qb.x * dt + qb.y) + dt * (qa.w * dt + qb.z) + qb.w > 0.0);
-}
+#else
+    return true;
 #endif
+}
 
+// Pair k of the batch along the pixel's ray d: composited front to back if the ray passes within its footprint.
+// Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then
+// composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance behind.
 bool composite(uint k, vec3 d, inout vec3 color, inout float T, inout float zsum) {
     vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
     vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
@@ -131,11 +134,7 @@ void main() {
         barrier();
         if (s_done == 256u) break;
         uint batch = min(256u, range.y - start);
-#ifdef RASTER_CONIC
         for (uint k = 0u; k < batch && !done; ++k) if (conic_hit(k, s, t)) done = composite(k, d, color, T, zsum);
-#else
-        for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, color, T, zsum);
-#endif
     }
     uint pixel = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;
     if (inside) {
