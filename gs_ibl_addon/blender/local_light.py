@@ -11,8 +11,9 @@ keeps the emission non-negative (EEVEE clamps negative emission): core/probe/loc
 says why. The emission is also scaled by the mesh's own ambient occlusion (Only Local): the engines shadow the
 user's shader, not emission. The group has two outputs, one per engine, read by the user's Material Output and by
 an EEVEE-only output of ours: Cycles H = E + D over B = E (the World probe's irradiance image), EEVEE H = W + D over
-its order-1 part of W (the World probe's order-2 coefficients) as EEVEE derings it. Irradiance is order-2 SH, kept as the nine monomial
-coefficients of core/probe/grid.py, so each of W and D is a sum of nine colours times polynomials of the normal.
+its order-1 part of W (the World probe's order-2 coefficients) as EEVEE derings it. Irradiance is order-2 SH, kept
+as the nine monomial coefficients of core/probe/grid.py, so each of W and D is a sum of nine colours times
+polynomials of the normal.
 
 Every kind of local light is a grid (a per-object probe is a 1 x 1 x 1 grid at the mesh's centre), and every grid
 is a tile (core/probe/grid.py ``pack_grid``) of one float image per file, the atlas, stacked from the bottom
@@ -272,9 +273,8 @@ def _build(tree, atlas) -> None:
             total = term if total is None else b.vec("ADD", total, term)
         return total
     coeffs, weight = _grid_lookups(b, geo.outputs["Position"], atlas)
-    world_coeffs = _world_coefficients(atlas)
-    world = [b.const(c) for c in world_coeffs]
-    w_sh = poly_sum(world)
+    world = _world_coefficients(atlas)
+    w_sh = poly_sum([b.const(c) for c in world])
     irr = atlas.get(WORLD_IRRADIANCE)
     if isinstance(irr, bpy.types.Image):
         w_image = latlong_lookup(tree, geo.outputs["Normal"], irr, name="GS-IBL World Irradiance")
@@ -283,8 +283,8 @@ def _build(tree, atlas) -> None:
     delta = b.scale(poly_sum(coeffs), weight)
     # (H, B) per output: Cycles E + D over E; EEVEE W + D over its order-1 World (core/probe/local_mix.py says why)
     paths = {"Shader": (b.vec("ADD", w_image, delta), w_image),
-             "EEVEE": (b.vec("ADD", w_sh, delta), b.vec("MAXIMUM", poly_sum([b.const(c) for c in eevee_world_order1(world_coeffs)]),
-                                                            (0.0, 0.0, 0.0)))}
+             "EEVEE": (b.vec("ADD", w_sh, delta),
+                       b.vec("MAXIMUM", poly_sum([b.const(c) for c in eevee_world_order1(world)]), (0.0, 0.0, 0.0)))}
     # the emission is light the engine does not trace: its own mesh's occlusion of it (Only Local AO) stands in
     # for the shadows the user's shader gets from the World (a convex mesh: 1)
     ao = N.new("ShaderNodeAmbientOcclusion")

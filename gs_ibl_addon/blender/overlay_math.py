@@ -251,7 +251,7 @@ class SplatOverlay:
 
     def prepare_motion(self) -> None:
         """Start building the motion copy (once) if the scene is over the budget: a thread of its own, seconds of
-        numpy (3M splats: ~7 s on this CPU)."""
+        numpy (3M splats: ~4 s on this CPU, core/render/coarse.py)."""
         src = self._motion_source
         if self.motion is None and src is not None and src.count > self.motion_budget:
             self.motion = MotionCopy(src, self.motion_budget, self._background)

@@ -126,17 +126,17 @@ class RadixSorter:
             drop = i == 0 and drop_key is not None
             push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index,
                     "drop": int(drop), "drop_key": int(drop_key or 0)}
-            rec.dispatch(hist_k, [src_k, self.hist, count], g,
-                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds)))
+            if self.digit_bits == 8:  # the 8-bit kernels' blocks, and how the scatter reads and writes them
+                push["block_rounds"] = self.block_rounds
+            rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
             stamp("hist")
             if scan:
                 total, total_at = self.scanner.record(rec, self.hist, self.bins * self.n_blocks), 0
                 stamp("scan")
             else:
                 total, total_at = self.hist, 4 * self.bins * self.n_blocks
-            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g,
-                         **(push if self.digit_bits != 8 else dict(push, block_rounds=self.block_rounds, scanned=int(scan),
-                                                                 coalesce=COALESCE)))
+            scatter_push = push if self.digit_bits != 8 else dict(push, scanned=int(scan), coalesce=COALESCE)
+            rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g, **scatter_push)
             if drop:  # the histogram's total is what the first pass kept
                 rec.copy(total, count, 4, src_offset=total_at, dst_offset=4 * count_index)
             stamp("scatter")

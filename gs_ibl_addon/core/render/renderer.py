@@ -103,6 +103,7 @@ def raster_conic(batch: ViewBatch) -> bool:
     sides = [max(v.width, v.height) for v in batch.views]
     return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
 
+
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
 # GPU bytes per (probe, splat) pair: prepared (PREP vec4), tile rectangles (MAX_VIEWS uvec2), tile count, depth

@@ -45,6 +45,7 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
 
 
 _SORT_PUSH = "n_blocks shift count_index drop drop_key"
+_RASTER = ("Views Ranges InstVal Prepared Image Depth", "n_views total_tiles chunks total_pixels write_depth", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
@@ -56,10 +57,8 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("gs_emit", "Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners",
        "n capacity n_views n_tiles"),
     _k("gs_ranges", "InstKey Count Ranges"),
-    _k("gs_raster", "Views Ranges InstVal Prepared Image Depth",
-       "n_views total_tiles chunks total_pixels write_depth", (16, 16)),
-    _k("gs_raster_conic", "Views Ranges InstVal Prepared Image Depth",
-       "n_views total_tiles chunks total_pixels write_depth", (16, 16)),
+    _k("gs_raster", *_RASTER),
+    _k("gs_raster_conic", *_RASTER),  # the same gs_raster.glsl with the conic pre-test
     _k("gs_merge", "Partial Image PartialDepth Depth", "chunks total_pixels write_depth"),
     # prefix sums and radix sorts (render/gpu_sort.py)
     _k("scan_block", "Data Sums", "n"),
