@@ -344,6 +344,8 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--block", type=int, default=10)
     ap.add_argument("--coalesce", type=int, choices=(0, 1), help="radix8_scatter's way of writing (gpu_sort.COALESCE)")
+    ap.add_argument("--conic-faces", help="MIN:MAX, the face sizes that raster with the conic pre-test "
+                    "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
     ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
@@ -351,6 +353,9 @@ def main() -> None:
     if args.coalesce is not None:
         from gs_ibl_addon.core.render import gpu_sort
         gpu_sort.COALESCE = args.coalesce
+    if args.conic_faces:
+        from gs_ibl_addon.core.render import renderer
+        renderer.CONIC_MIN_FACE, renderer.CONIC_MAX_FACE = (int(x) for x in args.conic_faces.split(":"))
     {"bench": run_bench, "plot": run_plot}[args.mode](args)
 
 

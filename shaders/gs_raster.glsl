@@ -25,9 +25,7 @@ shared float s_cut[256];
 // Per pair, its footprint as a conic in this view's image plane, centred on the splat (footprint_conic): a pixel
 // tests it (two loads, a few multiply-adds) before the ray test, which most pairs fail in most of a tile when the
 // tile holds many pairs for its pixels (small faces). Large faces use the kernel without it (renderer.py
-// CONIC_MAX_FACE says why). Testing 32 pairs' conics first and then ray-testing the passes (a bitmask) was faster on
-// an H200 but gave wrong images on lavapipe, for a reason not found (one tile of the guitar test; the same tests
-// one pair at a time are right): not kept.
+// CONIC_MAX_FACE says why).
 shared vec4 s_qa[256], s_qb[256];
 
 // The rays d = fwd + s right + t down that the ray test accepts, m(d) = |o' x Wd|^2 / |Wd|^2 <= c, are those with
@@ -61,17 +59,14 @@ void footprint_conic(View vw, vec4 w0, vec4 w1, vec4 w2, float cut, out vec4 qa,
 #endif
 shared uint s_done;
 
-// Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may); without the
-// conic, every pair may.
-bool conic_hit(uint k, float s, float t) {
 #ifdef RASTER_CONIC
+// Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may).
+bool conic_hit(uint k, float s, float t) {
     vec4 qa = s_qa[k], qb = s_qb[k];
     float ds = s - qa.x, dt = t - qa.y;
     return !(ds * (qa.z * ds + qb.x * dt + qb.y) + dt * (qa.w * dt + qb.z) + qb.w > 0.0);
-#else
-    return true;
-#endif
 }
+#endif
 
 // Pair k of the batch along the pixel's ray d: composited front to back if the ray passes within its footprint.
 // Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then
@@ -134,7 +129,23 @@ void main() {
         barrier();
         if (s_done == 256u) break;
         uint batch = min(256u, range.y - start);
-        for (uint k = 0u; k < batch && !done; ++k) if (conic_hit(k, s, t)) done = composite(k, d, color, T, zsum);
+#ifdef RASTER_CONIC
+        // 32 pairs' conics first, then the ray test of those that pass, lowest first (front to back). The mask
+        // loop runs its 32 steps whatever the batch holds, the bound tested inside: bounded by the batch's
+        // remainder, lavapipe rastered one tile of the guitar test wrongly.
+        for (uint k0 = 0u; k0 < batch && !done; k0 += 32u) {
+            uint mask = 0u;
+            for (uint j = 0u; j < 32u; ++j)
+                if (k0 + j < batch && conic_hit(k0 + j, s, t)) mask |= 1u << j;
+            while (mask != 0u && !done) {
+                uint j = uint(findLSB(mask));
+                mask &= mask - 1u;
+                done = composite(k0 + j, d, color, T, zsum);
+            }
+        }
+#else
+        for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, color, T, zsum);
+#endif
     }
     uint pixel = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;
     if (inside) {

@@ -89,13 +89,13 @@ def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk
 # Benchmarks only: a timestamp after each step of both sorts (labels "<stage>.hist", ".scan", ".scatter").
 PROFILE_SORTS = False
 # Faces from CONIC_MIN_FACE to CONIC_MAX_FACE raster with each pair's footprint conic tested before the ray test
-# (gs_raster_conic): their tiles hold many pairs for 256 pixels, and the cheap test is what a pixel mostly does.
-# Measured on an H200 (docs/benchmarks.md, 2026-12-03), raster ms at 6M splats, ray test alone -> conic first:
-# 64² random 3.52 -> 2.47, shell 12.67 -> 8.73; 128² 1.78 and 6.59 with it; at 256² slower (random 1.31 -> 1.66,
-# shell 5.50 -> 6.05) and at 1024² more so, where each tile's few batches of pairs are bound by their loads and the
-# conic's setup and registers cost more than the test saves; at 32² slower too (1M splats 0.66 -> 0.78, a 13k-node
-# level-of-detail cut 0.031 -> 0.044). Lavapipe: within +-10% everywhere up to 256².
-CONIC_MIN_FACE, CONIC_MAX_FACE = 64, 128
+# (gs_raster_conic: 32 pairs' conics, then the ray test of those that pass): their tiles hold many pairs for 256
+# pixels, and the cheap test is what a pixel mostly does. Raster ms on an H200 (docs/benchmarks.md, 2026-12-03), ray
+# test alone -> conic first: 6M splats at 64² random 3.52 -> 1.81, shell 12.67 -> 6.53; at 256² random 1.32 -> 1.31,
+# shell 5.67 -> 4.33 (1M: 0.36 -> 0.48, 1.02 -> 0.90); at 1024² slower (6M 3.22 -> 5.49, 9.71 -> 10.40), where each
+# tile holds a few batches of pairs and the conic's setup and registers cost more than the test saves; at 32² slower
+# too (1M splats 0.66 -> 0.78, a 13k-node level-of-detail cut 0.031 -> 0.044). Lavapipe: within +-10% up to 256².
+CONIC_MIN_FACE, CONIC_MAX_FACE = 64, 256
 
 
 def raster_conic(batch: ViewBatch) -> bool:
