@@ -4,7 +4,7 @@ Target: white spheres and Suzannes at five places (centre, by the window, far co
 within 3% of the mean of native Cycles at 8,192 spp (denoiser off), in Cycles and in EEVEE.
 
 Run:  .venv/bin/python benchmarks/auto_light_bench.py [--native-samples 8192] [--samples 256] [--eevee-samples 16]
-      [--places centre,window] [--meshes sphere] [--steps native,world,auto]
+      [--places centre,window] [--meshes sphere] [--steps native,world,auto]  (without native: the last run's)
       .venv/bin/python benchmarks/auto_light_bench.py --replot build/auto-light/run   (tables and chart again)
 Needs the trixie root (scripts/blender_roots.sh ensure trixie). The Blender side is benchmarks/auto_light_scene.py,
 run in bpy 5.3 with the built zip installed by Blender's own installer through tests/real_blender/test_matrix.py's
@@ -186,6 +186,23 @@ def report(rows: list[dict], result: dict, args: dict) -> str:
     return "\n".join(lines)
 
 
+def _kept_natives(run: Path, args: dict) -> dict:
+    """A run without the "native" step keeps the last run's references (their renders and times), when that run
+    rendered them alike (same samples, size and places); else none, and its cells are left out."""
+    try:
+        prev_args = json.loads((run / "args.json").read_text())
+        prev = json.loads((run / "result.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    same = all(prev_args.get(k) == args[k] for k in ("native_samples", "size", "radius", "suzanne_size", "fov_deg"))
+    if not same:
+        return {}
+    keys = {f"native_{m}_{p}" for m in args["meshes"] for p in args["places"]
+            if prev_args.get("places", {}).get(p) == args["places"][p]}
+    return {"files": {f"{k}.npy": (run / f"{k}.npy").read_bytes() for k in keys if (run / f"{k}.npy").exists()},
+            "times": {k: v for k, v in prev.get("times", {}).items() if k in keys}}
+
+
 def _finish(run: Path, write: bool) -> None:
     result = json.loads((run / "result.json").read_text())
     args = json.loads((run / "args.json").read_text())
@@ -268,9 +285,14 @@ def main() -> None:
         if len(head):  # Blender's importer put the splats where our reader does: the places are where meant
             result["positions_max_diff"] = float(np.abs(head - room.positions[:len(head)]).max())
     finally:
+        kept = _kept_natives(run, args) if "native" not in args["steps"] else {}
         shutil.rmtree(run, ignore_errors=True)
         shutil.copytree(runner.host, run, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
         runner.close()
+        for name, data in kept.get("files", {}).items():
+            (run / name).write_bytes(data)
+        if result.get("times") is not None:
+            result["times"] = {**kept.get("times", {}), **result["times"]}
     (run / "result.json").write_text(json.dumps(result, indent=1))
     (run / "args.json").write_text(json.dumps(args, indent=1))
     if not result.get("ok"):

@@ -28,7 +28,8 @@ def test_measure_points_and_grid_keep_off_the_floor():
     lo, hi = np.array([0.0, 0.0, 0.0]), np.array([1.0, 2.0, 0.5])  # a mesh resting on the floor at z = 0
     pts = measure_points(lo, hi)
     assert pts.shape == (9, 3) and np.allclose(pts[0], (lo + hi) / 2)
-    assert pts[1:, 2].min() > 0.05  # its lowest probes stand above the floor's splats
+    # its lowest probes stand above the floor's splats: (1 - SHRINK) / 2 of its height, 3.75 cm here
+    assert pts[1:, 2].min() > 0.03
     flat = mesh_grid([0, 0, 0], [1, 1, 0.01])  # a thin plate gets one node across its thickness
     assert flat.shape == (3, 3, 1)
 
