@@ -186,6 +186,12 @@ def report(rows: list[dict], result: dict, args: dict) -> str:
     return "\n".join(lines)
 
 
+def _options(text: str) -> dict:
+    """"KEY=VALUE,..." (values as JSON; True/False as Python writes them) -> {KEY: value}."""
+    return {k: json.loads(v.lower() if v in ("True", "False") else v)
+            for k, v in (kv.split("=", 1) for kv in text.split(",") if kv)}
+
+
 def _kept_natives(run: Path, args: dict) -> dict:
     """A run without the "native" step keeps the last run's references (their renders and times), when that run
     rendered them alike (same samples, size and places); else none, and its cells are left out."""
@@ -194,7 +200,8 @@ def _kept_natives(run: Path, args: dict) -> dict:
         prev = json.loads((run / "result.json").read_text())
     except (OSError, ValueError):
         return {}
-    same = all(prev_args.get(k) == args[k] for k in ("native_samples", "size", "radius", "suzanne_size", "fov_deg"))
+    same = (all(prev_args.get(k) == args[k] for k in ("native_samples", "size", "radius", "suzanne_size", "fov_deg"))
+            and prev_args.get("cycles_settings", {}) == args["cycles_settings"])
     if not same:
         return {}
     keys = {f"native_{m}_{p}" for m in args["meshes"] for p in args["places"]
@@ -245,6 +252,8 @@ def main() -> None:
     ap.add_argument("--steps", default="native,world,auto")
     ap.add_argument("--eevee-set", default="", metavar="KEY=VALUE,...",
                     help="EEVEE options for a trial (scene.eevee, e.g. use_fast_gi=False,clamp_surface_indirect=0)")
+    ap.add_argument("--cycles-set", default="", metavar="KEY=VALUE,...",
+                    help="Cycles options for a trial, every render (scene.cycles, e.g. diffuse_bounces=0)")
     ap.add_argument("--no-write", action="store_true", help="leave docs/ alone (a trial run)")
     ap.add_argument("--replot", metavar="RUN", help="tables, CSV and chart again from a kept run folder")
     a = ap.parse_args()
@@ -277,8 +286,7 @@ def main() -> None:
                 "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": a.native_samples,
                 "samples": a.samples, "eevee_samples": a.eevee_samples, "threads": a.threads,
                 "steps": a.steps.split(","), "date": time.strftime("%Y-%m-%d"),
-                "eevee_settings": {k: json.loads(v.lower() if v in ("True", "False") else v)
-                                   for k, v in (kv.split("=", 1) for kv in a.eevee_set.split(",") if kv)}}
+                "eevee_settings": _options(a.eevee_set), "cycles_settings": _options(a.cycles_set)}
         result = matrix.run_script(runner, HERE / "auto_light_scene.py", args, RESULT_TAG, "auto")
         result["wall_s"] = time.perf_counter() - t_start
         head = np.asarray(result.get("positions_head", []))

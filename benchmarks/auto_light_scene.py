@@ -58,6 +58,8 @@ def _setup() -> None:
     c.transparent_max_bounces = 256
     c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
     c.filter_width = 0.01
+    for key, value in ARGS.get("cycles_settings", {}).items():  # a trial of Cycles' own options (every render)
+        setattr(c, key, value)
 
 
 def _material() -> bpy.types.Material:
