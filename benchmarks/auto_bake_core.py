@@ -51,7 +51,7 @@ def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
     t["measurement"] = time.perf_counter()
     if choice.kind == "grid":  # the nodes the measurement did not place, as blender/auto_light.py
-        spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS)
+        spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
         bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
     t["grid"] = time.perf_counter()
     names = list(t)

@@ -43,6 +43,9 @@ def test_a_grid_reuses_the_measured_nodes():
     m = measured_nodes(spec, pts)
     assert (m >= 0).sum() == 9 and sorted(m[m >= 0].tolist()) == list(range(9))
     np.testing.assert_allclose(spec.points().reshape(-1, 3)[m >= 0], pts[m[m >= 0]], atol=1e-12)
+    dense = mesh_grid(lo, hi, variation=1.5)  # light changing by more than its mean across it: 5 x 5 x 5
+    md = measured_nodes(dense, pts)
+    assert dense.shape == (5, 5, 5) and (md >= 0).sum() == 9 and (dense.lo, dense.hi) == (spec.lo, spec.hi)
     flat = mesh_grid(lo, np.array([0.8, 0.3, 1.0]))  # no height: one node along z
     mf = measured_nodes(flat, measure_points(lo, np.array([0.8, 0.3, 1.0])))
     assert flat.count == 9 and (mf >= 0).sum() == 5  # the centre and four corners; the edge middles are new

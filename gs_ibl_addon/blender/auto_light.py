@@ -71,7 +71,7 @@ def auto_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object,
             tiles[keys[name]] = ll.probe_tile(points[9 * i], d[9 * i] - d_world)
         elif c.kind == "grid":
             keys[name] = f"object:{name}"
-            grids[i] = mesh_grid(*box)
+            grids[i] = mesh_grid(*box, c.variation)
     if grids:  # the grids' nodes the measurement did not place: one more batch
         reuse = {i: measured_nodes(spec, points[9 * i:9 * i + 9]) for i, spec in grids.items()}
         fresh = {i: spec.points().reshape(-1, 3)[reuse[i] < 0] for i, spec in grids.items()}

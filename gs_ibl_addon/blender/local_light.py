@@ -3,17 +3,18 @@
 The World (one probe) keeps lighting every mesh: background, specular and diffuse. A mesh whose light differs
 from the World probe's gets it through its material:
 
-    surface = s x the user's shader + Emission(albedo x strength x (H(n) - s B(n)))
+    surface = s x the user's shader + Emission(albedo x strength x (H(n) - s B(n)))          (EEVEE)
+    surface = s x the user's shader + (1 - s) x Diffuse(albedo) + Emission(... (H(n) - B(n)))  (Cycles)
 
 where H is the mesh's light (the World probe's plus D, the mesh's difference: its own probe, or its grid at the
 shading point), B what the user's shader gets from the World in this engine and s the largest scale in 0..1 that
-keeps the emission non-negative (EEVEE clamps negative emission): core/probe/local_mix.py is the numpy twin and
-says why. The emission is also scaled by the mesh's own ambient occlusion (Only Local): the engines shadow the
-user's shader, not emission. The group has two outputs, one per engine, read by the user's Material Output and by
-an EEVEE-only output of ours: Cycles H = E + D over B = E (the World probe's irradiance image), EEVEE H = W + D over
-its order-1 part of W (the World probe's order-2 coefficients) as EEVEE derings it. Irradiance is order-2 SH, kept
-as the nine monomial coefficients of core/probe/grid.py, so each of W and D is a sum of nine colours times
-polynomials of the normal.
+keeps the emission non-negative (EEVEE clamps negative emission; Cycles keeps it, and the World's diffuse stays
+traced there): core/probe/local_mix.py is the numpy twin and says why. The emission is also scaled by the mesh's own
+ambient occlusion (Only Local): the engines shadow the user's shader, not emission. The group has two outputs, one
+per engine, read by the user's Material Output and by an EEVEE-only output of ours: Cycles H = E + D over B = E (the
+World probe's irradiance image), EEVEE H = W + D over its order-1 part of W (the World probe's order-2 coefficients)
+as EEVEE derings it. Irradiance is order-2 SH, kept as the nine monomial coefficients of core/probe/grid.py, so each
+of W and D is a sum of nine colours times polynomials of the normal.
 
 Every kind of local light is a grid (a per-object probe is a 1 x 1 x 1 grid at the mesh's centre), and every grid
 is a tile (core/probe/grid.py ``pack_grid``) of one float image per file, the atlas, stacked from the bottom
@@ -248,7 +249,8 @@ class _Nodes:
 
 def _build(tree, atlas) -> None:
     """(Re)build the group's nodes (core/probe/local_mix.py in nodes): per engine s x shader + Emission(albedo x
-    strength x (H - s B)), with w D = w sum_k c_k(P) P_k(n) the mesh's difference. Cycles: H = E + w D over B = E,
+    strength x (H - s B)) (Cycles: s x shader + (1 - s) x Diffuse(albedo) + Emission(albedo x strength x (H - B))),
+    with w D = w sum_k c_k(P) P_k(n) the mesh's difference. Cycles: H = E + w D over B = E,
     E the World probe's irradiance image along n (what Cycles' diffuse gets from that World; its order-2
     coefficients W where the atlas names no image). EEVEE: H = W + w D over B = EEVEE's order-1 part of W. Without
     an atlas both outputs pass the shader through."""
@@ -294,10 +296,19 @@ def _build(tree, atlas) -> None:
         rx, ry, rz = b.separate(b.vec("DIVIDE", here, b.vec("MAXIMUM", base, (EPS, EPS, EPS))))
         s = b.math("MINIMUM", b.math("MINIMUM", rx, ry), rz)
         s.node.use_clamp = True  # 0..1
-        mixer = N.new("ShaderNodeMixShader")  # Fac 1 - s: s x the shader, the rest nothing (no second shader)
+        # Fac 1 - s: s x the shader, and the rest: in EEVEE nothing (no second shader), in Cycles a diffuse of the
+        # albedo, so the World's diffuse light stays traced (shadowed) whole and only the difference H - B is
+        # emitted, signed (local_mix.py: the AO stand-in then scales D alone, not the (1 - s) B moved into it)
+        mixer = N.new("ShaderNodeMixShader")
         L.new(b.math("SUBTRACT", 1.0, s), mixer.inputs["Fac"])
         L.new(gin.outputs["Shader"], mixer.inputs[1])
-        rest = b.scale(b.vec("SUBTRACT", here, b.scale(base, s)), ao.outputs["AO"])
+        if out_name == "Shader":
+            diffuse = N.new("ShaderNodeBsdfDiffuse")
+            L.new(gin.outputs["Albedo"], diffuse.inputs["Color"])
+            L.new(diffuse.outputs[0], mixer.inputs[2])
+            rest = b.scale(b.vec("SUBTRACT", here, base), ao.outputs["AO"])
+        else:
+            rest = b.scale(b.vec("SUBTRACT", here, b.scale(base, s)), ao.outputs["AO"])
         lit = b.vec("MULTIPLY", b.scale(rest, gin.outputs["Strength"]), gin.outputs["Albedo"])
         emit = N.new("ShaderNodeEmission")
         L.new(lit, emit.inputs["Color"])
