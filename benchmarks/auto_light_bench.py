@@ -187,27 +187,33 @@ def report(rows: list[dict], result: dict, args: dict) -> str:
 
 
 def _options(text: str) -> dict:
-    """"KEY=VALUE,..." (values as JSON; True/False as Python writes them) -> {KEY: value}."""
-    return {k: json.loads(v.lower() if v in ("True", "False") else v)
-            for k, v in (kv.split("=", 1) for kv in text.split(",") if kv)}
+    """"KEY=VALUE,..." -> {KEY: value}: values as JSON (True/False as Python writes them), else as text (CPU)."""
+    def value(v: str):
+        try:
+            return json.loads(v.lower() if v in ("True", "False") else v)
+        except ValueError:
+            return v
+    return {k: value(v) for k, v in (kv.split("=", 1) for kv in text.split(",") if kv)}
 
 
 def _kept_natives(run: Path, args: dict) -> dict:
     """A run without the "native" step keeps the last run's references (their renders and times), when that run
-    rendered them alike (same samples, size and places); else none, and its cells are left out."""
+    rendered them alike (same samples, size, meshes' albedo and places; main() checks the Blender); else none, and
+    its cells are left out."""
     try:
         prev_args = json.loads((run / "args.json").read_text())
         prev = json.loads((run / "result.json").read_text())
     except (OSError, ValueError):
         return {}
-    same = (all(prev_args.get(k) == args[k] for k in ("native_samples", "size", "radius", "suzanne_size", "fov_deg"))
+    same = (all(prev_args.get(k) == args[k]
+                for k in ("native_samples", "size", "radius", "suzanne_size", "fov_deg", "albedo"))
             and prev_args.get("cycles_settings", {}) == args["cycles_settings"])
     if not same:
         return {}
     keys = {f"native_{m}_{p}" for m in args["meshes"] for p in args["places"]
             if prev_args.get("places", {}).get(p) == args["places"][p]}
     return {"files": {f"{k}.npy": (run / f"{k}.npy").read_bytes() for k in keys if (run / f"{k}.npy").exists()},
-            "times": {k: v for k, v in prev.get("times", {}).items() if k in keys}}
+            "times": {k: v for k, v in prev.get("times", {}).items() if k in keys}, "blender": prev.get("blender")}
 
 
 def _finish(run: Path, write: bool) -> None:
@@ -271,36 +277,40 @@ def main() -> None:
     from gs_ibl_addon.core.colour import linear_sh_for_srgb_rule
     from gs_ibl_addon.core.formats import read_scene
     from gs_ibl_addon.core.formats.ply import write_ply
+    unknown = [p for p in a.places.split(",") if p not in PLACES]
+    if unknown:  # before the runner: a failed run replaces the last run's folder (and its references)
+        sys.exit(f"unknown --places {','.join(unknown)}: choose from {','.join(PLACES)}")
+    places = {p: PLACES[p] for p in a.places.split(",")}
     t_start = time.perf_counter()
     runner = matrix.Runner(entry, None)
     run = WORK / "run"
     result: dict = {}
+    kept: dict = {}
     try:
         room = read_scene(REPO / "samples" / "room.ply")
         room.sh = linear_sh_for_srgb_rule(room.sh)  # Blender decodes every splat as sRGB: it gets the linear light
         room.colour_space = "srgb"
         write_ply(runner.host / "room.ply", room)
-        places = {p: PLACES[p] for p in a.places.split(",")}
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": a.size, "albedo": 0.8,
                 "radius": 0.25, "suzanne_size": 0.4, "fov_deg": 40.0, "places": places,
                 "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": a.native_samples,
                 "samples": a.samples, "eevee_samples": a.eevee_samples, "threads": a.threads,
                 "steps": a.steps.split(","), "date": time.strftime("%Y-%m-%d"),
                 "eevee_settings": _options(a.eevee_set), "cycles_settings": _options(a.cycles_set)}
+        kept = _kept_natives(run, args) if "native" not in args["steps"] else {}
         result = matrix.run_script(runner, HERE / "auto_light_scene.py", args, RESULT_TAG, "auto")
         result["wall_s"] = time.perf_counter() - t_start
         head = np.asarray(result.get("positions_head", []))
         if len(head):  # Blender's importer put the splats where our reader does: the places are where meant
             result["positions_max_diff"] = float(np.abs(head - room.positions[:len(head)]).max())
     finally:
-        kept = _kept_natives(run, args) if "native" not in args["steps"] else {}
         shutil.rmtree(run, ignore_errors=True)
         shutil.copytree(runner.host, run, ignore=shutil.ignore_patterns("home", "*.ply", "*.zip", "*.blend*"))
         runner.close()
-        for name, data in kept.get("files", {}).items():
-            (run / name).write_bytes(data)
-        if result.get("times") is not None:
-            result["times"] = {**kept.get("times", {}), **result["times"]}
+        if kept and kept.get("blender") == result.get("blender"):  # references from another Blender: none
+            for name, data in kept["files"].items():
+                (run / name).write_bytes(data)
+            result["times"] = {**kept["times"], **result.get("times", {})}
     (run / "result.json").write_text(json.dumps(result, indent=1))
     (run / "args.json").write_text(json.dumps(args, indent=1))
     if not result.get("ok"):

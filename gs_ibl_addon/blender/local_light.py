@@ -8,13 +8,13 @@ from the World probe's gets it through its material:
 
 where H is the mesh's light (the World probe's plus D, the mesh's difference: its own probe, or its grid at the
 shading point), B what the user's shader gets from the World in this engine and s the largest scale in 0..1 that
-keeps the emission non-negative (EEVEE clamps negative emission; Cycles keeps it, and the World's diffuse stays
-traced there): core/probe/local_mix.py is the numpy twin and says why. The emission is also scaled by the mesh's own
-ambient occlusion (Only Local): the engines shadow the user's shader, not emission. The group has two outputs, one
-per engine, read by the user's Material Output and by an EEVEE-only output of ours: Cycles H = E + D over B = E (the
-World probe's irradiance image), EEVEE H = W + D over its order-1 part of W (the World probe's order-2 coefficients)
-as EEVEE derings it. Irradiance is order-2 SH, kept as the nine monomial coefficients of core/probe/grid.py, so each
-of W and D is a sum of nine colours times polynomials of the normal.
+keeps H - s B non-negative (EEVEE clamps negative emission; Cycles keeps it, so there the emission is H - B and the
+World's diffuse stays traced): core/probe/local_mix.py is the numpy twin and says why. The emission is also scaled
+by the mesh's own ambient occlusion (Only Local): the engines shadow the user's shader, not emission. The group has
+two outputs, one per engine, read by the user's Material Output and by an EEVEE-only output of ours: Cycles H = E +
+D over B = E (the World probe's irradiance image), EEVEE H = W + D over its order-1 part of W (the World probe's
+order-2 coefficients) as EEVEE derings it. Irradiance is order-2 SH, kept as the nine monomial coefficients of
+core/probe/grid.py, so each of W and D is a sum of nine colours times polynomials of the normal.
 
 Every kind of local light is a grid (a per-object probe is a 1 x 1 x 1 grid at the mesh's centre), and every grid
 is a tile (core/probe/grid.py ``pack_grid``) of one float image per file, the atlas, stacked from the bottom

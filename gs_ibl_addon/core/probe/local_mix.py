@@ -15,13 +15,15 @@ mesh's own ambient occlusion (Only Local), standing in for the shadows the engin
 not for emission; on a convex mesh it is 1, which is what this twin models.
 
 Cycles keeps a negative emission, so there the (1 - s) of the user's shader that s takes away is replaced by a plain
-diffuse of the albedo, and the emission is the signed difference H - B alone:
+diffuse of the albedo (the same albedo the emission assumes: the user's diffuse colour, or the group's grey for a
+shader it does not know), and the emission is the signed difference H - B alone:
 
     surface = s x user + (1 - s) x Diffuse(albedo) + Emission(albedo x (H - B))
 
-The World's diffuse light then stays traced, with its shadows, whatever s is, and the AO stand-in scales only the
-mesh's difference D: with (1 - s) B inside the emission, a far corner's Suzanne (s ~ 0.5 in blue) lost the traced
-World's shadows on that part and rendered 3.4% below native Cycles, 1.4% with this (2026-12-03).
+The World's diffuse light then stays traced, with its shadows, whatever s is (the user's specular still dims by s,
+as in EEVEE), and the AO stand-in scales only the mesh's difference D: with (1 - s) B inside the emission, a far
+corner's Suzanne (s ~ 0.5 in blue) lost the traced World's shadows on that part and rendered 3.4% below native
+Cycles, 1.4% with this (2026-12-03).
 
 B differs by engine. Cycles integrates the World image: B = E, and H = E + D. EEVEE lights from an order-1 SH of
 the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1, clamped at 0)
@@ -67,7 +69,8 @@ def world_diffuse(world: np.ndarray, normals: np.ndarray, engine: str,
 
 
 def mix(here: np.ndarray, base: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(s (...,), emission (..., 3) per unit albedo): the user's shader scale and what is emitted on top."""
+    """(s (...,), emission (..., 3) per unit albedo): the user's shader scale and what EEVEE emits on top (Cycles
+    emits here - base, shaded() says how)."""
     s = np.clip(np.min(here / np.maximum(base, EPS), axis=-1), 0.0, 1.0)
     return s, here - s[..., None] * base
 
