@@ -69,13 +69,13 @@ bool tile_touched(mat3 g, View vw, uint tx, uint ty) {
 
 void main() {
     uint q = linear_group() * 256u + gl_LocalInvocationID.x;
-    uint all_instances = total[0];
-    if (q == 0u) { count[0] = min(all_instances, p.capacity); count[1] = all_instances; }
-    if (q >= min(all_instances, p.capacity)) return;
+    uint all_instances = total[0], used = min(all_instances, p.capacity);
+    if (q == 0u) { count[0] = used; count[1] = all_instances; }
+    if (q >= used) return;
     // the owner of slot q: the last splat (in depth order) whose first slot is <= q; empty splats share a start
     // with their successor and so are never the last. It lies between this block's owner and the next block's
     // (gs_emit_owners.comp).
-    uint block = q / 256u, used = min(all_instances, p.capacity);
+    uint block = q / 256u;
     uint lo = owners[block], hi = (block + 1u) * 256u < used ? owners[block + 1u] : p.n - 1u;
     while (lo < hi) {
         uint mid = (lo + hi + 1u) >> 1;

@@ -135,12 +135,12 @@ void main() {
         // remainder, lavapipe rastered one tile of the guitar test wrongly.
         for (uint k0 = 0u; k0 < batch && !done; k0 += 32u) {
             uint mask = 0u;
-            for (uint j = 0u; j < 32u; ++j)
-                if (k0 + j < batch && conic_hit(k0 + j, s, t)) mask |= 1u << j;
+            for (uint bit = 0u; bit < 32u; ++bit)
+                if (k0 + bit < batch && conic_hit(k0 + bit, s, t)) mask |= 1u << bit;
             while (mask != 0u && !done) {
-                uint j = uint(findLSB(mask));
+                uint bit = uint(findLSB(mask));
                 mask &= mask - 1u;
-                done = composite(k0 + j, d, color, T, zsum);
+                done = composite(k0 + bit, d, color, T, zsum);
             }
         }
 #else
