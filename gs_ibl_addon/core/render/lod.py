@@ -230,13 +230,12 @@ def _moments_of_splats(scene: SplatScene, sel: np.ndarray) -> tuple[_Moments, np
     w = scene.opacities[sel].astype(np.float64) * mean_footprint(scene.scales[sel])
     mu = scene.positions[sel].astype(np.float64)
     m2 = np.stack([w * (np.sum(rot[:, i] * rot[:, j] * q, 1) + mu[:, i] * mu[:, j]) for i, j in _PAIRS], 1)
-    every = bool(sel.all())  # a boolean selection copies (N, K, 3) floats: skip it when it takes them all
-    sh = scene.sh if every else scene.sh[sel]
+    sh = scene.sh if sel.all() else scene.sh[sel]  # a boolean selection copies (N, K, 3) floats: not when all
     if scene.colour_space == "srgb":
         sh = _sh_to_linear(sh).astype(np.float32)
-        every = False  # a fresh array: weighted in place
-    sh = sh.reshape(len(w), -1)
-    sh = sh * w.astype(np.float32)[:, None] if every else np.multiply(sh, w.astype(np.float32)[:, None], out=sh)
+    shared = sh is scene.sh  # the scene's own array is weighted into a new one, a copy of ours in place
+    sh, weight = sh.reshape(len(w), -1), w.astype(np.float32)[:, None]
+    sh = sh * weight if shared else np.multiply(sh, weight, out=sh)
     return _Moments(w, mu * w[:, None], m2, sh), w
 
 
