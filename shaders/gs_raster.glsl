@@ -16,7 +16,11 @@ layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks
 // the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
 layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
 // write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
-layout(push_constant) uniform P { uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; } p;
+// small_tol: the largest bound on a pair's alpha error for which a small splat takes its footprint's expansion
+// (small_form) instead of the ray test; 0 gives every pair the ray test.
+layout(push_constant) uniform P {
+    uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; float small_tol;
+} p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
@@ -68,19 +72,78 @@ bool conic_hit(uint k, float s, float t) {
 }
 #endif
 
-// Pair k of the batch along the pixel's ray d: composited front to back if the ray passes within its footprint.
-// Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept: the rule then
-// composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance behind.
-bool composite(uint k, vec3 d, inout vec3 color, inout float T, inout float zsum) {
-    vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
-    vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
-    if (dot(ol, dl) >= 0.0) return false;  // the closest approach lies behind the origin
-    vec3 cr = cross(ol, dl);
-    float cc = dot(cr, cr), dd = dot(dl, dl);
-    if (cc > s_cut[k] * dd) return false;  // outside the footprint (3DGS: alpha < 1/255); m = cc / dd
-    float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * cc / dd));
+#ifndef RASTER_CONIC
+// A small splat's m along the rays near it, as a quadratic form in the image plane (render/splat_math.py
+// small_form mirrors this, with the derivation). With d = d0 + ds right + dt down about the centre's ray d0 = mu / z,
+// Wd = -o'/z + ds a + dt b, so m = |o' x Wd|^2 / |Wd|^2 = N / D with N = |ds xa + dt xb|^2 exactly and
+// D = D0 (1 - l + v), D0 = |o'|^2 / z^2, l = L . (ds, dt), v = |ds a + dt b|^2 / D0. Then m ~ (N / D0)(1 + l): what is
+// dropped is (N / D0)(l^2 - v) to second order, and over the pixels at N / D0 = q it is at most q^2 K, K =
+// L^T M^-1 L + tr(M^-1 G / D0) with M = N's matrix / D0 and G = v's. The alpha error o e^(-q/2) q^2 K / 2 is at most
+// 1.09 o K, so a pair takes this form when 1.09 o K <= small_tol: K is about the footprint's squared angular length,
+// so only splats well below a degree take it, needles as well as blobs. The series needs |l| small: 2 cut K <= 0.01
+// keeps |l| <= 0.1 where q <= 2 cut, and the pixel clamps l at -0.5 so that the pixels beyond (the tile's far
+// corners, where l may pass -1) stay outside. Along d the closest approach lies at z (1 + l / 2), to the same order.
+// Writes f0 = (s0, t0, M_ss, M_tt), f1 = (2 M_st, L_s, L_t, z) and returns whether the form holds; a splat not well
+// in front of the view never does.
+bool small_form(View vw, vec4 w0, vec4 w1, vec4 w2, float opacity, float cut, out vec4 f0, out vec4 f1) {
+    f0 = vec4(0.0);
+    f1 = vec4(0.0);
+    if (!(p.small_tol > 0.0)) return false;
+    vec3 ol = vec3(w0.w, w1.w, w2.w);
+    vec3 mu = -(w0.xyz * (ol.x / dot(w0.xyz, w0.xyz)) + w1.xyz * (ol.y / dot(w1.xyz, w1.xyz))
+                + w2.xyz * (ol.z / dot(w2.xyz, w2.xyz)));
+    float z = dot(vw.fwd.xyz, mu);
+    if (!(z > 0.2 * length(mu))) return false;
+    vec3 r = vw.right_tanx.xyz, dn = vw.down_tany.xyz;
+    vec3 a = vec3(dot(w0.xyz, r), dot(w1.xyz, r), dot(w2.xyz, r));
+    vec3 b = vec3(dot(w0.xyz, dn), dot(w1.xyz, dn), dot(w2.xyz, dn));
+    vec3 xa = cross(ol, a), xb = cross(ol, b);  // as cross products: o', a and b are near parallel for thin splats
+    float oo = dot(ol, ol), iz = 1.0 / z;
+    float id0 = z * z / oo;  // 1 / D0
+    float mss = dot(xa, xa) * id0, mtt = dot(xb, xb) * id0, mst = dot(xa, xb) * id0;
+    vec3 xab = cross(xa, xb);
+    float det = dot(xab, xab) * id0 * id0;  // det M, by Lagrange's identity rather than a cancelling difference
+    float ls = 2.0 * z * dot(a, ol) / oo, lt = 2.0 * z * dot(b, ol) / oo;
+    float k_det = mtt * ls * ls - 2.0 * mst * ls * lt + mss * lt * lt  // det M (L^T M^-1 L + tr(M^-1 G / D0))
+                  + (mtt * dot(a, a) - 2.0 * mst * dot(a, b) + mss * dot(b, b)) * id0;
+    f0 = vec4(dot(r, mu) * iz, dot(dn, mu) * iz, mss, mtt);
+    f1 = vec4(2.0 * mst, ls, lt, z);
+    return k_det * max(1.09 * opacity / p.small_tol, 200.0 * cut) <= det;  // false for a NaN or a line
+}
+#endif
+
+// Pair k of the batch along the pixel's ray d (image coordinates s, t): composited front to back if the ray passes
+// within its footprint. Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept:
+// the rule then composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance
+// behind. A negative s_cut marks a small splat's expansion in s_w0, s_w1 (small_form): the same for every pixel of
+// the tile, so the branch does not diverge.
+bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum) {
+    float cut = s_cut[k], m, along;
+#ifndef RASTER_CONIC
+    if (cut < 0.0) {
+        vec4 f0 = s_w0[k], f1 = s_w1[k];
+        float ds = s - f0.x, dt = t - f0.y;
+        float q = ds * (f0.z * ds + f1.x * dt) + f0.w * (dt * dt);
+        float l = f1.y * ds + f1.z * dt;
+        m = q + q * max(l, -0.5);
+        if (m > -cut) return false;
+        along = f1.w + f1.w * (0.5 * l);
+    } else
+#endif
+    {
+        vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
+        vec3 dl = vec3(dot(s_w0[k].xyz, d), dot(s_w1[k].xyz, d), dot(s_w2[k].xyz, d));
+        float od = dot(ol, dl);
+        if (od >= 0.0) return false;  // the closest approach lies behind the origin
+        vec3 cr = cross(ol, dl);
+        float cc = dot(cr, cr), dd = dot(dl, dl);
+        if (cc > cut * dd) return false;  // outside the footprint (3DGS: alpha < 1/255); m = cc / dd
+        m = cc / dd;
+        along = -od / dd;  // closest approach along d; d's forward part is 1
+    }
+    float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
     color += T * alpha * s_col[k].rgb;
-    if (p.write_depth != 0u) zsum += T * alpha * (-dot(ol, dl) / dd);  // closest approach along d; d's forward part is 1
+    if (p.write_depth != 0u) zsum += T * alpha * along;
     T *= 1.0 - alpha;
     return T < T_MIN;
 }
@@ -121,9 +184,15 @@ void main() {
             uint i = inst_val[j];
             s_w0[lid] = prepared[PREP * i]; s_w1[lid] = prepared[PREP * i + 1u];
             s_w2[lid] = prepared[PREP * i + 2u]; s_col[lid] = prepared[PREP * i + 3u];
-            s_cut[lid] = prepared[PREP * i + 4u].x;
+            float cut = prepared[PREP * i + 4u].x;
+            s_cut[lid] = cut;
 #ifdef RASTER_CONIC
-            footprint_conic(vw, s_w0[lid], s_w1[lid], s_w2[lid], s_cut[lid], s_qa[lid], s_qb[lid]);
+            footprint_conic(vw, s_w0[lid], s_w1[lid], s_w2[lid], cut, s_qa[lid], s_qb[lid]);
+#else
+            vec4 f0, f1;
+            if (small_form(vw, s_w0[lid], s_w1[lid], s_w2[lid], s_col[lid].w, cut, f0, f1)) {
+                s_w0[lid] = f0; s_w1[lid] = f1; s_cut[lid] = -cut;
+            }
 #endif
         }
         barrier();
@@ -140,11 +209,11 @@ void main() {
             while (mask != 0u && !done) {
                 uint bit = uint(findLSB(mask));
                 mask &= mask - 1u;
-                done = composite(k0 + bit, d, color, T, zsum);
+                done = composite(k0 + bit, d, s, t, color, T, zsum);
             }
         }
 #else
-        for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, color, T, zsum);
+        for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum);
 #endif
     }
     uint pixel = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;

@@ -105,6 +105,12 @@ def raster_conic(batch: ViewBatch) -> bool:
     return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
 
 
+# A pair whose footprint's quadratic expansion in the image plane gives its alpha to within SMALL_SPLAT_TOL
+# (splat_math.small_form: splats of about a 1024² face's pixel and below, seen from any face size) is rastered from
+# that expansion instead of the ray test: a third of the per-pixel arithmetic. 0 turns it off. The plain kernel only:
+# the conic kernel's pixels already skip most pairs with a cheaper test.
+SMALL_SPLAT_TOL = 1e-5
+
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
 # GPU bytes per (probe, splat) pair: prepared (PREP vec4), tile rectangles (MAX_VIEWS uvec2), tile count, depth
@@ -610,7 +616,7 @@ class SplatRenderer:
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
-                         chunks=chunks, total_pixels=pixels, write_depth=int(depth))
+                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), small_tol=SMALL_SPLAT_TOL)
             if chunks > 1:
                 rec.dispatch(KERNELS["gs_merge"], [partial, g_image, partial_depth, depth_buf], groups(pixels, 256, c),
                              chunks=chunks, total_pixels=pixels, write_depth=int(depth))

@@ -92,6 +92,69 @@ def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice,
     return np.sum(cr * cr, -1) / dd, -od / dd, od < 0
 
 
+# max over q of exp(-q/2) q^2 / 2 (at q = 4): turns small_form's bound on m's error, q^2 K, into one on alpha's
+SMALL_ERROR_FACTOR = 8.0 / np.e ** 2
+
+
+@dataclass
+class SmallForm:
+    """A splat's m near its centre's ray in one view, m ~ q (1 + l), the image-plane expansion the GPU raster
+    uses for small splats (gs_raster.glsl small_form). All (S,) float64 arrays."""
+    s0: np.ndarray  # image-plane coordinates of the centre (right, down; the view's tan units)
+    t0: np.ndarray
+    mss: np.ndarray  # q = mss ds^2 + 2 mst ds dt + mtt dt^2
+    mst: np.ndarray
+    mtt: np.ndarray
+    ls: np.ndarray  # l = ls ds + lt dt
+    lt: np.ndarray
+    z: np.ndarray  # the centre's depth along the view's forward axis
+    error: np.ndarray  # bound on |alpha - alpha of the expansion| (inf where the form does not hold)
+
+
+def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, down) -> SmallForm:
+    """The expansion of m about each splat's centre ray in the view (forward, right, down), and its error bound.
+
+    With d = d0 + ds right + dt down, d0 = mu / z the ray through the centre (z = forward . mu), the whitened ray
+    is Wd = -o'/z + ds a + dt b (a = W right, b = W down, o' = -W mu), so the ray test's m = |o' x Wd|^2 / |Wd|^2
+    is N / D with N = |ds (o' x a) + dt (o' x b)|^2 exactly and D = D0 (1 - l + v): D0 = |o'|^2 / z^2,
+    l = (2 z / |o'|^2)(ds a.o' + dt b.o'), v = |ds a + dt b|^2 / D0. So m = q (1 + l) + q (l^2 - v) + ..., q =
+    N / D0 = x^T M x (x = (ds, dt)). Where q is some value, (L.x)^2 <= q L^T M^-1 L and v <= q tr(M^-1 G) (G =
+    v's matrix), so the error is at most q^2 K, K = L^T M^-1 L + tr(M^-1 G), and alpha's, o e^(-m/2) m_err / 2,
+    at most SMALL_ERROR_FACTOR o K. K is about the footprint's squared angular length (M^-1's large eigenvalue), so
+    short needles hold as well as blobs, long ones do not, nor does a splat not well in front of the view (z <=
+    0.2 |mu|). The series
+    needs |l| small: where 2 cut K > 0.01 (|l| may pass 0.1 inside q <= 2 cut) the bound is inf too, and
+    small_form_m clamps l at -0.5 so that the pixels farther out, where l may pass -1, stay outside the footprint."""
+    f, r, dn = (np.asarray(v, np.float64) for v in (forward, right, down))
+    w = p.whiten[index]
+    ol = p.origin_local[index]
+    mu = -np.linalg.solve(w, ol[..., None])[..., 0]  # the GPU takes W's rows as orthogonal: the same to rounding
+    z = mu @ f
+    a, b = w @ r, w @ dn
+    xa, xb = np.cross(ol, a), np.cross(ol, b)
+    oo = np.sum(ol * ol, 1)
+    id0 = z * z / oo
+    mss, mtt, mst = np.sum(xa * xa, 1) * id0, np.sum(xb * xb, 1) * id0, np.sum(xa * xb, 1) * id0
+    xab = np.cross(xa, xb)
+    det = np.sum(xab * xab, 1) * id0 * id0
+    ls, lt = 2 * z * np.sum(a * ol, 1) / oo, 2 * z * np.sum(b * ol, 1) / oo
+    k_det = (mtt * ls ** 2 - 2 * mst * ls * lt + mss * lt ** 2
+             + (mtt * np.sum(a * a, 1) - 2 * mst * np.sum(a * b, 1) + mss * np.sum(b * b, 1)) * id0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        error = SMALL_ERROR_FACTOR * p.opacity[index] * k_det / det
+        series = 200 * p.cutoff[index] * k_det <= det
+    error = np.where((z > 0.2 * np.linalg.norm(mu, axis=1)) & series & (det > 0) & np.isfinite(error), error, np.inf)
+    return SmallForm(mu @ r / z, mu @ dn / z, mss, mst, mtt, ls, lt, z, error)
+
+
+def small_form_m(form: SmallForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m, where along the ray the closest approach lies), each (S, P), for image-plane points (P,) s, t."""
+    ds, dt = s[None] - form.s0[:, None], t[None] - form.t0[:, None]
+    q = ds * (form.mss[:, None] * ds + 2 * form.mst[:, None] * dt) + form.mtt[:, None] * dt * dt
+    lin = form.ls[:, None] * ds + form.lt[:, None] * dt
+    return q * (1 + np.maximum(lin, -0.5)), form.z[:, None] * (1 + 0.5 * lin)
+
+
 def _pcg(v: np.ndarray) -> np.ndarray:
     """PCG hash of uint32s (Jarzynski & Olano 2020), as pcg() in shaders/gs_preprocess.comp."""
     state = v * np.uint32(747796405) + np.uint32(2891336453)
