@@ -93,12 +93,14 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 
 
 class Ours:
-    name = "gs-ibl"
+    """Our renderer; ``small_tol`` other than None: with that renderer.SMALL_SPLAT_TOL (an A/B row of its own)."""
 
-    def __init__(self, scene, ctx) -> None:
-        from gs_ibl_addon.core.render.renderer import SplatRenderer
-        self.r = SplatRenderer(scene, ctx)
+    def __init__(self, scene, ctx, small_tol: float | None = None) -> None:
+        from gs_ibl_addon.core.render import renderer
+        self.r = renderer.SplatRenderer(scene, ctx)
         self.sh_k = scene.sh.shape[1]
+        self.small_tol = renderer.SMALL_SPLAT_TOL if small_tol is None else small_tol
+        self.name = "gs-ibl" if small_tol is None else f"gs-ibl small_tol={small_tol:g}"
 
     def set_face(self, face: int) -> None:
         from gs_ibl_addon.core.render.renderer import _views_buffer_data
@@ -107,6 +109,8 @@ class Ours:
         _, self.tiles, self.pixels = _views_buffer_data(self.batch)
 
     def rep(self) -> dict:
+        from gs_ibl_addon.core.render import renderer
+        renderer.SMALL_SPLAT_TOL = self.small_tol  # read when a batch shape's program is first recorded
         t0 = time.perf_counter()
         res = self.r.render(self.batch, timestamps=True)
         wall = (time.perf_counter() - t0) * 1e3
@@ -121,6 +125,8 @@ class Ours:
         return int(self.r.count.read(np.uint32, 1)[0])
 
     def images(self) -> np.ndarray:
+        from gs_ibl_addon.core.render import renderer
+        renderer.SMALL_SPLAT_TOL = self.small_tol
         return np.stack(self.r.render(self.batch).images)
 
     def close(self) -> None:
@@ -242,27 +248,28 @@ def run_bench(args) -> None:
             t = time.perf_counter()
             scene = SCENES[kind](n)
             ours, peer = Ours(scene, ctx), Gsplat(scene)
+            variants = [Ours(scene, ctx, float(x)) for x in args.ab_small_tol.split(",") if x]
             log(f"{kind} {n:,}: scene and uploads {time.perf_counter() - t:.1f} s")
             for face in [int(x) for x in args.faces.split(",")]:
-                ours.set_face(face)
-                peer.set_face(face)
-                got = timed([ours, peer], nv, args.warmup, args.rounds, args.block)
+                for r in (ours, *variants, peer):
+                    r.set_face(face)
+                got = timed([ours, *variants, peer], nv, args.warmup, args.rounds, args.block)
                 ref, im = ours.images(), peer.images()
                 diff = float(np.abs(ref[..., :3] - im[..., :3]).mean() / max(float(ref[..., :3].mean()), 1e-12))
                 drawn = ours.drawn_pairs()
                 rows = []
-                for r in (ours, peer):
+                for r in (ours, *variants, peer):
                     reps, clk = got[r.name]
                     gpu = [x["gpu_ms"] for x in reps]
                     row = {"device": ctx.device_name, "driver": info.get("driver", ""), "date": date, "scene": kind,
                            "splats": n, "face": face, "renderer": r.name, "gpu_ms": round(statistics.median(gpu), 4),
                            "gpu_min_ms": round(min(gpu), 4), "gpu_max_ms": round(max(gpu), 4),
                            "wall_ms": round(statistics.median(x["wall_ms"] for x in reps), 3),
-                           "pairs": reps[-1]["pairs"], "pairs_drawn": drawn if r is ours else "",
+                           "pairs": reps[-1]["pairs"], "pairs_drawn": drawn if r is not peer else "",
                            "sm_mhz_min": min(clk) if clk else "", "sm_mhz_max": max(clk) if clk else "",
-                           "image_diff": "" if r is ours else round(diff, 4),
-                           "coverage": round(float((ref if r is ours else im)[..., 3].mean()), 4)}
-                    if r is ours:
+                           "image_diff": round(diff, 4) if r is peer else "",
+                           "coverage": round(float((im if r is peer else ref)[..., 3].mean()), 4)}
+                    if r is not peer:
                         floors = stage_floor_bytes(n, ours.sh_k, row["pairs"], drawn, ours.tiles, ours.pixels, 6)
                         for s in STAGES:
                             row[f"{s}_ms"] = round(statistics.median(x[s] for x in reps), 4)
@@ -271,8 +278,14 @@ def run_bench(args) -> None:
                         for s in STAGES:
                             row[f"{s}_ms"] = row[f"{s}_floor_ms"] = ""
                     rows.append(row)
+                for v in variants:  # how far the variant's image is from ours: same image_diff measure
+                    vim = v.images()
+                    rows[1 + variants.index(v)]["image_diff"] = round(float(
+                        np.abs(ref[..., :3] - vim[..., :3]).mean() / max(float(ref[..., :3].mean()), 1e-12)), 7)
                 append_csv(args.csv, rows)
-                o, g = rows
+                o, g = rows[0], rows[-1]
+                for v in rows[1:-1]:
+                    log(f"  {v['renderer']}: {v['gpu_ms']:.3f} (raster {v['raster_ms']:.2f}; diff {v['image_diff']})")
                 log(f"{kind} {n:>9,} {face:>5}: ours {o['gpu_ms']:.3f} (wall {o['wall_ms']:.2f}) gsplat "
                     f"{g['gpu_ms']:.3f} (wall {g['wall_ms']:.2f}) ratio {o['gpu_ms'] / g['gpu_ms']:.2f} | pairs "
                     f"{o['pairs']:,}/{drawn:,} vs {g['pairs']:,} | SM {o['sm_mhz_min']}-{o['sm_mhz_max']} | "
@@ -292,6 +305,8 @@ def run_bench(args) -> None:
                     log("  gsplat kernels (ms per call): "
                         + ", ".join(f"{k} {v:.3f}" for k, v in peer.kernel_ms()[:12]))
             ours.close()
+            for v in variants:
+                v.close()
             del peer, scene
             torch.cuda.empty_cache()
 
@@ -346,6 +361,8 @@ def main() -> None:
     ap.add_argument("--coalesce", type=int, choices=(0, 1), help="radix8_scatter's way of writing (gpu_sort.COALESCE)")
     ap.add_argument("--conic-faces", help="MIN:MAX, the face sizes that raster with the conic pre-test "
                     "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
+    ap.add_argument("--ab-small-tol", default="", help="X,...: also our renderer with SMALL_SPLAT_TOL = X, "
+                    "rows of their own in the same blocks")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
     ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
