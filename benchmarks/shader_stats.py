@@ -1,7 +1,8 @@
 """What the driver compiled each kernel into (VK_KHR_pipeline_executable_properties): registers, shared memory,
 spills, as the driver names them, so that a kernel's occupancy can be read off instead of guessed.
 
-  python benchmarks/shader_stats.py [--kernels gs_raster,gs_raster_conic] [--csv out/bench/shader_stats.csv]
+  python benchmarks/shader_stats.py [--kernels gs_raster,gs_raster_conic] [--spv gs_raster:variant.spv,...]
+         [--csv out/bench/shader_stats.csv]
 
 Makes its own device with the extension and its feature on (the renderer's context asks for neither), builds each
 kernel of core/vk/kernels.py from the extension's SPIR-V with statistics captured, and prints one row per kernel and
@@ -56,8 +57,9 @@ def _device(vk, want: str | None):
     return instance, device, names[pick]
 
 
-def kernel_stats(vk, device, name: str) -> list[tuple[str, str, str]]:
-    """(executable, statistic, value) rows of kernel ``name`` as this device compiles it."""
+def kernel_stats(vk, device, name: str, spv: str | None = None) -> list[tuple[str, str, str]]:
+    """(executable, statistic, value) rows of kernel ``name`` as this device compiles it (``spv``: another build of
+    it, with the same bindings and push constants)."""
     k = KERNELS[name]
     bindings = [vk.VkDescriptorSetLayoutBinding(binding=i, descriptorType=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
                                                 descriptorCount=1, stageFlags=vk.VK_SHADER_STAGE_COMPUTE_BIT)
@@ -70,7 +72,7 @@ def kernel_stats(vk, device, name: str) -> list[tuple[str, str, str]]:
     plci = vk.VkPipelineLayoutCreateInfo(setLayoutCount=1, pSetLayouts=set_layouts,
                                          pushConstantRangeCount=len(ranges), pPushConstantRanges=ranges or None)
     layout = vk.vkCreatePipelineLayout(device, plci, None)
-    code = bytes(_load_spirv(name))
+    code = bytes(_load_spirv(name)) if spv is None else open(spv, "rb").read()
     smci = vk.VkShaderModuleCreateInfo(codeSize=len(code), pCode=code)
     module = vk.vkCreateShaderModule(device, smci, None)
     entry = "main"
@@ -105,20 +107,24 @@ def kernel_stats(vk, device, name: str) -> list[tuple[str, str, str]]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kernels", default="gs_raster,gs_raster_conic,radix8_scatter,gs_emit,gs_preprocess")
+    ap.add_argument("--spv", default="", help="KERNEL:PATH,...: other builds of a kernel, as rows of their own")
     ap.add_argument("--device", default=os.environ.get("GS_IBL_DEVICE"))
     ap.add_argument("--csv")
     args = ap.parse_args()
     import vulkan as vk
     instance, device, dev_name = _device(vk, args.device)
     out = []
-    for name in args.kernels.split(","):
-        for exe, stat, value in kernel_stats(vk, device, name):
-            out.append({"device": dev_name, "kernel": name, "executable": exe, "statistic": stat, "value": value})
+    builds = [(name, None) for name in args.kernels.split(",") if name]
+    builds += [tuple(x.split(":", 1)) for x in args.spv.split(",") if x]
+    for name, spv in builds:
+        label = name if spv is None else f"{name}:{os.path.basename(spv)}"
+        for exe, stat, value in kernel_stats(vk, device, name, spv):
+            out.append({"device": dev_name, "kernel": label, "executable": exe, "statistic": stat, "value": value})
     vk.vkDestroyDevice(device, None)
     vk.vkDestroyInstance(instance, None)
     width = max(len(r["statistic"]) for r in out) if out else 10
     for r in out:
-        print(f"{r['kernel']:18s} {r['statistic']:{width}s} {r['value']}")
+        print(f"{r['kernel']:40s} {r['statistic']:{width}s} {r['value']}")
     if args.csv:
         os.makedirs(os.path.dirname(os.path.abspath(args.csv)), exist_ok=True)
         with open(args.csv, "w", newline="") as f:

@@ -40,17 +40,16 @@ shared vec4 s_qa[256], s_qb[256];
 // c is inflated as gs_emit inflates it, so rounding never rejects a pixel the ray test would light. Gives
 // (s0, t0, A, B) and (2C, 2D, 2E, F) of Q = A ds^2 + 2C ds dt + B dt^2 + 2D ds + 2E dt + F; a splat not well in
 // front of the view gets Q = -1 everywhere (the ray test alone decides).
-void footprint_conic(View vw, vec4 w0, vec4 w1, vec4 w2, float cut, out vec4 qa, out vec4 qb) {
+void footprint_conic(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float cut, out vec4 qa, out vec4 qb) {
     vec3 ol = vec3(w0.w, w1.w, w2.w);
     // W's rows are R's columns over the dilated scales, so mu = -W^-1 o' = -sum_k w_k o'_k / |w_k|^2
     vec3 mu = -(w0.xyz * (ol.x / dot(w0.xyz, w0.xyz)) + w1.xyz * (ol.y / dot(w1.xyz, w1.xyz))
                 + w2.xyz * (ol.z / dot(w2.xyz, w2.xyz)));
-    float z = dot(vw.fwd.xyz, mu);
+    float z = dot(fwd, mu);
     qa = vec4(0.0);
     qb = vec4(0.0, 0.0, 0.0, -1.0);
     if (!(z > 0.2 * length(mu))) return;
     float c = cut * 1.02 + 1e-3;
-    vec3 r = vw.right_tanx.xyz, dn = vw.down_tany.xyz;
     vec3 a = vec3(dot(w0.xyz, r), dot(w1.xyz, r), dot(w2.xyz, r));
     vec3 b = vec3(dot(w0.xyz, dn), dot(w1.xyz, dn), dot(w2.xyz, dn));
     // |o'|^2 V - u^2 = |o' x (ds a + dt b)|^2 (Lagrange): taken as cross products, since for a thin splat o', a
@@ -62,6 +61,9 @@ void footprint_conic(View vw, vec4 w0, vec4 w1, vec4 w2, float cut, out vec4 qa,
 }
 #endif
 shared uint s_done;
+// The tile's view (forward, right, down) for the loaders, from shared memory: read again each batch rather than
+// held in registers through the pixel loop, which would cost occupancy (docs/benchmarks.md: registers).
+shared vec3 s_view[3];
 
 #ifdef RASTER_CONIC
 // Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may).
@@ -82,19 +84,20 @@ bool conic_hit(uint k, float s, float t) {
 // 1.09 o K, so a pair takes this form when 1.09 o K <= small_tol: K is about the footprint's squared angular length,
 // so only splats well below a degree take it, needles as well as blobs. The series needs |l| small: 2 cut K <= 0.01
 // keeps |l| <= 0.1 where q <= 2 cut, and the pixel clamps l at -0.5 so that the pixels beyond (the tile's far
-// corners, where l may pass -1) stay outside. Along d the closest approach lies at z (1 + l / 2), to the same order.
+// corners, where l may pass -1) stay outside. Along d the closest approach lies at z (1 + l / 2), relative error
+// at most cut K where q <= cut: frames with depth ask for 2000 cut K <= 1.
 // Writes f0 = (s0, t0, M_ss, M_tt), f1 = (2 M_st, L_s, L_t, z) and returns whether the form holds; a splat not well
 // in front of the view never does.
-bool small_form(View vw, vec4 w0, vec4 w1, vec4 w2, float opacity, float cut, out vec4 f0, out vec4 f1) {
+bool small_form(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float opacity, float cut, out vec4 f0,
+                out vec4 f1) {
     f0 = vec4(0.0);
     f1 = vec4(0.0);
     if (!(p.small_tol > 0.0)) return false;
     vec3 ol = vec3(w0.w, w1.w, w2.w);
     vec3 mu = -(w0.xyz * (ol.x / dot(w0.xyz, w0.xyz)) + w1.xyz * (ol.y / dot(w1.xyz, w1.xyz))
                 + w2.xyz * (ol.z / dot(w2.xyz, w2.xyz)));
-    float z = dot(vw.fwd.xyz, mu);
+    float z = dot(fwd, mu);
     if (!(z > 0.2 * length(mu))) return false;
-    vec3 r = vw.right_tanx.xyz, dn = vw.down_tany.xyz;
     vec3 a = vec3(dot(w0.xyz, r), dot(w1.xyz, r), dot(w2.xyz, r));
     vec3 b = vec3(dot(w0.xyz, dn), dot(w1.xyz, dn), dot(w2.xyz, dn));
     vec3 xa = cross(ol, a), xb = cross(ol, b);  // as cross products: o', a and b are near parallel for thin splats
@@ -108,7 +111,8 @@ bool small_form(View vw, vec4 w0, vec4 w1, vec4 w2, float opacity, float cut, ou
                   + (mtt * dot(a, a) - 2.0 * mst * dot(a, b) + mss * dot(b, b)) * id0;
     f0 = vec4(dot(r, mu) * iz, dot(dn, mu) * iz, mss, mtt);
     f1 = vec4(2.0 * mst, ls, lt, z);
-    return k_det * max(1.09 * opacity / p.small_tol, 200.0 * cut) <= det;  // false for a NaN or a line
+    float series = p.write_depth != 0u ? 2000.0 : 200.0;  // with depth: its error c K <= 5e-4 too
+    return k_det * max(1.09 * opacity / p.small_tol, series * cut) <= det;  // false for a NaN
 }
 #endif
 
@@ -165,6 +169,12 @@ void main() {
     float s = ((float(px) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w;
     float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
     vec3 d = vw.fwd.xyz + s * vw.right_tanx.xyz + t * vw.down_tany.xyz;
+    // where this pixel's result goes, so that nothing of the view stays live through the loop
+    uint out_index = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px
+                     + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
+    if (gl_LocalInvocationIndex == 0u) {
+        s_view[0] = vw.fwd.xyz; s_view[1] = vw.right_tanx.xyz; s_view[2] = vw.down_tany.xyz;
+    }
 
     uvec2 whole = ranges[probe * p.total_tiles + g];
     uint len = whole.y - whole.x;
@@ -187,10 +197,10 @@ void main() {
             float cut = prepared[PREP * i + 4u].x;
             s_cut[lid] = cut;
 #ifdef RASTER_CONIC
-            footprint_conic(vw, s_w0[lid], s_w1[lid], s_w2[lid], cut, s_qa[lid], s_qb[lid]);
+            footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], cut, s_qa[lid], s_qb[lid]);
 #else
             vec4 f0, f1;
-            if (small_form(vw, s_w0[lid], s_w1[lid], s_w2[lid], s_col[lid].w, cut, f0, f1)) {
+            if (small_form(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_col[lid].w, cut, f0, f1)) {
                 s_w0[lid] = f0; s_w1[lid] = f1; s_cut[lid] = -cut;
             }
 #endif
@@ -216,14 +226,13 @@ void main() {
         for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum);
 #endif
     }
-    uint pixel = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;
     if (inside) {
         if (p.chunks == 1u) {
-            image[pixel] = vec4(color, 1.0 - T);
-            if (p.write_depth != 0u) depth[pixel] = T < 1.0 ? zsum / (1.0 - T) : 0.0;
+            image[out_index] = vec4(color, 1.0 - T);
+            if (p.write_depth != 0u) depth[out_index] = T < 1.0 ? zsum / (1.0 - T) : 0.0;
         } else {
-            image[chunk * p.total_pixels + pixel] = vec4(color, T);
-            if (p.write_depth != 0u) depth[chunk * p.total_pixels + pixel] = zsum;
+            image[out_index] = vec4(color, T);
+            if (p.write_depth != 0u) depth[out_index] = zsum;
         }
     }
 }

@@ -111,7 +111,7 @@ class SmallForm:
     error: np.ndarray  # bound on |alpha - alpha of the expansion| (inf where the form does not hold)
 
 
-def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, down) -> SmallForm:
+def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, down, depth: bool = False) -> SmallForm:
     """The expansion of m about each splat's centre ray in the view (forward, right, down), and its error bound.
 
     With d = d0 + ds right + dt down, d0 = mu / z the ray through the centre (z = forward . mu), the whitened ray
@@ -124,7 +124,9 @@ def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, dow
     short needles hold as well as blobs, long ones do not, nor does a splat not well in front of the view (z <=
     0.2 |mu|). The series
     needs |l| small: where 2 cut K > 0.01 (|l| may pass 0.1 inside q <= 2 cut) the bound is inf too, and
-    small_form_m clamps l at -0.5 so that the pixels farther out, where l may pass -1, stay outside the footprint."""
+    small_form_m clamps l at -0.5 so that the pixels farther out, where l may pass -1, stay outside the footprint.
+    The closest approach's place along the ray, z (1 + l / 2), is off by at most cut K relatively where q <= cut:
+    ``depth`` asks for 2000 cut K <= 1 as the frames with depth do."""
     f, r, dn = (np.asarray(v, np.float64) for v in (forward, right, down))
     w = p.whiten[index]
     ol = p.origin_local[index]
@@ -142,7 +144,7 @@ def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, dow
              + (mtt * np.sum(a * a, 1) - 2 * mst * np.sum(a * b, 1) + mss * np.sum(b * b, 1)) * id0)
     with np.errstate(divide="ignore", invalid="ignore"):
         error = SMALL_ERROR_FACTOR * p.opacity[index] * k_det / det
-        series = 200 * p.cutoff[index] * k_det <= det
+        series = (2000 if depth else 200) * p.cutoff[index] * k_det <= det
     error = np.where((z > 0.2 * np.linalg.norm(mu, axis=1)) & series & (det > 0) & np.isfinite(error), error, np.inf)
     return SmallForm(mu @ r / z, mu @ dn / z, mss, mst, mtt, ls, lt, z, error)
 
