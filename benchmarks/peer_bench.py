@@ -95,11 +95,15 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 class Ours:
     """Our renderer; ``small_tol`` other than None: with that renderer.SMALL_SPLAT_TOL (an A/B row of its own)."""
 
+    DEFAULT_SMALL_TOL = None  # renderer.SMALL_SPLAT_TOL as imported: rep() sets the module's value per renderer
+
     def __init__(self, scene, ctx, small_tol: float | None = None) -> None:
         from gs_ibl_addon.core.render import renderer
+        if Ours.DEFAULT_SMALL_TOL is None:
+            Ours.DEFAULT_SMALL_TOL = renderer.SMALL_SPLAT_TOL
         self.r = renderer.SplatRenderer(scene, ctx)
         self.sh_k = scene.sh.shape[1]
-        self.small_tol = renderer.SMALL_SPLAT_TOL if small_tol is None else small_tol
+        self.small_tol = Ours.DEFAULT_SMALL_TOL if small_tol is None else small_tol
         self.name = "gs-ibl" if small_tol is None else f"gs-ibl small_tol={small_tol:g}"
 
     def set_face(self, face: int) -> None:

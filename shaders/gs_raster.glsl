@@ -25,6 +25,10 @@ layout(push_constant) uniform P {
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
 shared float s_cut[256];
+#ifndef RASTER_CONIC
+shared vec4 s_f0[256], s_f1[256];  // a small splat's form (small_form); s_cut negative says it holds
+shared vec2 s_band[256];
+#endif
 #ifdef RASTER_CONIC
 // Per pair, its footprint as a conic in this view's image plane, centred on the splat (footprint_conic): a pixel
 // tests it (two loads, a few multiply-adds) before the ray test, which most pairs fail in most of a tile when the
@@ -86,12 +90,15 @@ bool conic_hit(uint k, float s, float t) {
 // keeps |l| <= 0.1 where q <= 2 cut, and the pixel clamps l at -0.5 so that the pixels beyond (the tile's far
 // corners, where l may pass -1) stay outside. Along d the closest approach lies at z (1 + l / 2), relative error
 // at most cut K where q <= cut: frames with depth ask for 2000 cut K <= 1.
-// Writes f0 = (s0, t0, M_ss, M_tt), f1 = (2 M_st, L_s, L_t, z) and returns whether the form holds; a splat not well
-// in front of the view never does.
+// The footprint's edge stays the ray test's: a pixel whose m from the form lies within the form's error (plus float's)
+// of the cut takes the ray test, so no pixel flips in or out of the footprint (each such flip is 1/255 of alpha).
+// Writes f0 = (s0, t0, M_ss, M_tt), f1 = (2 M_st, L_s, L_t, z), band = the m between which a pixel takes the ray test,
+// and returns whether the form holds; a splat not well in front of the view never does.
 bool small_form(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float opacity, float cut, out vec4 f0,
-                out vec4 f1) {
+                out vec4 f1, out vec2 band) {
     f0 = vec4(0.0);
     f1 = vec4(0.0);
+    band = vec2(0.0);
     if (!(p.small_tol > 0.0)) return false;
     vec3 ol = vec3(w0.w, w1.w, w2.w);
     vec3 mu = -(w0.xyz * (ol.x / dot(w0.xyz, w0.xyz)) + w1.xyz * (ol.y / dot(w1.xyz, w1.xyz))
@@ -111,6 +118,8 @@ bool small_form(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float opac
                   + (mtt * dot(a, a) - 2.0 * mst * dot(a, b) + mss * dot(b, b)) * id0;
     f0 = vec4(dot(r, mu) * iz, dot(dn, mu) * iz, mss, mtt);
     f1 = vec4(2.0 * mst, ls, lt, z);
+    float edge = 1.5 * cut * cut * k_det / det + 1e-3 * cut;  // q^2 K at q ~ 1.1 cut, and float's share
+    band = vec2(cut - edge, cut + edge);
     float series = p.write_depth != 0u ? 2000.0 : 200.0;  // with depth: its error c K <= 5e-4 too
     return k_det * max(1.09 * opacity / p.small_tol, series * cut) <= det;  // false for a NaN
 }
@@ -123,16 +132,21 @@ bool small_form(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float opac
 // the tile, so the branch does not diverge.
 bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum) {
     float cut = s_cut[k], m, along;
+    bool ray = true;
 #ifndef RASTER_CONIC
     if (cut < 0.0) {
-        vec4 f0 = s_w0[k], f1 = s_w1[k];
+        vec4 f0 = s_f0[k], f1 = s_f1[k];
+        vec2 band = s_band[k];
         float ds = s - f0.x, dt = t - f0.y;
         float q = ds * (f0.z * ds + f1.x * dt) + f0.w * (dt * dt);
         float l = f1.y * ds + f1.z * dt;
         m = q + q * max(l, -0.5);
-        if (m > -cut) return false;
+        if (m > band.y) return false;
+        ray = m >= band.x;  // on the footprint's edge (rare, so divergent but cheap): the ray test decides
         along = f1.w + f1.w * (0.5 * l);
-    } else
+        cut = -cut;
+    }
+    if (ray)
 #endif
     {
         vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
@@ -200,8 +214,10 @@ void main() {
             footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], cut, s_qa[lid], s_qb[lid]);
 #else
             vec4 f0, f1;
-            if (small_form(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_col[lid].w, cut, f0, f1)) {
-                s_w0[lid] = f0; s_w1[lid] = f1; s_cut[lid] = -cut;
+            vec2 band;
+            if (small_form(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_col[lid].w, cut,
+                           f0, f1, band)) {
+                s_f0[lid] = f0; s_f1[lid] = f1; s_band[lid] = band; s_cut[lid] = -cut;
             }
 #endif
         }

@@ -53,10 +53,11 @@ def test_small_form_alpha_within_its_bound():
             alpha, alpha_f = p.opacity[i] * np.exp(-0.5 * m[0]), p.opacity[i] * np.exp(-0.5 * m_f[0])
             assert np.abs(alpha - alpha_f)[both].max(initial=0) <= form.error[i] * 1.0001 + 1e-12
             assert np.abs(along_f[0] / along[0] - 1)[both].max(initial=0) < 1e-3
-            flips += np.sum(hit != hit_f)  # pixels on the footprint's edge, alpha there 1/255 of the file's
+            edge = (m_f[0] >= form.band[i, 0]) & (m_f[0] <= form.band[i, 1])  # the ray test decides there
+            flips += np.sum((hit != hit_f) & ~edge)
             inside += hit.sum()
             checked += 1
-    assert checked == 360 and flips <= 2e-4 * inside
+    assert checked == 360 and inside > 1e4 and flips == 0
 
 
 def test_small_form_takes_small_splats_only():
@@ -81,40 +82,67 @@ def test_small_form_takes_small_splats_only():
     assert error([[1e-7, 1e-7, 2.0]], [far], 0.0, (np.cos(np.pi / 8), 0, np.sin(np.pi / 8), 0))[0] > 1e-3
 
 
+FORM_TOL = R.SMALL_SPLAT_TOL  # as the renderer ships it (tests set the module's value)
+
+
 def _render(monkeypatch, scene, batch, tol, depth=False):
     monkeypatch.setattr(R, "SMALL_SPLAT_TOL", tol)
     res = R.SplatRenderer(scene).render(batch, depth=depth)
     return res.images, (res.depths if depth else None)
 
 
-@pytest.mark.parametrize("face", [16, 32])
-def test_small_form_on_gpu_against_the_ray_test_and_numpy(monkeypatch, face):
-    # near big splats over far small ones: both paths in one tile, in depth order
-    near = random_scene(200, seed=3, sh_degree=1, extent=0.8)
+def _wall(n: int = 4000, seed: int = 9) -> SplatScene:
+    """Layers of small splats 18-22 m down +X across a 1.6 m square, a few big ones in front; shuffled."""
+    rng = np.random.default_rng(seed)
+    wall = random_scene(n, seed=seed, sh_degree=1, extent=1.0)
+    wall.positions = np.stack([rng.uniform(18, 22, n), rng.uniform(-0.8, 0.8, n), rng.uniform(-0.8, 0.8, n)],
+                              1).astype(np.float32)
+    wall.scales = (rng.uniform(0.002, 0.03, (n, 1)) * rng.uniform(0.3, 1.0, (n, 3))).astype(np.float32)
+    wall.opacities = rng.uniform(0.3, 0.95, n).astype(np.float32)
+    front = random_scene(12, seed=seed + 1, sh_degree=1, extent=0.3)
+    front.positions = (front.positions + np.array([8, 0, 0], np.float32)).astype(np.float32)
+    scene = concat([wall, front])
+    return scene.subset(rng.permutation(scene.count))
+
+
+def _mixed() -> SplatScene:
+    near = random_scene(100, seed=3, sh_degree=1, extent=0.8)
+    near.scales = (near.scales * 0.5).astype(np.float32)
     scene = concat([near, _far_scene(2500, seed=4)])
-    scene = scene.subset(np.random.default_rng(6).permutation(scene.count))
-    batch = ViewBatch.cubemap(np.array([0.05, -0.1, 0.02]), face)
+    return scene.subset(np.random.default_rng(6).permutation(scene.count))
+
+
+CASES = {
+    # splats of a pixel or two, many deep: the form's pixels dominate the image
+    "wall": (_wall, lambda: ViewBatch.pinhole(np.zeros(3), np.array([20.0, 0, 0]), 4.5, 48, 40)),
+    # near big splats over far small ones, on 32² cube faces: both paths in one tile, in depth order
+    "cube": (_mixed, lambda: ViewBatch.cubemap(np.array([0.05, -0.1, 0.02]), 32)),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_small_form_on_gpu_against_the_ray_test_and_numpy(monkeypatch, case):
+    make_scene, make_batch = CASES[case]
+    scene, batch = make_scene(), make_batch()
     assert not R.raster_conic(batch)
-    p = prepare(scene, batch.origin, batch.dilation, energy_preserving=True)
-    share = np.mean([np.mean(small_form(p, slice(None), v.forward, v.right, v.down).error <= R.SMALL_SPLAT_TOL)
+    p = prepare(scene, batch.origin, batch.dilation, energy_preserving=batch.energy_preserving)
+    share = np.mean([np.mean(small_form(p, slice(None), v.forward, v.right, v.down).error <= FORM_TOL)
                      for v in batch.views])
     assert share > 0.3  # the form is really taken
     ray, _ = _render(monkeypatch, scene, batch, 0.0)
-    fast, _ = _render(monkeypatch, scene, batch, R.SMALL_SPLAT_TOL)
+    fast, _ = _render(monkeypatch, scene, batch, FORM_TOL)
     ref = render_reference(scene, batch)
     diff = max(np.abs(a - b).max() for a, b in zip(fast, ray))
     assert 0 < diff < 1e-4  # the form is taken on the GPU too, and within its tolerance
     assert max(np.abs(a - b).max() for a, b in zip(fast, ref)) < TOL
-    assert min(img[..., 3].mean() for img in ref) > 0.05
+    assert np.mean([img[..., 3].mean() for img in ref]) > 0.005  # not empty (the far splats are faint at 32²)
 
 
 def test_small_form_depth(monkeypatch):
-    scene = _far_scene(1500, seed=8)
-    batch = ViewBatch.pinhole(np.zeros(3), np.array([1.0, 0.2, 0.1]), 70, 48, 40)
-    assert not R.raster_conic(batch)
-    images, depths = _render(monkeypatch, scene, batch, R.SMALL_SPLAT_TOL, depth=True)
+    scene, batch = _wall(), CASES["wall"][1]()
+    images, depths = _render(monkeypatch, scene, batch, FORM_TOL, depth=True)
     ref_images, ref_depths = render_reference(scene, batch, with_depth=True)
     covered = ref_images[0][..., 3] > 0.01
-    assert covered.mean() > 0.2
+    assert covered.mean() > 0.5
     np.testing.assert_allclose(depths[0][covered], ref_depths[0][covered], rtol=1e-3)
     assert np.abs(images[0] - ref_images[0]).max() < TOL

@@ -109,6 +109,7 @@ class SmallForm:
     lt: np.ndarray
     z: np.ndarray  # the centre's depth along the view's forward axis
     error: np.ndarray  # bound on |alpha - alpha of the expansion| (inf where the form does not hold)
+    band: np.ndarray  # (S, 2): the m between which a pixel takes the ray test (the footprint's edge stays exact)
 
 
 def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, down, depth: bool = False) -> SmallForm:
@@ -126,7 +127,9 @@ def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, dow
     needs |l| small: where 2 cut K > 0.01 (|l| may pass 0.1 inside q <= 2 cut) the bound is inf too, and
     small_form_m clamps l at -0.5 so that the pixels farther out, where l may pass -1, stay outside the footprint.
     The closest approach's place along the ray, z (1 + l / 2), is off by at most cut K relatively where q <= cut:
-    ``depth`` asks for 2000 cut K <= 1 as the frames with depth do."""
+    ``depth`` asks for 2000 cut K <= 1 as the frames with depth do. The footprint's edge stays the ray test's: a
+    pixel whose m from the form is within the form's error there (q^2 K at q ~ 1.1 cut) plus 1e-3 cut of float's
+    takes the ray test, so that no pixel flips in or out of a footprint (a flip is 1/255 of alpha)."""
     f, r, dn = (np.asarray(v, np.float64) for v in (forward, right, down))
     w = p.whiten[index]
     ol = p.origin_local[index]
@@ -146,7 +149,10 @@ def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, dow
         error = SMALL_ERROR_FACTOR * p.opacity[index] * k_det / det
         series = (2000 if depth else 200) * p.cutoff[index] * k_det <= det
     error = np.where((z > 0.2 * np.linalg.norm(mu, axis=1)) & series & (det > 0) & np.isfinite(error), error, np.inf)
-    return SmallForm(mu @ r / z, mu @ dn / z, mss, mst, mtt, ls, lt, z, error)
+    c = p.cutoff[index]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        edge = 1.5 * c * c * k_det / det + 1e-3 * c
+    return SmallForm(mu @ r / z, mu @ dn / z, mss, mst, mtt, ls, lt, z, error, np.stack([c - edge, c + edge], 1))
 
 
 def small_form_m(form: SmallForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
