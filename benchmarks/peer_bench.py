@@ -93,18 +93,14 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 
 
 class Ours:
-    """Our renderer; ``small_tol`` other than None: with that renderer.SMALL_SPLAT_TOL (an A/B row of its own)."""
+    """Our renderer; ``ray_only``: without the raster's plane forms (renderer.PLANE_FORMS False), an A/B row."""
 
-    DEFAULT_SMALL_TOL = None  # renderer.SMALL_SPLAT_TOL as imported: rep() sets the module's value per renderer
-
-    def __init__(self, scene, ctx, small_tol: float | None = None) -> None:
+    def __init__(self, scene, ctx, ray_only: bool = False) -> None:
         from gs_ibl_addon.core.render import renderer
-        if Ours.DEFAULT_SMALL_TOL is None:
-            Ours.DEFAULT_SMALL_TOL = renderer.SMALL_SPLAT_TOL
         self.r = renderer.SplatRenderer(scene, ctx)
         self.sh_k = scene.sh.shape[1]
-        self.small_tol = Ours.DEFAULT_SMALL_TOL if small_tol is None else small_tol
-        self.name = "gs-ibl" if small_tol is None else f"gs-ibl small_tol={small_tol:g}"
+        self.plane_forms = not ray_only
+        self.name = "gs-ibl ray test only" if ray_only else "gs-ibl"
 
     def set_face(self, face: int) -> None:
         from gs_ibl_addon.core.render.renderer import _views_buffer_data
@@ -114,7 +110,7 @@ class Ours:
 
     def rep(self) -> dict:
         from gs_ibl_addon.core.render import renderer
-        renderer.SMALL_SPLAT_TOL = self.small_tol  # read when a batch shape's program is first recorded
+        renderer.PLANE_FORMS = self.plane_forms  # read when a batch shape's program is first recorded
         t0 = time.perf_counter()
         res = self.r.render(self.batch, timestamps=True)
         wall = (time.perf_counter() - t0) * 1e3
@@ -130,7 +126,7 @@ class Ours:
 
     def images(self) -> np.ndarray:
         from gs_ibl_addon.core.render import renderer
-        renderer.SMALL_SPLAT_TOL = self.small_tol
+        renderer.PLANE_FORMS = self.plane_forms
         return np.stack(self.r.render(self.batch).images)
 
     def close(self) -> None:
@@ -252,7 +248,7 @@ def run_bench(args) -> None:
             t = time.perf_counter()
             scene = SCENES[kind](n)
             ours, peer = Ours(scene, ctx), Gsplat(scene)
-            variants = [Ours(scene, ctx, float(x)) for x in args.ab_small_tol.split(",") if x]
+            variants = [Ours(scene, ctx, ray_only=True)] if args.ab_ray else []
             log(f"{kind} {n:,}: scene and uploads {time.perf_counter() - t:.1f} s")
             for face in [int(x) for x in args.faces.split(",")]:
                 for r in (ours, *variants, peer):
@@ -365,12 +361,17 @@ def main() -> None:
     ap.add_argument("--coalesce", type=int, choices=(0, 1), help="radix8_scatter's way of writing (gpu_sort.COALESCE)")
     ap.add_argument("--conic-faces", help="MIN:MAX, the face sizes that raster with the conic pre-test "
                     "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
-    ap.add_argument("--ab-small-tol", default="", help="X,...: also our renderer with SMALL_SPLAT_TOL = X, "
-                    "rows of their own in the same blocks")
+    ap.add_argument("--ab-ray", action="store_true", help="also our renderer without the raster's plane forms "
+                    "(the ray test for every pair), rows of their own in the same blocks")
+    ap.add_argument("--raster-spv", help="another build of gs_raster.spv for our renderer (trials of a kernel)")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
     ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
     args = ap.parse_args()
+    if args.raster_spv:
+        from gs_ibl_addon.core.vk import pipelines
+        load = pipelines._load_spirv
+        pipelines._load_spirv = lambda name: open(args.raster_spv, "rb").read() if name == "gs_raster" else load(name)
     if args.coalesce is not None:
         from gs_ibl_addon.core.render import gpu_sort
         gpu_sort.COALESCE = args.coalesce

@@ -170,7 +170,8 @@ void main() {
     prepared[PREP * q + 1u] = vec4(w1, ol.y);
     prepared[PREP * q + 2u] = vec4(w2, ol.z);
     prepared[PREP * q + 3u] = vec4(sh_color(i, mu / dist), opacity);
-    prepared[PREP * q + 4u] = vec4(cutoff, float(probe * probe_tiles), 0.0, 0.0);  // exact below 2^24 (renderer.py)
+    // .y: exact below 2^24 (renderer.py); .zw: the centre's direction, octahedral, for the raster's plane forms
+    prepared[PREP * q + 4u] = vec4(cutoff, float(probe * probe_tiles), octahedral(mu));
     tile_count[q] = count;
     depth_key[q] = depth_sort_key(dist, po.xyz);
 }

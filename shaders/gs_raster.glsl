@@ -16,19 +16,14 @@ layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks
 // the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
 layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
 // write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
-// small_tol: the largest bound on a pair's alpha error for which a small splat takes its footprint's expansion
-// (small_form) instead of the ray test; 0 gives every pair the ray test.
+// plane_forms 0: every pair takes the ray test (plane_form; the conic kernel has none).
 layout(push_constant) uniform P {
-    uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; float small_tol;
+    uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; uint plane_forms;
 } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
 shared vec4 s_w0[256], s_w1[256], s_w2[256], s_col[256];
 shared float s_cut[256];
-#ifndef RASTER_CONIC
-shared vec4 s_f0[256], s_f1[256];  // a small splat's form (small_form); s_cut negative says it holds
-shared vec2 s_band[256];
-#endif
 #ifdef RASTER_CONIC
 // Per pair, its footprint as a conic in this view's image plane, centred on the splat (footprint_conic): a pixel
 // tests it (two loads, a few multiply-adds) before the ray test, which most pairs fail in most of a tile when the
@@ -79,74 +74,63 @@ bool conic_hit(uint k, float s, float t) {
 #endif
 
 #ifndef RASTER_CONIC
-// A small splat's m along the rays near it, as a quadratic form in the image plane (render/splat_math.py
-// small_form mirrors this, with the derivation). With d = d0 + ds right + dt down about the centre's ray d0 = mu / z,
-// Wd = -o'/z + ds a + dt b, so m = |o' x Wd|^2 / |Wd|^2 = N / D with N = |ds xa + dt xb|^2 exactly and
-// D = D0 (1 - l + v), D0 = |o'|^2 / z^2, l = L . (ds, dt), v = |ds a + dt b|^2 / D0. Then m ~ (N / D0)(1 + l): what is
-// dropped is (N / D0)(l^2 - v) to second order, and over the pixels at N / D0 = q it is at most q^2 K, K =
-// L^T M^-1 L + tr(M^-1 G / D0) with M = N's matrix / D0 and G = v's. The alpha error o e^(-q/2) q^2 K / 2 is at most
-// 1.09 o K, so a pair takes this form when 1.09 o K <= small_tol: K is about the footprint's squared angular length,
-// so only splats well below a degree take it, needles as well as blobs. The series needs |l| small: 2 cut K <= 0.01
-// keeps |l| <= 0.1 where q <= 2 cut, and the pixel clamps l at -0.5 so that the pixels beyond (the tile's far
-// corners, where l may pass -1) stay outside. Along d the closest approach lies at z (1 + l / 2), relative error
-// at most cut K where q <= cut: frames with depth ask for 2000 cut K <= 1.
-// The footprint's edge stays the ray test's: a pixel whose m from the form lies within the form's error (plus float's)
-// of the cut takes the ray test, so no pixel flips in or out of the footprint (each such flip is 1/255 of alpha).
-// Writes f0 = (s0, t0, M_ss, M_tt), f1 = (2 M_st, L_s, L_t, z), band = the m between which a pixel takes the ray test,
-// and returns whether the form holds; a splat not well in front of the view never does.
-bool small_form(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float opacity, float cut, out vec4 f0,
-                out vec4 f1, out vec2 band) {
-    f0 = vec4(0.0);
-    f1 = vec4(0.0);
-    band = vec2(0.0);
-    if (!(p.small_tol > 0.0)) return false;
+// A pair's m along every ray of the view, as exact quadratic forms in the image plane (render/splat_math.py
+// plane_form mirrors this, with the derivation). About the centre's ray d0 = mu / z (z = fwd . mu, image coordinates
+// s0, t0), d = d0 + ds right + dt down gives Wd = -o'/z + ds a + dt b (a = W right, b = W down), so with
+// D0 = |o'|^2 / z^2: m = |o' x Wd|^2 / |Wd|^2 = q / (1 - l + v), q = |ds (o' x a) + dt (o' x b)|^2 / D0,
+// l = 2 (ds a.o' + dt b.o') / (z D0), v = |ds a + dt b|^2 / D0; the closest approach is ahead where l < 2, at
+// z (1 - l/2) / (1 - l + v) along d. Every term is of the footprint's own size, so float keeps what the ray test's
+// cross product of two near-parallel long vectors loses for small far splats, and a pixel evaluates two quadratics
+// and a linear form (three shared loads, ~15 operations) where the ray test takes a matrix product, a cross
+// product and two dots. Writes (s0, t0, q_ss, q_tt), (2 q_st, l_s, l_t, z), (v_ss, 2 v_st, v_tt, 0) over the
+// pair's w0, w1, w2 and negates its cut when the form holds: a splat well in front of the view (z > 0.2 |mu|) whose
+// footprint is not so long and thin (q's eigenvalues more than ~1e3 apart) that q would cancel in float. The centre's
+// ray (s0, t0) is the one quantity a pixel subtracts from: it comes from the direction preprocess keeps (centre,
+// octahedral), as precise as o' itself; mu rebuilt from W and o' is off by ~1e-7 |mu|, which for a splat a thousand
+// of its sizes away moved its footprint by 1e-4 of it and flipped edge pixels (tests/test_raster_plane.py's wall).
+void plane_form(vec3 fwd, vec3 r, vec3 dn, uint k, vec3 centre) {
+    vec4 w0 = s_w0[k], w1 = s_w1[k], w2 = s_w2[k];
     vec3 ol = vec3(w0.w, w1.w, w2.w);
+    float zc = dot(fwd, centre);
+    if (!(zc > 0.2 * length(centre))) return;
+    // the centre's distance for the forms' scale (no cancellation there): W's rows are R's columns over the dilated
+    // scales, so mu = -W^-1 o' = -sum_k w_k o'_k / |w_k|^2
     vec3 mu = -(w0.xyz * (ol.x / dot(w0.xyz, w0.xyz)) + w1.xyz * (ol.y / dot(w1.xyz, w1.xyz))
                 + w2.xyz * (ol.z / dot(w2.xyz, w2.xyz)));
-    float z = dot(fwd, mu);
-    if (!(z > 0.2 * length(mu))) return false;
+    float z = zc * (length(mu) / length(centre));
     vec3 a = vec3(dot(w0.xyz, r), dot(w1.xyz, r), dot(w2.xyz, r));
     vec3 b = vec3(dot(w0.xyz, dn), dot(w1.xyz, dn), dot(w2.xyz, dn));
-    vec3 xa = cross(ol, a), xb = cross(ol, b);  // as cross products: o', a and b are near parallel for thin splats
-    float oo = dot(ol, ol), iz = 1.0 / z;
-    float id0 = z * z / oo;  // 1 / D0
-    float mss = dot(xa, xa) * id0, mtt = dot(xb, xb) * id0, mst = dot(xa, xb) * id0;
+    vec3 xa = cross(ol, a), xb = cross(ol, b);  // cross products: o', a and b are near parallel for thin splats
+    float iz = 1.0 / z, id0 = z * z / dot(ol, ol);
+    float qss = dot(xa, xa) * id0, qtt = dot(xb, xb) * id0;
     vec3 xab = cross(xa, xb);
-    float det = dot(xab, xab) * id0 * id0;  // det M, by Lagrange's identity rather than a cancelling difference
-    float ls = 2.0 * z * dot(a, ol) / oo, lt = 2.0 * z * dot(b, ol) / oo;
-    float k_det = mtt * ls * ls - 2.0 * mst * ls * lt + mss * lt * lt  // det M (L^T M^-1 L + tr(M^-1 G / D0))
-                  + (mtt * dot(a, a) - 2.0 * mst * dot(a, b) + mss * dot(b, b)) * id0;
-    f0 = vec4(dot(r, mu) * iz, dot(dn, mu) * iz, mss, mtt);
-    f1 = vec4(2.0 * mst, ls, lt, z);
-    float edge = 1.5 * cut * cut * k_det / det + 1e-3 * cut;  // q^2 K at q ~ 1.1 cut, and float's share
-    band = vec2(cut - edge, cut + edge);
-    float series = p.write_depth != 0u ? 2000.0 : 200.0;  // with depth: its error c K <= 5e-4 too
-    return k_det * max(1.09 * opacity / p.small_tol, series * cut) <= det;  // false for a NaN
+    if (!((qss + qtt) * (qss + qtt) <= 1e3 * dot(xab, xab) * id0 * id0)) return;  // 4 det q / tr^2, Lagrange's way
+    s_w0[k] = vec4(dot(r, centre) / zc, dot(dn, centre) / zc, qss, qtt);
+    s_w1[k] = vec4(2.0 * dot(xa, xb) * id0, 2.0 * dot(a, ol) * iz * id0, 2.0 * dot(b, ol) * iz * id0, z);
+    s_w2[k] = vec4(dot(a, a) * id0, 2.0 * dot(a, b) * id0, dot(b, b) * id0, 0.0);
+    s_cut[k] = -s_cut[k];
 }
 #endif
 
 // Pair k of the batch along the pixel's ray d (image coordinates s, t): composited front to back if the ray passes
 // within its footprint. Returns whether the pixel is now opaque. Unlike 3DGS, the splat that crosses T_MIN is kept:
 // the rule then composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance
-// behind. A negative s_cut marks a small splat's expansion in s_w0, s_w1 (small_form): the same for every pixel of
-// the tile, so the branch does not diverge.
+// behind. A negative s_cut says the pair holds its plane form (plane_form): the same for every pixel of the tile,
+// so the branch does not diverge.
 bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum) {
     float cut = s_cut[k], m, along;
-    bool ray = true;
 #ifndef RASTER_CONIC
     if (cut < 0.0) {
-        vec4 f0 = s_f0[k], f1 = s_f1[k];
-        vec2 band = s_band[k];
+        vec4 f0 = s_w0[k], f1 = s_w1[k], f2 = s_w2[k];
         float ds = s - f0.x, dt = t - f0.y;
         float q = ds * (f0.z * ds + f1.x * dt) + f0.w * (dt * dt);
         float l = f1.y * ds + f1.z * dt;
-        m = q + q * max(l, -0.5);
-        if (m > band.y) return false;
-        ray = m >= band.x;  // on the footprint's edge (rare, so divergent but cheap): the ray test decides
-        along = f1.w + f1.w * (0.5 * l);
-        cut = -cut;
-    }
-    if (ray)
+        float den = 1.0 - l + (ds * (f2.x * ds + f2.y * dt) + f2.z * (dt * dt));  // |Wd|^2 / D0 > 0
+        if (q > -cut * den || l >= 2.0) return false;  // outside the footprint, or the approach behind the origin
+        float iden = 1.0 / den;
+        m = q * iden;
+        along = f1.w * (1.0 - 0.5 * l) * iden;
+    } else
 #endif
     {
         vec3 ol = vec3(s_w0[k].w, s_w1[k].w, s_w2[k].w);
@@ -208,17 +192,13 @@ void main() {
             uint i = inst_val[j];
             s_w0[lid] = prepared[PREP * i]; s_w1[lid] = prepared[PREP * i + 1u];
             s_w2[lid] = prepared[PREP * i + 2u]; s_col[lid] = prepared[PREP * i + 3u];
-            float cut = prepared[PREP * i + 4u].x;
-            s_cut[lid] = cut;
+            vec4 e = prepared[PREP * i + 4u];
+            s_cut[lid] = e.x;
 #ifdef RASTER_CONIC
-            footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], cut, s_qa[lid], s_qb[lid]);
+            footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_cut[lid], s_qa[lid],
+                            s_qb[lid]);
 #else
-            vec4 f0, f1;
-            vec2 band;
-            if (small_form(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_col[lid].w, cut,
-                           f0, f1, band)) {
-                s_f0[lid] = f0; s_f1[lid] = f1; s_band[lid] = band; s_cut[lid] = -cut;
-            }
+            if (p.plane_forms != 0u) plane_form(s_view[0], s_view[1], s_view[2], lid, from_octahedral(e.zw));
 #endif
         }
         barrier();

@@ -67,3 +67,17 @@ mat3 cut_covariance(mat3 rot, vec3 s2, float cutoff) {
     mat3 rs = mat3(rot[0] * s2.x, rot[1] * s2.y, rot[2] * s2.z);
     return cutoff * (rs * transpose(rot));
 }
+
+// A direction as two floats (the octahedral map), precise to float rounding in every direction: the raster's plane
+// forms take a splat's centre ray from it, which the whitened origin o' would give only to |mu| / scale times that.
+vec2 octahedral(vec3 v) {
+    vec3 n = v / (abs(v.x) + abs(v.y) + abs(v.z));
+    if (n.z >= 0.0) return n.xy;
+    return (1.0 - abs(n.yx)) * vec2(n.x >= 0.0 ? 1.0 : -1.0, n.y >= 0.0 ? 1.0 : -1.0);
+}
+
+vec3 from_octahedral(vec2 e) {  // not normalised
+    vec3 n = vec3(e, 1.0 - abs(e.x) - abs(e.y));
+    if (n.z < 0.0) n.xy = (1.0 - abs(n.yx)) * vec2(n.x >= 0.0 ? 1.0 : -1.0, n.y >= 0.0 ? 1.0 : -1.0);
+    return n;
+}

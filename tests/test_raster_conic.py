@@ -28,9 +28,9 @@ def _scene():
 
 def _both(monkeypatch, scene, batch, read):
     out = []
-    # the ray test alone, then the conic first; a renderer each (it keeps its programs). The plain kernel's small
-    # splat form (test_raster_small.py) is off: it is within a tolerance of the ray test, not its bits
-    monkeypatch.setattr(R, "SMALL_SPLAT_TOL", 0.0)
+    # the ray test alone, then the conic first; a renderer each (it keeps its programs). The plain kernel's plane
+    # forms (test_raster_plane.py) are off: they give the ray test's m to rounding, not its bits
+    monkeypatch.setattr(R, "PLANE_FORMS", False)
     for limit in (0, 1 << 20):
         monkeypatch.setattr(R, "CONIC_MIN_FACE", 1)
         monkeypatch.setattr(R, "CONIC_MAX_FACE", limit)

@@ -105,12 +105,10 @@ def raster_conic(batch: ViewBatch) -> bool:
     return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
 
 
-# A pair whose footprint's quadratic expansion in the image plane gives its alpha to within SMALL_SPLAT_TOL (a
-# bound; splat_math.small_form: splats up to about two of a 1024² face's pixels, seen from any face size) is rastered
-# from that expansion instead of the ray test: a third of the per-pixel arithmetic. 0 turns it off. At 1e-4 the
-# shells of peer_bench take it for 96% (1M splats) and all (6M) of their splats, at 1e-5 for none and 66%. The plain
-# kernel only: the conic kernel's pixels already skip most pairs with a cheaper test.
-SMALL_SPLAT_TOL = 1e-4
+# The plain raster kernel evaluates each pair whose centre is well in front of the view through its exact forms in
+# the image plane (gs_raster.glsl plane_form, splat_math.plane_form): the ray test's m with less arithmetic per pixel
+# and no cancellation for small far splats. False: the ray test for every pair (tests, benchmarks' A/B).
+PLANE_FORMS = True
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
@@ -617,7 +615,7 @@ class SplatRenderer:
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
-                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), small_tol=SMALL_SPLAT_TOL)
+                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS))
             if chunks > 1:
                 rec.dispatch(KERNELS["gs_merge"], [partial, g_image, partial_depth, depth_buf], groups(pixels, 256, c),
                              chunks=chunks, total_pixels=pixels, write_depth=int(depth))

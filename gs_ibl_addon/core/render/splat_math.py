@@ -92,44 +92,35 @@ def ray_mahalanobis(p: PreparedSplats, index: np.ndarray | slice,
     return np.sum(cr * cr, -1) / dd, -od / dd, od < 0
 
 
-# max over q of exp(-q/2) q^2 / 2 (at q = 4): turns small_form's bound on m's error, q^2 K, into one on alpha's
-SMALL_ERROR_FACTOR = 8.0 / np.e ** 2
-
-
 @dataclass
-class SmallForm:
-    """A splat's m near its centre's ray in one view, m ~ q (1 + l), the image-plane expansion the GPU raster
-    uses for small splats (gs_raster.glsl small_form). All (S,) float64 arrays."""
-    s0: np.ndarray  # image-plane coordinates of the centre (right, down; the view's tan units)
+class PlaneForm:
+    """A splat's m along every ray of one view as exact forms in the view's image plane, as the GPU raster takes it
+    (gs_raster.glsl plane_form). All (S,) float64 arrays."""
+    s0: np.ndarray  # image-plane coordinates of the centre's ray (right, down; the view's tan units)
     t0: np.ndarray
-    mss: np.ndarray  # q = mss ds^2 + 2 mst ds dt + mtt dt^2
-    mst: np.ndarray
-    mtt: np.ndarray
+    qss: np.ndarray  # q = qss ds^2 + 2 qst ds dt + qtt dt^2
+    qst: np.ndarray
+    qtt: np.ndarray
     ls: np.ndarray  # l = ls ds + lt dt
     lt: np.ndarray
+    vss: np.ndarray  # v = vss ds^2 + 2 vst ds dt + vtt dt^2
+    vst: np.ndarray
+    vtt: np.ndarray
     z: np.ndarray  # the centre's depth along the view's forward axis
-    error: np.ndarray  # bound on |alpha - alpha of the expansion| (inf where the form does not hold)
-    band: np.ndarray  # (S, 2): the m between which a pixel takes the ray test (the footprint's edge stays exact)
+    held: np.ndarray  # bool: the GPU takes the form (else the ray test)
 
 
-def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, down, depth: bool = False) -> SmallForm:
-    """The expansion of m about each splat's centre ray in the view (forward, right, down), and its error bound.
+def plane_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, down) -> PlaneForm:
+    """The ray test's m of each splat, rewritten about its centre's ray in the view (forward, right, down).
 
-    With d = d0 + ds right + dt down, d0 = mu / z the ray through the centre (z = forward . mu), the whitened ray
-    is Wd = -o'/z + ds a + dt b (a = W right, b = W down, o' = -W mu), so the ray test's m = |o' x Wd|^2 / |Wd|^2
-    is N / D with N = |ds (o' x a) + dt (o' x b)|^2 exactly and D = D0 (1 - l + v): D0 = |o'|^2 / z^2,
-    l = (2 z / |o'|^2)(ds a.o' + dt b.o'), v = |ds a + dt b|^2 / D0. So m = q (1 + l) + q (l^2 - v) + ..., q =
-    N / D0 = x^T M x (x = (ds, dt)). Where q is some value, (L.x)^2 <= q L^T M^-1 L and v <= q tr(M^-1 G) (G =
-    v's matrix), so the error is at most q^2 K, K = L^T M^-1 L + tr(M^-1 G), and alpha's, o e^(-m/2) m_err / 2,
-    at most SMALL_ERROR_FACTOR o K. K is about the footprint's squared angular length (M^-1's large eigenvalue), so
-    short needles hold as well as blobs, long ones do not, nor does a splat not well in front of the view (z <=
-    0.2 |mu|). The series
-    needs |l| small: where 2 cut K > 0.01 (|l| may pass 0.1 inside q <= 2 cut) the bound is inf too, and
-    small_form_m clamps l at -0.5 so that the pixels farther out, where l may pass -1, stay outside the footprint.
-    The closest approach's place along the ray, z (1 + l / 2), is off by at most cut K relatively where q <= cut:
-    ``depth`` asks for 2000 cut K <= 1 as the frames with depth do. The footprint's edge stays the ray test's: a
-    pixel whose m from the form is within the form's error there (q^2 K at q ~ 1.1 cut) plus 1e-3 cut of float's
-    takes the ray test, so that no pixel flips in or out of a footprint (a flip is 1/255 of alpha)."""
+    A pixel's ray is d = d0 + ds right + dt down with d0 = mu / z the ray through the centre (z = forward . mu;
+    (s0, t0) its image coordinates). The whitened ray is then Wd = -o'/z + ds a + dt b (a = W right, b = W down,
+    o' = -W mu), so with D0 = |o'|^2 / z^2 the ray test's m = |o' x Wd|^2 / |Wd|^2 is, exactly,
+    m = q / (1 - l + v): q = |ds (o' x a) + dt (o' x b)|^2 / D0, l = 2 (ds a.o' + dt b.o') / (z D0) and
+    v = |ds a + dt b|^2 / D0. The closest approach, -o'.Wd / |Wd|^2 along d, is z (1 - l/2) / (1 - l + v): ahead
+    where l < 2. Each term is of the footprint's own size, so float keeps what the ray test's cross product of two
+    near-parallel long vectors loses for small far splats. Held (the GPU takes it) for a splat well in front of the
+    view (z > 0.2 |mu|) whose q is not too ill-conditioned to evaluate in float: tr(q)^2 <= 1e3 det(q)."""
     f, r, dn = (np.asarray(v, np.float64) for v in (forward, right, down))
     w = p.whiten[index]
     ol = p.origin_local[index]
@@ -137,30 +128,24 @@ def small_form(p: PreparedSplats, index: np.ndarray | slice, forward, right, dow
     z = mu @ f
     a, b = w @ r, w @ dn
     xa, xb = np.cross(ol, a), np.cross(ol, b)
-    oo = np.sum(ol * ol, 1)
-    id0 = z * z / oo
-    mss, mtt, mst = np.sum(xa * xa, 1) * id0, np.sum(xb * xb, 1) * id0, np.sum(xa * xb, 1) * id0
-    xab = np.cross(xa, xb)
-    det = np.sum(xab * xab, 1) * id0 * id0
-    ls, lt = 2 * z * np.sum(a * ol, 1) / oo, 2 * z * np.sum(b * ol, 1) / oo
-    k_det = (mtt * ls ** 2 - 2 * mst * ls * lt + mss * lt ** 2
-             + (mtt * np.sum(a * a, 1) - 2 * mst * np.sum(a * b, 1) + mss * np.sum(b * b, 1)) * id0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        error = SMALL_ERROR_FACTOR * p.opacity[index] * k_det / det
-        series = (2000 if depth else 200) * p.cutoff[index] * k_det <= det
-    error = np.where((z > 0.2 * np.linalg.norm(mu, axis=1)) & series & (det > 0) & np.isfinite(error), error, np.inf)
-    c = p.cutoff[index]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        edge = 1.5 * c * c * k_det / det + 1e-3 * c
-    return SmallForm(mu @ r / z, mu @ dn / z, mss, mst, mtt, ls, lt, z, error, np.stack([c - edge, c + edge], 1))
+        iz, id0 = 1 / z, z * z / np.sum(ol * ol, 1)
+        qss, qtt, qst = np.sum(xa * xa, 1) * id0, np.sum(xb * xb, 1) * id0, np.sum(xa * xb, 1) * id0
+        xab = np.cross(xa, xb)
+        held = (z > 0.2 * np.linalg.norm(mu, axis=1)) & ((qss + qtt) ** 2 <= 1e3 * np.sum(xab * xab, 1) * id0 ** 2)
+        return PlaneForm(mu @ r * iz, mu @ dn * iz, qss, qst, qtt, 2 * np.sum(a * ol, 1) * iz * id0,
+                         2 * np.sum(b * ol, 1) * iz * id0, np.sum(a * a, 1) * id0, np.sum(a * b, 1) * id0,
+                         np.sum(b * b, 1) * id0, z, held)
 
 
-def small_form_m(form: SmallForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(m, where along the ray the closest approach lies), each (S, P), for image-plane points (P,) s, t."""
-    ds, dt = s[None] - form.s0[:, None], t[None] - form.t0[:, None]
-    q = ds * (form.mss[:, None] * ds + 2 * form.mst[:, None] * dt) + form.mtt[:, None] * dt * dt
-    lin = form.ls[:, None] * ds + form.lt[:, None] * dt
-    return q * (1 + np.maximum(lin, -0.5)), form.z[:, None] * (1 + 0.5 * lin)
+def plane_form_m(form: PlaneForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """As ray_mahalanobis, for image-plane points (P,) s, t: (m, t along the ray, ahead), each (S, P)."""
+    c = {k: getattr(form, k)[:, None] for k in ("s0", "t0", "qss", "qst", "qtt", "ls", "lt", "vss", "vst", "vtt", "z")}
+    ds, dt = s[None] - c["s0"], t[None] - c["t0"]
+    q = ds * (c["qss"] * ds + 2 * c["qst"] * dt) + c["qtt"] * dt * dt
+    lin = c["ls"] * ds + c["lt"] * dt
+    den = 1 - lin + ds * (c["vss"] * ds + 2 * c["vst"] * dt) + c["vtt"] * dt * dt
+    return q / den, c["z"] * (1 - 0.5 * lin) / den, lin < 2
 
 
 def _pcg(v: np.ndarray) -> np.ndarray:
