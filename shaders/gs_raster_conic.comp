@@ -3,4 +3,5 @@
 // CONIC_MAX_FACE (render/renderer.py says why).
 #define RASTER_CONIC 1
 #extension GL_GOOGLE_include_directive : require
+#extension GL_EXT_control_flow_attributes : require
 #include "gs_raster.glsl"
