@@ -363,15 +363,19 @@ def main() -> None:
                     "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
     ap.add_argument("--ab-ray", action="store_true", help="also our renderer without the raster's plane forms "
                     "(the ray test for every pair), rows of their own in the same blocks")
-    ap.add_argument("--raster-spv", help="another build of gs_raster.spv for our renderer (trials of a kernel)")
+    ap.add_argument("--spv-dir", help="a folder of other builds of our kernels (NAME.spv): trials of a kernel")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
     ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
     args = ap.parse_args()
-    if args.raster_spv:
+    if args.spv_dir:
         from gs_ibl_addon.core.vk import pipelines
         load = pipelines._load_spirv
-        pipelines._load_spirv = lambda name: open(args.raster_spv, "rb").read() if name == "gs_raster" else load(name)
+
+        def trial(name: str) -> bytes:
+            path = os.path.join(args.spv_dir, name + ".spv")
+            return open(path, "rb").read() if os.path.exists(path) else load(name)
+        pipelines._load_spirv = trial
     if args.coalesce is not None:
         from gs_ibl_addon.core.render import gpu_sort
         gpu_sort.COALESCE = args.coalesce

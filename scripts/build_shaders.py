@@ -24,6 +24,11 @@ DST = ROOT / "gs_ibl_addon" / "shaders"
 RECORD = DST / "sources.json"
 CONSTANTS_PY = ROOT / "gs_ibl_addon" / "core" / "vk" / "constants.py"
 CONSTANTS_GLSL = SRC / "constants.glsl"
+# No -O (spirv-opt): NVIDIA's compiler did better with glslc's plain SPIR-V. H200, 2026-12-04 (docs/benchmarks.md):
+# the plain raster held 61 registers with -O and 53 without, and rastered 6M splats at 1024² in 10.1 -> 8.9 ms
+# (shell), 3.5 -> 3.2 (random); the radix scatter 71 -> 68 registers; no stage got slower. Lavapipe optimises the
+# SPIR-V itself with LLVM.
+GLSLC_FLAGS = ("--target-env=vulkan1.2",)
 
 
 def constants_glsl() -> str:
@@ -36,6 +41,7 @@ def constants_glsl() -> str:
 
 def source_hash(comp: pathlib.Path) -> str:
     h = hashlib.sha1(comp.read_bytes())
+    h.update(" ".join(GLSLC_FLAGS).encode())  # other flags: another build
     for inc in sorted(SRC.glob("*.glsl")):  # includes: any change rebuilds every shader (they are few and small)
         h.update(inc.name.encode())
         h.update(inc.read_bytes())
@@ -60,7 +66,7 @@ def main() -> int:
             print(f"glslc is missing and {out.name} is not built from the current {comp.name}: apt-get install glslc",
                   file=sys.stderr)
             return 1
-        cmd = [glslc, "--target-env=vulkan1.2", "-O", "-I", str(SRC), str(comp), "-o", str(out)]
+        cmd = [glslc, *GLSLC_FLAGS, "-I", str(SRC), str(comp), "-o", str(out)]
         r = subprocess.run(cmd, capture_output=True, text=True)
         if r.returncode != 0:
             print(r.stderr, file=sys.stderr)
