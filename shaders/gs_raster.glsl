@@ -219,8 +219,8 @@ void main() {
             }
         }
 #else
-        // not unrolled: unrolled (the compiler's choice) the kernel held 61 registers instead of 53, and rastered the
-        // 6M shell at 1024² in 9.9 ms instead of 8.9 on an H200 (docs/benchmarks.md)
+        // not unrolled: the pixel loop's registers are what bounds this kernel (docs/benchmarks.md: registers), and
+        // the 53-register build measured best on an H200 had it so
         [[dont_unroll]] for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum);
 #endif
     }

@@ -219,7 +219,9 @@ def test_blender_camera_matrices_give_the_same_image(blender):
                             up=m[:3, 1])
     _same_view(ov.batch.views[0], ref.views[0], atol=1e-6)
     r = SplatRenderer(small_scene())
-    np.testing.assert_allclose(r.render(ov.batch).images[0], r.render(ref).images[0], atol=1e-5)
+    # The two views agree to 1e-6, and the plane forms (tests/test_raster_plane.py) round differently for each: their
+    # images may part by float32 rounding, which that file bounds at 5e-5.
+    np.testing.assert_allclose(r.render(ov.batch).images[0], r.render(ref).images[0], atol=5e-5)
 
 
 @bpy_only
