@@ -92,15 +92,25 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
             "ranges": 4 * drawn + 8 * tiles, "raster": 4 * drawn + PREP * 16 * n + 16 * pixels}
 
 
-class Ours:
-    """Our renderer; ``ray_only``: without the raster's plane forms (renderer.PLANE_FORMS False), an A/B row."""
+# A/B rows (--ab): our renderer with a raster switch off, measured in the same blocks as the rest.
+VARIANTS = {"ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False)),  # no plane forms
+            "no-bound": ("gs-ibl no tile bound", dict(PLANE_BOUND=False))}  # forms without their tile bound
 
-    def __init__(self, scene, ctx, ray_only: bool = False) -> None:
+
+class Ours:
+    """Our renderer; ``variant``: a VARIANTS key, an A/B row with one of the raster's switches off."""
+
+    def __init__(self, scene, ctx, variant: str | None = None) -> None:
         from gs_ibl_addon.core.render import renderer
         self.r = renderer.SplatRenderer(scene, ctx)
         self.sh_k = scene.sh.shape[1]
-        self.plane_forms = not ray_only
-        self.name = "gs-ibl ray test only" if ray_only else "gs-ibl"
+        self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
+        self.switches = dict(dict(PLANE_FORMS=True, PLANE_BOUND=True), **off)
+
+    def _switch(self) -> None:
+        from gs_ibl_addon.core.render import renderer
+        for k, v in self.switches.items():  # read when a batch shape's program is first recorded
+            setattr(renderer, k, v)
 
     def set_face(self, face: int) -> None:
         from gs_ibl_addon.core.render.renderer import _views_buffer_data
@@ -109,8 +119,7 @@ class Ours:
         _, self.tiles, self.pixels = _views_buffer_data(self.batch)
 
     def rep(self) -> dict:
-        from gs_ibl_addon.core.render import renderer
-        renderer.PLANE_FORMS = self.plane_forms  # read when a batch shape's program is first recorded
+        self._switch()
         t0 = time.perf_counter()
         res = self.r.render(self.batch, timestamps=True)
         wall = (time.perf_counter() - t0) * 1e3
@@ -125,8 +134,7 @@ class Ours:
         return int(self.r.count.read(np.uint32, 1)[0])
 
     def images(self) -> np.ndarray:
-        from gs_ibl_addon.core.render import renderer
-        renderer.PLANE_FORMS = self.plane_forms
+        self._switch()
         return np.stack(self.r.render(self.batch).images)
 
     def close(self) -> None:
@@ -248,7 +256,7 @@ def run_bench(args) -> None:
             t = time.perf_counter()
             scene = SCENES[kind](n)
             ours, peer = Ours(scene, ctx), Gsplat(scene)
-            variants = [Ours(scene, ctx, ray_only=True)] if args.ab_ray else []
+            variants = [Ours(scene, ctx, v) for v in args.ab.split(",") if v]
             log(f"{kind} {n:,}: scene and uploads {time.perf_counter() - t:.1f} s")
             for face in [int(x) for x in args.faces.split(",")]:
                 for r in (ours, *variants, peer):
@@ -361,8 +369,8 @@ def main() -> None:
     ap.add_argument("--coalesce", type=int, choices=(0, 1), help="radix8_scatter's way of writing (gpu_sort.COALESCE)")
     ap.add_argument("--conic-faces", help="MIN:MAX, the face sizes that raster with the conic pre-test "
                     "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
-    ap.add_argument("--ab-ray", action="store_true", help="also our renderer without the raster's plane forms "
-                    "(the ray test for every pair), rows of their own in the same blocks")
+    ap.add_argument("--ab", default="", help="comma-separated VARIANTS (ray: no plane forms; no-bound: forms "
+                    "without the tile bound): our renderer with that switch off, rows of their own in the same blocks")
     ap.add_argument("--spv-dir", help="a folder of other builds of our kernels (NAME.spv): trials of a kernel")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))

@@ -109,6 +109,9 @@ def raster_conic(batch: ViewBatch) -> bool:
 # the image plane (gs_raster.glsl plane_form, splat_math.plane_form): the ray test's m with less arithmetic per pixel
 # and no cancellation for small far splats. False: the ray test for every pair (tests, benchmarks' A/B).
 PLANE_FORMS = True
+# Each form also bounds its q's cut over the tile, so a pixel far outside the footprint ends after q alone; no result
+# changes (tests/test_raster_plane.py). False: every pixel takes the whole form (tests, benchmarks' A/B).
+PLANE_BOUND = True
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
@@ -558,7 +561,7 @@ class SplatRenderer:
         shape = tuple((v.width, v.height) for v in batch.views)
         key = (shape, batch.n_probes, group, float(batch.pixel_angle), batch.dilation, bool(batch.energy_preserving),
                bool(timestamps), bool(depth), self.capacity, lod_k, self.cut_capacity,
-               check_colour_space(self.colour_space))
+               check_colour_space(self.colour_space), PLANE_FORMS, PLANE_BOUND)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -615,7 +618,8 @@ class SplatRenderer:
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
-                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS))
+                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS),
+                         plane_bound=int(PLANE_BOUND))
             if chunks > 1:
                 rec.dispatch(KERNELS["gs_merge"], [partial, g_image, partial_depth, depth_buf], groups(pixels, 256, c),
                              chunks=chunks, total_pixels=pixels, write_depth=int(depth))
