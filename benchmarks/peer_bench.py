@@ -93,8 +93,7 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 
 
 # A/B rows (--ab): our renderer with a raster switch off, measured in the same blocks as the rest.
-VARIANTS = {"ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False)),  # no plane forms
-            "no-bound": ("gs-ibl no tile bound", dict(PLANE_BOUND=False))}  # forms without their tile bound
+VARIANTS = {"ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False))}  # no plane forms
 
 
 class Ours:
@@ -105,7 +104,7 @@ class Ours:
         self.r = renderer.SplatRenderer(scene, ctx)
         self.sh_k = scene.sh.shape[1]
         self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
-        self.switches = dict(dict(PLANE_FORMS=True, PLANE_BOUND=True), **off)
+        self.switches = dict(dict(PLANE_FORMS=True), **off)
 
     def _switch(self) -> None:
         from gs_ibl_addon.core.render import renderer
@@ -369,8 +368,8 @@ def main() -> None:
     ap.add_argument("--coalesce", type=int, choices=(0, 1), help="radix8_scatter's way of writing (gpu_sort.COALESCE)")
     ap.add_argument("--conic-faces", help="MIN:MAX, the face sizes that raster with the conic pre-test "
                     "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
-    ap.add_argument("--ab", default="", help="comma-separated VARIANTS (ray: no plane forms; no-bound: forms "
-                    "without the tile bound): our renderer with that switch off, rows of their own in the same blocks")
+    ap.add_argument("--ab", default="", help="comma-separated VARIANTS (ray: no plane forms): our renderer "
+                    "with that switch off, rows of their own in the same blocks")
     ap.add_argument("--spv-dir", help="a folder of other builds of our kernels (NAME.spv): trials of a kernel")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))

@@ -16,11 +16,9 @@ layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks
 // the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
 layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
 // write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
-// plane_forms 0: every pair takes the ray test (plane_form; the conic kernel has none). plane_bound 0: no pixel is
-// rejected by the form's tile bound (plane_form), which changes no result: tests and benchmarks' A/B.
+// plane_forms 0: every pair takes the ray test (plane_form; the conic kernel has none).
 layout(push_constant) uniform P {
     uint n_views; uint total_tiles; uint chunks; uint total_pixels; uint write_depth; uint plane_forms;
-    uint plane_bound;
 } p;
 
 const float ALPHA_MAX = 0.99, T_MIN = 1e-4;
@@ -65,8 +63,6 @@ shared uint s_done;
 // The tile's view (forward, right, down) for the loaders, from shared memory: read again each batch rather than
 // held in registers through the pixel loop, which would cost occupancy (docs/benchmarks.md: registers).
 shared vec3 s_view[3];
-// The image coordinates of the tile's first and last pixel centres, (s, s', t, t'), for plane_form's bound.
-shared vec4 s_tile;
 
 #ifdef RASTER_CONIC
 // Whether the pixel at image coordinates (s, t) may lie in pair k's footprint (a NaN says it may).
@@ -92,11 +88,7 @@ bool conic_hit(uint k, float s, float t) {
 // ray (s0, t0) is the one quantity a pixel subtracts from: it comes from the direction preprocess keeps (centre,
 // octahedral), as precise as o' itself; mu rebuilt from W and o' is off by ~1e-7 |mu|, which for a splat a thousand
 // of its sizes away moved its footprint by 1e-4 of it and flipped edge pixels (tests/test_raster_plane.py's wall).
-// The pair's cut goes to w2.w, and its negated slot holds a bound for the whole tile: q > cut max(1 - l + v) over
-// the tile's pixels rejects a pixel from q alone (two loads, five multiply-adds), where most pixels of a tile of
-// small splats end. 1 - l + v is convex (v is a square), so its largest value over the tile's rectangle is at a
-// corner; the corners' own magnitude pads it for the rounding of a pixel's den (splat_math.plane_den_bound).
-void plane_form(vec3 fwd, vec3 r, vec3 dn, uint k, vec3 centre, vec4 tile) {
+void plane_form(vec3 fwd, vec3 r, vec3 dn, uint k, vec3 centre) {
     vec4 w0 = s_w0[k], w1 = s_w1[k], w2 = s_w2[k];
     vec3 ol = vec3(w0.w, w1.w, w2.w);
     float zc = dot(fwd, centre);
@@ -113,26 +105,10 @@ void plane_form(vec3 fwd, vec3 r, vec3 dn, uint k, vec3 centre, vec4 tile) {
     float qss = dot(xa, xa) * id0, qtt = dot(xb, xb) * id0;
     vec3 xab = cross(xa, xb);
     if (!((qss + qtt) * (qss + qtt) <= 1e3 * dot(xab, xab) * id0 * id0)) return;  // 4 det q / tr^2, Lagrange's way
-    vec2 c0 = vec2(dot(r, centre) / zc, dot(dn, centre) / zc);
-    vec3 lf = vec3(2.0 * dot(a, ol) * iz * id0, 2.0 * dot(b, ol) * iz * id0, z);
-    vec3 vf = vec3(dot(a, a) * id0, 2.0 * dot(a, b) * id0, dot(b, b) * id0);
-    float cut = s_cut[k];
-    s_w0[k] = vec4(c0, qss, qtt);
-    s_w1[k] = vec4(2.0 * dot(xa, xb) * id0, lf);
-    s_w2[k] = vec4(vf, cut);
-    float bound = 3.4e38;
-    if (p.plane_bound != 0u) {
-        float top = -3.4e38, pad = 1.0;
-        for (uint c = 0u; c < 4u; ++c) {
-            float ds = ((c & 1u) != 0u ? tile.y : tile.x) - c0.x, dt = ((c & 2u) != 0u ? tile.w : tile.z) - c0.y;
-            float l = lf.x * ds + lf.y * dt, v = ds * (vf.x * ds + vf.y * dt) + vf.z * (dt * dt);
-            top = max(top, 1.0 - l + v);
-            pad = max(pad, 1.0 + abs(l) + v);
-        }
-        float b = cut * (top + 1e-5 * pad);
-        if (b > 0.0 && b < bound) bound = b;  // else (NaN, overflow) no pixel is rejected by it
-    }
-    s_cut[k] = -bound;
+    s_w0[k] = vec4(dot(r, centre) / zc, dot(dn, centre) / zc, qss, qtt);
+    s_w1[k] = vec4(2.0 * dot(xa, xb) * id0, 2.0 * dot(a, ol) * iz * id0, 2.0 * dot(b, ol) * iz * id0, z);
+    s_w2[k] = vec4(dot(a, a) * id0, 2.0 * dot(a, b) * id0, dot(b, b) * id0, 0.0);
+    s_cut[k] = -s_cut[k];
 }
 #endif
 
@@ -145,14 +121,12 @@ bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T
     float cut = s_cut[k], m, along;
 #ifndef RASTER_CONIC
     if (cut < 0.0) {
-        vec4 f0 = s_w0[k];
+        vec4 f0 = s_w0[k], f1 = s_w1[k], f2 = s_w2[k];
         float ds = s - f0.x, dt = t - f0.y;
-        float q = ds * (f0.z * ds + s_w1[k].x * dt) + f0.w * (dt * dt);
-        if (q > -cut) return false;  // outside the footprint wherever in the tile (plane_form's bound)
-        vec4 f1 = s_w1[k], f2 = s_w2[k];
+        float q = ds * (f0.z * ds + f1.x * dt) + f0.w * (dt * dt);
         float l = f1.y * ds + f1.z * dt;
         float den = 1.0 - l + (ds * (f2.x * ds + f2.y * dt) + f2.z * (dt * dt));  // |Wd|^2 / D0 > 0
-        if (q > f2.w * den || l >= 2.0) return false;  // outside the footprint, or the approach behind the origin
+        if (q > -cut * den || l >= 2.0) return false;  // outside the footprint, or the approach behind the origin
         float iden = 1.0 / den;
         m = q * iden;
         along = f1.w * (1.0 - 0.5 * l) * iden;
@@ -198,12 +172,6 @@ void main() {
                      + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
     if (gl_LocalInvocationIndex == 0u) {
         s_view[0] = vw.fwd.xyz; s_view[1] = vw.right_tanx.xyz; s_view[2] = vw.down_tany.xyz;
-        // the same expressions as s and t: a pixel's coordinates are monotone in its index, so within these
-        uint x0 = px, y0 = py, x1 = min(x0 + TILE - 1u, vw.dims.x - 1u), y1 = min(y0 + TILE - 1u, vw.dims.y - 1u);
-        s_tile = vec4(((float(x0) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w,
-                      ((float(x1) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w,
-                      ((float(y0) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w,
-                      ((float(y1) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w);
     }
 
     uvec2 whole = ranges[probe * p.total_tiles + g];
@@ -230,8 +198,7 @@ void main() {
             footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_cut[lid], s_qa[lid],
                             s_qb[lid]);
 #else
-            if (p.plane_forms != 0u)
-                plane_form(s_view[0], s_view[1], s_view[2], lid, from_octahedral(e.zw), s_tile);
+            if (p.plane_forms != 0u) plane_form(s_view[0], s_view[1], s_view[2], lid, from_octahedral(e.zw));
 #endif
         }
         barrier();

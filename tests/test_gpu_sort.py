@@ -138,3 +138,37 @@ def test_both_ways_of_writing_a_block(monkeypatch, coalesce, n, short):
     order = kept[np.argsort(keys[kept], kind="stable")]
     np.testing.assert_array_equal(k, keys[order])
     np.testing.assert_array_equal(v, vals[order])
+
+
+@pytest.mark.parametrize("digit_bits", [4, 8])
+def test_a_sort_recorded_for_fewer_pairs_than_its_capacity(digit_bits):
+    """RadixSorter.record(n=...): a large sorter given a short list dispatches that list's blocks only, and sorts
+    it as a sorter of its own size would (odd and even pass counts, with and without dropping a key)."""
+    from gs_ibl_addon.core.render.gpu_sort import RadixSorter
+    from gs_ibl_addon.core.vk import Buffer, Recorder
+    ctx = get_context()
+    if digit_bits == 8 and digit_bits_for(ctx) != 8:
+        pytest.skip("no 8-bit sorter on this device")
+    capacity, n = 300_000, 9_000
+    sorter = RadixSorter(ctx, capacity, digit_bits)
+    kb, vb, cb = Buffer(ctx, capacity * 4, "k"), Buffer(ctx, capacity * 4, "v"), Buffer(ctx, 16, "count")
+    try:
+        for bits, drop in ((32, None), (12, 7), (20, None)):
+            rng = np.random.default_rng(bits)
+            keys = rng.integers(0, 2 ** bits, n, dtype=np.uint64).astype(np.uint32)
+            keys[::5] = 7
+            vals = np.arange(n, dtype=np.uint32)
+            kb.write(np.concatenate([keys, np.full(capacity - n, 2 ** bits - 1, np.uint32)]))
+            vb.write(np.arange(capacity, dtype=np.uint32))
+            cb.write(np.array([n, 0, 0, 0], np.uint32))
+            with Recorder(ctx) as rec:
+                sorter.record(rec, kb, vb, cb, 0, bits, drop_key=drop, n=n + 100)
+            kept = keys != drop if drop is not None else np.ones(n, bool)
+            order = np.argsort(keys[kept], kind="stable")
+            assert int(cb.read(np.uint32, 1)[0]) == kept.sum()
+            np.testing.assert_array_equal(kb.read(np.uint32, n)[:kept.sum()], keys[kept][order])
+            np.testing.assert_array_equal(vb.read(np.uint32, n)[:kept.sum()], vals[kept][order])
+    finally:
+        sorter.destroy()
+        for b in (kb, vb, cb):
+            b.destroy()

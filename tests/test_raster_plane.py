@@ -7,8 +7,7 @@ import pytest
 
 from gs_ibl_addon.core.render import renderer as R
 from gs_ibl_addon.core.render.reference import render_reference
-from gs_ibl_addon.core.render.splat_math import (plane_den_bound, plane_form, plane_form_m, prepare,
-                                                 ray_mahalanobis)
+from gs_ibl_addon.core.render.splat_math import plane_form, plane_form_m, prepare, ray_mahalanobis
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.scene import SplatScene
 from gs_ibl_addon.core.synthetic import concat, random_scene
@@ -71,37 +70,8 @@ def test_plane_form_held_only_well_in_front():
     assert held.tolist() == [True, True, False, False, False]
 
 
-def test_plane_den_bound_holds_over_each_tile():
-    """The tile bound is at least every pixel's denominator (convexity; the corners are the tile's first and last
-    pixel centres), and it rejects from q alone most of the pixels the whole form rejects for small far splats."""
-    scene = concat([_near_scene(), _far_scene(1500)])
-    batch = ViewBatch.cubemap(np.array([0.05, -0.1, 0.02]), 64)
-    p = prepare(scene, batch.origin, batch.dilation, energy_preserving=True)
-    v = batch.views[0]
-    form = plane_form(p, slice(None), v.forward, v.right, v.down)
-    held = np.where(form.held)[0]
-    sub = type(form)(*[getattr(form, k)[held] for k in form.__dataclass_fields__])
-    coord = ((np.arange(64) + 0.5) / 64 * 2 - 1) * v.tan_x
-    cut = p.cutoff[held][:, None]
-    early = exact = 0
-    for ty in range(4):
-        for tx in range(4):
-            s, t = np.meshgrid(coord[16 * tx:16 * tx + 16], coord[16 * ty:16 * ty + 16])
-            s, t = s.ravel(), t.ravel()
-            bound = plane_den_bound(sub, (s[0], s[-1]), (t[0], t[-1]))
-            ds, dt = s[None] - sub.s0[:, None], t[None] - sub.t0[:, None]
-            den = (1 - (sub.ls[:, None] * ds + sub.lt[:, None] * dt)
-                   + ds * (sub.vss[:, None] * ds + 2 * sub.vst[:, None] * dt) + sub.vtt[:, None] * dt * dt)
-            assert np.all(den <= bound[:, None])
-            q = ds * (sub.qss[:, None] * ds + 2 * sub.qst[:, None] * dt) + sub.qtt[:, None] * dt * dt
-            early += np.sum(q > cut * bound[:, None])
-            exact += np.sum(q > cut * den)
-    assert early > 0.95 * exact
-
-
-def _render(monkeypatch, scene, batch, forms, depth=False, bound=True):
+def _render(monkeypatch, scene, batch, forms, depth=False):
     monkeypatch.setattr(R, "PLANE_FORMS", forms)
-    monkeypatch.setattr(R, "PLANE_BOUND", bound)
     res = R.SplatRenderer(scene).render(batch, depth=depth)
     return res.images, (res.depths if depth else None)
 
@@ -146,17 +116,6 @@ def test_plane_forms_on_gpu_against_the_ray_test_and_numpy(monkeypatch, case):
     assert 0 < diff < 5e-5  # the forms are taken on the GPU, and differ from the ray test by rounding only
     assert max(np.abs(a - b).max() for a, b in zip(forms, ref)) < TOL
     assert np.mean([img[..., 3].mean() for img in ref]) > 0.005  # not empty (the far splats are faint at 16²)
-
-
-@pytest.mark.parametrize("case", sorted(CASES))
-def test_plane_bound_changes_no_pixel(monkeypatch, case):
-    """The tile bound only ends early what the whole form rejects: the images and depths are the same bits."""
-    make_scene, make_batch = CASES[case]
-    scene, batch = make_scene(), make_batch()
-    whole = _render(monkeypatch, scene, batch, True, depth=True, bound=False)
-    bound = _render(monkeypatch, scene, batch, True, depth=True, bound=True)
-    for a, b in zip(whole[0] + whole[1], bound[0] + bound[1]):
-        assert np.array_equal(a, b)
 
 
 def test_plane_forms_depth(monkeypatch):

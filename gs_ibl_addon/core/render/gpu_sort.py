@@ -103,8 +103,12 @@ class RadixSorter:
         self.scanner = Scanner(ctx, self.bins * self.n_blocks)
 
     def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int,
-               drop_key: int | None = None, stamps: str | None = None) -> None:
+               drop_key: int | None = None, stamps: str | None = None, n: int | None = None) -> None:
         """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy).
+
+        ``n``: the most pairs ``count`` may hold for this recording (default the capacity): blocks past it are not
+        dispatched, so a short list in a large sorter costs what its own blocks do. A count past ``n`` sorts only
+        the first ``n`` pairs (the renderer sees that after the frame and draws it again).
 
         ``drop_key``: pairs with exactly this key are left out of the result, which is then packed at the front,
         and ``count[count_index]`` becomes the number kept (the first pass's histogram total): the later passes,
@@ -113,28 +117,30 @@ class RadixSorter:
         """
         prefix = "radix8" if self.digit_bits == 8 else "radix"
         hist_k, scat_k = KERNELS[f"{prefix}_hist"], KERNELS[f"{prefix}_scatter"]
-        g = groups(self.n_blocks, 1, self.ctx)
+        n = self.capacity if n is None else max(1, min(int(n), self.capacity))
+        n_blocks = -(-n // self.block_keys)
+        g = groups(n_blocks, 1, self.ctx)
         src_k, src_v, dst_k, dst_v = keys, vals, self.keys_tmp, self.vals_tmp
         passes = max(1, -(-int(bits) // self.digit_bits))
         short = self.digit_bits == 8 and self.block_rounds == SHORT_BLOCK_ROUNDS
-        scan = self.digit_bits != 8 or self.n_blocks > (UNSCANNED_MAX_SHORT_BLOCKS if short else UNSCANNED_MAX_BLOCKS)
+        scan = self.digit_bits != 8 or n_blocks > (UNSCANNED_MAX_SHORT_BLOCKS if short else UNSCANNED_MAX_BLOCKS)
 
         def stamp(step: str) -> None:
             if stamps:
                 rec.timestamp(f"{stamps}.{step}")
         for i in range(passes):
             drop = i == 0 and drop_key is not None
-            push = {"n_blocks": self.n_blocks, "shift": self.digit_bits * i, "count_index": count_index,
+            push = {"n_blocks": n_blocks, "shift": self.digit_bits * i, "count_index": count_index,
                     "drop": int(drop), "drop_key": int(drop_key or 0)}
             if self.digit_bits == 8:  # the 8-bit kernels' blocks, and how the scatter reads and writes them
                 push["block_rounds"] = self.block_rounds
             rec.dispatch(hist_k, [src_k, self.hist, count], g, **push)
             stamp("hist")
             if scan:
-                total, total_at = self.scanner.record(rec, self.hist, self.bins * self.n_blocks), 0
+                total, total_at = self.scanner.record(rec, self.hist, self.bins * n_blocks), 0
                 stamp("scan")
             else:
-                total, total_at = self.hist, 4 * self.bins * self.n_blocks
+                total, total_at = self.hist, 4 * self.bins * n_blocks
             scatter_push = push if self.digit_bits != 8 else dict(push, scanned=int(scan), coalesce=COALESCE)
             rec.dispatch(scat_k, [src_k, src_v, dst_k, dst_v, self.hist, count], g, **scatter_push)
             if drop:  # the histogram's total is what the first pass kept
@@ -142,8 +148,8 @@ class RadixSorter:
             stamp("scatter")
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
         if src_k is not keys:
-            rec.copy(src_k, keys, self.capacity * 4)
-            rec.copy(src_v, vals, self.capacity * 4)
+            rec.copy(src_k, keys, n * 4)
+            rec.copy(src_v, vals, n * 4)
             stamp("copy")
 
     def destroy(self) -> None:

@@ -109,9 +109,17 @@ def raster_conic(batch: ViewBatch) -> bool:
 # the image plane (gs_raster.glsl plane_form, splat_math.plane_form): the ray test's m with less arithmetic per pixel
 # and no cancellation for small far splats. False: the ray test for every pair (tests, benchmarks' A/B).
 PLANE_FORMS = True
-# Each form also bounds its q's cut over the tile, so a pixel far outside the footprint ends after q alone; no result
-# changes (tests/test_raster_plane.py). False: every pixel takes the whole form (tests, benchmarks' A/B).
-PLANE_BOUND = True
+
+# A batch shape's recordings sort and emit for twice what it drew (two frames apart, a moving view rarely draws
+# twice as much; a frame that does is drawn again), within the renderer's buffers; from its first frame, once that
+# halves them (else the first recording is kept: recording again costs more than sorting empty blocks).
+def budget_for(count: int) -> int:
+    return 2 * int(count) + 4096
+
+
+def budget_fit(count: int, cap: int) -> int:
+    return budget_for(count) if budget_for(count) <= cap // 2 else cap
+
 
 PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
 
@@ -354,6 +362,9 @@ class SplatRenderer:
         self._pending: tuple | None = None  # the render submitted and not yet waited for (render(wait=False))
         self._owned: list = []  # every GPU object this renderer made, destroyed by close()
         self._programs: dict[tuple, Program] = {}
+        # Per batch shape, the (instances, cut nodes) its recordings are sized for (_caps): learnt from its first
+        # render, grown when a frame outgrows them, so a small face after a large one does not sort its capacity.
+        self._budgets: dict[tuple, tuple[int, int]] = {}
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
         try:
             n = max(1, scene.count)
@@ -535,49 +546,67 @@ class SplatRenderer:
         timings = prog.wait()
         redrawn = False
         n_groups = -(-args[0].n_probes // args[-1])
+        shape = self._shape(*args)
         while True:
             # per group: [0] pairs kept, [1] pairs wanted, [2] nodes in the cut
             counts = self._frame["group_counts"].read(np.uint32, 4 * n_groups).reshape(n_groups, 4)
             needed, total = int(counts[:, 1].max()), int(counts[:, 1].sum())
+            pairs_cap, cut_cap = self._caps(shape)
             if self.lod is not None:
                 self.drawn = int(counts[:, 2].max())
-                if self.drawn > self.cut_capacity:  # the cut outgrew its sort: nothing after it counts
+            if self.lod is not None and self.drawn > cut_cap:  # the cut outgrew its sort: nothing after it counts
+                if self.drawn > self.cut_capacity:
                     self._grow_cut(int(self.drawn * 1.25) + 1024)
-                elif needed > self.capacity:
+                self._budgets[shape] = (pairs_cap, budget_for(self.drawn))
+            elif needed > pairs_cap:
+                if needed > self.capacity:
                     self._ensure_capacity(int(needed * 1.25) + 1024)
-                else:
-                    break
-            elif needed > self.capacity:
-                self._ensure_capacity(int(needed * 1.25) + 1024)
+                self._budgets[shape] = (budget_for(needed), cut_cap)
             else:
+                if shape not in self._budgets:  # its first frame: later ones are sized for what it drew
+                    self._budgets[shape] = (budget_fit(needed, pairs_cap),
+                                            budget_fit(self.drawn, cut_cap) if self.lod is not None else cut_cap)
                 break
             timings = self._program(*args).run()
             redrawn = True
         result._finished(timings, total)
         return redrawn
 
+    @staticmethod
+    def _shape(batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool, depth: bool,
+               lod_k: float = 0.0, group: int = 1) -> tuple:
+        """What sets a render's instance and cut counts, short of where its probes are."""
+        return (tuple((v.width, v.height) for v in batch.views), batch.n_probes, group, float(batch.pixel_angle),
+                batch.dilation, lod_k)
+
+    def _caps(self, shape: tuple) -> tuple[int, int]:
+        """(instances, cut nodes) that recordings of ``shape`` sort and emit: the learnt budget, within the
+        buffers' capacities. Counts past them are caught after the frame (resolve), which draws it again."""
+        pairs, cut = self._budgets.get(shape, (self.capacity, self.cut_capacity))
+        return min(pairs, self.capacity), min(cut, self.cut_capacity)
+
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
                  depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
-        shape = tuple((v.width, v.height) for v in batch.views)
-        key = (shape, batch.n_probes, group, float(batch.pixel_angle), batch.dilation, bool(batch.energy_preserving),
-               bool(timestamps), bool(depth), self.capacity, lod_k, self.cut_capacity,
-               check_colour_space(self.colour_space), PLANE_FORMS, PLANE_BOUND)
+        caps = self._caps(self._shape(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group))
+        key = (self._shape(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group),
+               bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
+               check_colour_space(self.colour_space), PLANE_FORMS)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
             prog = None
         if prog is None:
-            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group)
+            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
         return prog
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
+                depth: bool, lod_k: float, group: int, caps: tuple[int, int]) -> Program:
         """One submission: the probes in groups of ``group``, one group after another through the same pair
         buffers (a batch of one probe, or one that fits, is a single group). ``total_tiles`` / ``total_pixels``
-        are one probe's."""
+        are one probe's; ``caps`` the (instances, cut nodes) it sorts (_caps)."""
         c, nv, probes = self.ctx, len(batch.views), batch.n_probes
         n_groups = -(-probes // group)
         tree = self.lod
@@ -613,13 +642,12 @@ class SplatRenderer:
             rec.fill(ranges, 0, (tiles + 1) * 8)
             n = tree.count if tree is not None else self.scene_count
             if n:
-                self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp)
+                self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
             rec.dispatch(KERNELS["gs_raster_conic" if raster_conic(batch) else "gs_raster"],
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
-                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS),
-                         plane_bound=int(PLANE_BOUND))
+                         chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS))
             if chunks > 1:
                 rec.dispatch(KERNELS["gs_merge"], [partial, g_image, partial_depth, depth_buf], groups(pixels, 256, c),
                              chunks=chunks, total_pixels=pixels, write_depth=int(depth))
@@ -633,10 +661,11 @@ class SplatRenderer:
         return rec.program()
 
     def _record_sort_emit(self, rec: Recorder, batch: ViewBatch, origins: Buffer, probes: int, n: int,
-                          count_index: int, tiles: int, lod_k: float, stamp) -> None:
+                          count_index: int, tiles: int, lod_k: float, stamp, caps: tuple[int, int]) -> None:
         """preprocess -> [the cut's compaction] -> depth sort -> counts -> emit -> tile sort -> ranges, for the
         (probe, splat) pairs of ``probes`` probes at ``origins``."""
         c, tree, nv = self.ctx, self.lod, len(batch.views)
+        capacity, cut_capacity = caps
         grid = (dict(lod=1, lod_tau=lod_k * batch.pixel_angle, lod_cell=tree.cell1, lod_ox=tree.origin[0],
                      lod_oy=tree.origin[1], lod_oz=tree.origin[2]) if tree is not None else
                 dict(lod=0, lod_tau=0.0, lod_cell=0.0, lod_ox=0.0, lod_oy=0.0, lod_oz=0.0))
@@ -660,28 +689,28 @@ class SplatRenderer:
             stamp("lod_compact")
             keys, vals, sort_count, sorter, count_index = (self.sort_key, self.sort_val, live_total, self.cut_sorter,
                                                            0)
-            pairs = self.cut_capacity  # from here on only the cut's entries
+            pairs = cut_capacity  # from here on only the cut's entries
         else:
             keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
         sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS,
-                      stamps="sort_depth" if PROFILE_SORTS else None)
+                      stamps="sort_depth" if PROFILE_SORTS else None, n=pairs if tree is not None else None)
         stamp("sort_depth")
         rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                      groups(pairs, 256, c), n=pairs, count_index=count_index)
         total_buf = self.scanner.record(rec, self.offsets, pairs)
         rec.dispatch(KERNELS["gs_emit_owners"], [self.offsets, total_buf, self.owners], groups(pairs, 256, c),
-                     n=pairs, capacity=self.capacity)
+                     n=pairs, capacity=capacity)
         rec.dispatch(KERNELS["gs_emit"],
                      [self.views, keys, vals, self.offsets, total_buf, self.inst_key,
                       self.inst_val, self.count, self.prepared, self.rects, self.owners],
-                     groups(self.capacity, 256, c), n=pairs, capacity=self.capacity, n_views=nv, n_tiles=tiles)
+                     groups(capacity, 256, c), n=pairs, capacity=capacity, n_views=nv, n_tiles=tiles)
         stamp("emit")
         # `tiles` is the key of instances whose tile the footprint missed: the sort drops them (count[0] becomes
         # the pairs kept), so its second pass, ranges and raster never see them
         self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, max(1, int(tiles - 1).bit_length()),
-                                drop_key=tiles, stamps="sort_tiles" if PROFILE_SORTS else None)
+                                drop_key=tiles, stamps="sort_tiles" if PROFILE_SORTS else None, n=capacity)
         stamp("sort_tiles")
-        rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, self._frame["ranges"]], groups(self.capacity, 256, c))
+        rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, self._frame["ranges"]], groups(capacity, 256, c))
         stamp("ranges")
 
     def close(self) -> None:

@@ -148,21 +148,6 @@ def plane_form_m(form: PlaneForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndar
     return q / den, c["z"] * (1 - 0.5 * lin) / den, lin < 2
 
 
-def plane_den_bound(form: PlaneForm, s_range: tuple[float, float], t_range: tuple[float, float]) -> np.ndarray:
-    """(S,) the most the forms' denominator 1 - l + v reaches over the image rectangle s_range x t_range, padded for
-    a pixel's rounding, as gs_raster.glsl's plane_form bounds a tile: 1 - l + v is convex (v is a square), so its
-    largest value over a rectangle is at a corner; |l| is too, and v, so the corners' 1 + |l| + v bounds the size of
-    any pixel's terms. A pixel with q > cut * bound is outside the footprint."""
-    top, pad = np.full(len(form.z), -np.inf), np.ones(len(form.z))
-    for s in s_range:
-        for t in t_range:
-            ds, dt = s - form.s0, t - form.t0
-            lin = form.ls * ds + form.lt * dt
-            v = ds * (form.vss * ds + 2 * form.vst * dt) + form.vtt * dt * dt
-            top, pad = np.maximum(top, 1 - lin + v), np.maximum(pad, 1 + np.abs(lin) + v)
-    return top + 1e-5 * pad
-
-
 def _pcg(v: np.ndarray) -> np.ndarray:
     """PCG hash of uint32s (Jarzynski & Olano 2020), as pcg() in shaders/gs_preprocess.comp."""
     state = v * np.uint32(747796405) + np.uint32(2891336453)

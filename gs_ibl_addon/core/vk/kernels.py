@@ -46,7 +46,7 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
 
 _SORT_PUSH = "n_blocks shift count_index drop drop_key"
 _RASTER = ("Views Ranges InstVal Prepared Image Depth",
-           "n_views total_tiles chunks total_pixels write_depth plane_forms plane_bound", (16, 16))
+           "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
