@@ -104,7 +104,7 @@ class Ours:
         self.r = renderer.SplatRenderer(scene, ctx)
         self.sh_k = scene.sh.shape[1]
         self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
-        self.switches = dict(dict(PLANE_FORMS=True), **off)
+        self.switches = {"PLANE_FORMS": True, **off}
 
     def _switch(self) -> None:
         from gs_ibl_addon.core.render import renderer

@@ -29,7 +29,7 @@ def test_small_face_after_a_large_one_sorts_its_own_instances():
         capacity = r.capacity
         for _ in range(2):  # the first frame learns the budget, the second is recorded for it
             got = np.stack(r.render(small).images)
-        shape = r._shape(small, 0, 0, False, False)
+        shape = r._shape(small)
         pairs, _ = r._caps(shape)
         assert pairs <= capacity // 2 and pairs >= 2 * r.render(small).instances
         assert np.array_equal(got, _fresh(scene, small))
@@ -43,7 +43,7 @@ def test_a_frame_past_its_budget_is_drawn_again(grow):
     with SplatRenderer(scene) as r:
         r.render(far)
         r.render(far)
-        shape = r._shape(far, 0, 0, False, False)
+        shape = r._shape(far)
         before = r._caps(shape)[0]
         assert before < r.capacity
         res = r.render(near, wait=False)
@@ -60,7 +60,7 @@ def test_level_of_detail_cut_budget():
     with SplatRenderer(scene, lod=tree) as r:
         r.render(ViewBatch.cubemap(far, 32), lod_k=4.0)
         r.render(ViewBatch.cubemap(far, 32), lod_k=4.0)
-        shape = r._shape(ViewBatch.cubemap(far, 32), 0, 0, False, False, 4.0)
+        shape = r._shape(ViewBatch.cubemap(far, 32), 4.0)
         cut_far = r._caps(shape)[1]
         assert cut_far <= r.cut_capacity // 2
         res = r.render(ViewBatch.cubemap(near, 32), lod_k=4.0, wait=False)

@@ -546,7 +546,8 @@ class SplatRenderer:
         timings = prog.wait()
         redrawn = False
         n_groups = -(-args[0].n_probes // args[-1])
-        shape = self._shape(*args)
+        batch, *_, lod_k, group = args
+        shape = self._shape(batch, lod_k, group)
         while True:
             # per group: [0] pairs kept, [1] pairs wanted, [2] nodes in the cut
             counts = self._frame["group_counts"].read(np.uint32, 4 * n_groups).reshape(n_groups, 4)
@@ -573,8 +574,7 @@ class SplatRenderer:
         return redrawn
 
     @staticmethod
-    def _shape(batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool, depth: bool,
-               lod_k: float = 0.0, group: int = 1) -> tuple:
+    def _shape(batch: ViewBatch, lod_k: float = 0.0, group: int = 1) -> tuple:
         """What sets a render's instance and cut counts, short of where its probes are."""
         return (tuple((v.width, v.height) for v in batch.views), batch.n_probes, group, float(batch.pixel_angle),
                 batch.dilation, lod_k)
@@ -587,9 +587,9 @@ class SplatRenderer:
 
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
                  depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
-        caps = self._caps(self._shape(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group))
-        key = (self._shape(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group),
-               bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
+        shape = self._shape(batch, lod_k, group)
+        caps = self._caps(shape)
+        key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
                check_colour_space(self.colour_space), PLANE_FORMS)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
@@ -693,7 +693,7 @@ class SplatRenderer:
         else:
             keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
         sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS,
-                      stamps="sort_depth" if PROFILE_SORTS else None, n=pairs if tree is not None else None)
+                      stamps="sort_depth" if PROFILE_SORTS else None, n=pairs)
         stamp("sort_depth")
         rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                      groups(pairs, 256, c), n=pairs, count_index=count_index)
