@@ -1,6 +1,7 @@
-"""What the GPU benchmarks share: their scene, a warm-up, and appending rows to a CSV."""
+"""What the GPU benchmarks share: their scene, a warm-up, appending rows to a CSV, and kernels from a trial build."""
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import sys
@@ -83,3 +84,24 @@ def gpu_clock() -> int | str:
         return int(pynvml.nvmlDeviceGetClockInfo(pynvml.nvmlDeviceGetHandleByIndex(0), pynvml.NVML_CLOCK_SM))
     except Exception:
         return ""
+
+
+@contextlib.contextmanager
+def kernels_from(folder: str | None):
+    """Pipelines first made inside this block take each kernel with a NAME.spv in ``folder`` from there (a trial
+    build: benchmarks/kernel_trials.py), the rest from the extension. Pipelines are made once per context, so a
+    renderer on a context of its own keeps the trial's kernels after the block, beside others on the shared one."""
+    from gs_ibl_addon.core.vk import pipelines
+    load = pipelines._load_spirv
+    if folder is None:
+        yield
+        return
+
+    def trial(name: str) -> bytes:
+        path = os.path.join(folder, name + ".spv")
+        return open(path, "rb").read() if os.path.exists(path) else load(name)
+    pipelines._load_spirv = trial
+    try:
+        yield
+    finally:
+        pipelines._load_spirv = load

@@ -41,7 +41,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
-from bench_common import append_csv, bench_scene, shell_scene  # noqa: E402
+from bench_common import append_csv, bench_scene, kernels_from, shell_scene  # noqa: E402
 
 STAGES = ("preprocess", "sort_depth", "emit", "sort_tiles", "ranges", "raster")
 SCENES = {"random": lambda n: bench_scene(n, 3, 5.0), "shell": shell_scene}
@@ -96,14 +96,30 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 VARIANTS = {"ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False))}  # no plane forms
 
 
-class Ours:
-    """Our renderer; ``variant``: a VARIANTS key, an A/B row with one of the raster's switches off."""
+def trial_dirs(folder: str | None) -> list[str]:
+    """The trial builds under ``folder``: its subfolders holding SPIR-V, by name."""
+    if not folder:
+        return []
+    subs = [os.path.join(folder, d) for d in sorted(os.listdir(folder))]
+    return [d for d in subs if os.path.isdir(d) and any(f.endswith(".spv") for f in os.listdir(d))]
 
-    def __init__(self, scene, ctx, variant: str | None = None) -> None:
+
+class Ours:
+    """Our renderer; ``variant``: a VARIANTS key, an A/B row with one of the raster's switches off; ``trial``: a
+    folder of trial kernels (benchmarks/kernel_trials.py build), an A/B row on a Vulkan context of its own whose
+    pipelines take those kernels."""
+
+    def __init__(self, scene, ctx, variant: str | None = None, trial: str | None = None) -> None:
         from gs_ibl_addon.core.render import renderer
-        self.r = renderer.SplatRenderer(scene, ctx)
+        from gs_ibl_addon.core.vk.context import VulkanContext
+        self.trial = trial
+        self.own_ctx = VulkanContext() if trial else None
+        with kernels_from(trial):
+            self.r = renderer.SplatRenderer(scene, self.own_ctx or ctx)
         self.sh_k = scene.sh.shape[1]
         self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
+        if trial:
+            self.name = f"gs-ibl [{os.path.basename(os.path.normpath(trial))}]"
         self.switches = {"PLANE_FORMS": True, **off}
 
     def _switch(self) -> None:
@@ -119,9 +135,10 @@ class Ours:
 
     def rep(self) -> dict:
         self._switch()
-        t0 = time.perf_counter()
-        res = self.r.render(self.batch, timestamps=True)
-        wall = (time.perf_counter() - t0) * 1e3
+        with kernels_from(self.trial):  # a batch shape's first frame makes its pipelines
+            t0 = time.perf_counter()
+            res = self.r.render(self.batch, timestamps=True)
+            wall = (time.perf_counter() - t0) * 1e3
         t = res.timings_ms
         out = {"gpu_ms": t["total"], "wall_ms": wall, "pairs": res.instances}
         for s in STAGES:
@@ -134,10 +151,13 @@ class Ours:
 
     def images(self) -> np.ndarray:
         self._switch()
-        return np.stack(self.r.render(self.batch).images)
+        with kernels_from(self.trial):
+            return np.stack(self.r.render(self.batch).images)
 
     def close(self) -> None:
         self.r.close()
+        if self.own_ctx is not None:
+            self.own_ctx.close()
 
 
 def load_gsplat():
@@ -256,6 +276,7 @@ def run_bench(args) -> None:
             scene = SCENES[kind](n)
             ours, peer = Ours(scene, ctx), Gsplat(scene)
             variants = [Ours(scene, ctx, v) for v in args.ab.split(",") if v]
+            variants += [Ours(scene, ctx, trial=t) for t in trial_dirs(args.trials)]
             log(f"{kind} {n:,}: scene and uploads {time.perf_counter() - t:.1f} s")
             for face in [int(x) for x in args.faces.split(",")]:
                 for r in (ours, *variants, peer):
@@ -370,19 +391,12 @@ def main() -> None:
                     "(renderer.CONIC_MIN_FACE, CONIC_MAX_FACE)")
     ap.add_argument("--ab", default="", help="comma-separated VARIANTS (ray: no plane forms): our renderer "
                     "with that switch off, rows of their own in the same blocks")
-    ap.add_argument("--spv-dir", help="a folder of other builds of our kernels (NAME.spv): trials of a kernel")
+    ap.add_argument("--trials", help="a folder of trial builds of our kernels (one subfolder of NAME.spv files a "
+                    "trial: benchmarks/kernel_trials.py build): A/B rows, each on a Vulkan context of its own")
     ap.add_argument("--profile-at", default="", help="N@FACE,...: sort steps and gsplat's kernels there")
     ap.add_argument("--csv", default=os.path.join(HERE, "..", "out", "bench", "peer.csv"))
     ap.add_argument("--png", default=os.path.join(HERE, "..", "docs", "performance.png"))
     args = ap.parse_args()
-    if args.spv_dir:
-        from gs_ibl_addon.core.vk import pipelines
-        load = pipelines._load_spirv
-
-        def trial(name: str) -> bytes:
-            path = os.path.join(args.spv_dir, name + ".spv")
-            return open(path, "rb").read() if os.path.exists(path) else load(name)
-        pipelines._load_spirv = trial
     if args.coalesce is not None:
         from gs_ibl_addon.core.render import gpu_sort
         gpu_sort.COALESCE = args.coalesce

@@ -2,7 +2,7 @@
 spills, as the driver names them, so that a kernel's occupancy can be read off instead of guessed.
 
   python benchmarks/shader_stats.py [--kernels gs_raster,gs_raster_conic] [--spv gs_raster:variant.spv,...]
-         [--csv out/bench/shader_stats.csv]
+         [--trials out/trials] [--csv out/bench/shader_stats.csv]
 
 Makes its own device with the extension and its feature on (the renderer's context asks for neither), builds each
 kernel of core/vk/kernels.py from the extension's SPIR-V with statistics captured, and prints one row per kernel and
@@ -108,16 +108,25 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--kernels", default="gs_raster,gs_raster_conic,radix8_scatter,gs_emit,gs_preprocess")
     ap.add_argument("--spv", default="", help="KERNEL:PATH,...: other builds of a kernel, as rows of their own")
+    ap.add_argument("--trials", help="a folder of trial builds (benchmarks/kernel_trials.py build): each of their "
+                    "kernels as a row of its own, labelled KERNEL:TRIAL")
     ap.add_argument("--device", default=os.environ.get("GS_IBL_DEVICE"))
     ap.add_argument("--csv")
     args = ap.parse_args()
     import vulkan as vk
     instance, device, dev_name = _device(vk, args.device)
     out = []
-    builds = [(name, None) for name in args.kernels.split(",") if name]
-    builds += [tuple(x.split(":", 1)) for x in args.spv.split(",") if x]
-    for name, spv in builds:
-        label = name if spv is None else f"{name}:{os.path.basename(spv)}"
+    builds = [(name, None, name) for name in args.kernels.split(",") if name]
+    for x in args.spv.split(","):
+        if x:
+            name, spv = x.split(":", 1)
+            builds.append((name, spv, f"{name}:{os.path.basename(spv)}"))
+    for trial in sorted(os.listdir(args.trials)) if args.trials else []:
+        folder = os.path.join(args.trials, trial)
+        for f in sorted(os.listdir(folder)) if os.path.isdir(folder) else []:
+            if f.endswith(".spv"):
+                builds.append((f[:-4], os.path.join(folder, f), f"{f[:-4]}:{trial}"))
+    for name, spv, label in builds:
         for exe, stat, value in kernel_stats(vk, device, name, spv):
             out.append({"device": dev_name, "kernel": label, "executable": exe, "statistic": stat, "value": value})
     vk.vkDestroyDevice(device, None)

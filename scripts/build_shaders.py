@@ -48,6 +48,14 @@ def source_hash(comp: pathlib.Path) -> str:
     return h.hexdigest()
 
 
+def compile_comp(glslc: str, comp: pathlib.Path, out: pathlib.Path, include: pathlib.Path = SRC) -> str:
+    """Builds one kernel as the extension's are built (benchmarks/kernel_trials.py builds its trials so); returns
+    glslc's errors, empty when it succeeded."""
+    r = subprocess.run([glslc, *GLSLC_FLAGS, "-I", str(include), str(comp), "-o", str(out)], capture_output=True,
+                       text=True)
+    return r.stderr if r.returncode != 0 else ""
+
+
 def main() -> int:
     text = constants_glsl()
     if not CONSTANTS_GLSL.exists() or CONSTANTS_GLSL.read_text() != text:
@@ -66,11 +74,10 @@ def main() -> int:
             print(f"glslc is missing and {out.name} is not built from the current {comp.name}: apt-get install glslc",
                   file=sys.stderr)
             return 1
-        cmd = [glslc, *GLSLC_FLAGS, "-I", str(SRC), str(comp), "-o", str(out)]
-        r = subprocess.run(cmd, capture_output=True, text=True)
-        if r.returncode != 0:
-            print(r.stderr, file=sys.stderr)
-            return r.returncode
+        err = compile_comp(glslc, comp, out)
+        if err:
+            print(err, file=sys.stderr)
+            return 1
         record[comp.name] = digest
         built += 1
     if built:
