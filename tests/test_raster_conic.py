@@ -9,6 +9,7 @@ from gs_ibl_addon.core.formats import read_scene
 from gs_ibl_addon.core.render import renderer as R
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.synthetic import concat, random_scene
+from gs_ibl_addon.core.vk import get_context
 
 
 GUITAR = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "guitar.compressed.ply")
@@ -48,14 +49,19 @@ def test_both_rasters_give_the_same_bits(monkeypatch, face):
 
 def test_both_rasters_on_a_real_capture(monkeypatch):
     # the guitar from outside, thin real splats 58k deep in one tile: a bitmask form of the conic test got one
-    # tile of this wrong on lavapipe while the cube faces above passed
+    # tile of this wrong on lavapipe while the cube faces above passed. It was lavapipe's loop limit (the conic
+    # kernel steps its loops about twice a pair): on a CPU device the conic raster now takes that tile in two
+    # chunks (renderer.LOOP_PAIRS), each ending its pixels at T < T_MIN on its own, so the two agree to T_MIN there
     scene = read_scene(GUITAR)
     lo, hi = scene.bounds()
     centre = (lo + hi) / 2
     batch = ViewBatch.pinhole(centre + np.array([1.2 * np.linalg.norm(hi - lo), 0, 0]), centre, 40, 40, 64,
                               up=(0, -1, 0))
     plain, conic = _both(monkeypatch, scene, batch, lambda res: res.images[0])
-    assert np.array_equal(plain, conic)
+    if get_context().is_cpu:
+        assert np.abs(plain - conic).max() < 2e-4  # T_MIN (1e-4) and the merge's rounding
+    else:
+        assert np.array_equal(plain, conic)
     assert plain[..., 3].mean() > 0.1
 
 

@@ -33,6 +33,7 @@ groups one after another in the same submission, reusing the pair buffers.
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -65,6 +66,13 @@ CPU_RASTER_TARGET_GROUPS = 16
 MAX_RASTER_CHUNKS = 32
 CHUNK_BELOW_TILES = 64
 CHUNK_BYTES = 128 << 20
+# llvmpipe (lavapipe) ends every loop of a shader invocation once they have run 65,535 iterations in all (Mesa's
+# LP_MAX_TGSI_LOOP_ITERATIONS), silently: a raster workgroup past it composites no more pairs (a 1M-splat shell at
+# 16² faces came out 0.95 opaque for the reference's 0.999). So on a CPU device the pairs one workgroup takes stay
+# within these, per raster kernel (its loop steps a pair: one, and one a batch of 256; the conic's up to two, its
+# 32-step mask loop and the ray tests of those that pass); a frame whose deepest chunk is past them is drawn again in
+# more chunks (resolve; tests/test_loop_limit.py).
+LOOP_PAIRS = {"gs_raster": 60_000, "gs_raster_conic": 30_000}
 
 
 def target_groups(ctx) -> int:
@@ -365,6 +373,7 @@ class SplatRenderer:
         # Per batch shape, the (instances, cut nodes) its recordings are sized for (_caps): learnt from its first
         # render, grown when a frame outgrows them, so a small face after a large one does not sort its capacity.
         self._budgets: dict[tuple, tuple[int, int]] = {}
+        self._min_chunks: dict[tuple, int] = {}  # per batch shape, the chunks the loop limit asked for (LOOP_PAIRS)
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
         try:
             n = max(1, scene.count)
@@ -567,11 +576,31 @@ class SplatRenderer:
                 if shape not in self._budgets:  # its first frame: later ones are sized for what it drew
                     self._budgets[shape] = (budget_fit(needed, pairs_cap),
                                             budget_fit(self.drawn, cut_cap) if self.lod is not None else cut_cap)
-                break
-            timings = self._program(*args).run()
+                chunks = self._loop_chunks(batch, prog, int(counts[:, 3].max()))
+                if chunks is None:
+                    break
+                self._min_chunks[shape] = chunks
+            prog = self._program(*args)
+            timings = prog.run()
             redrawn = True
         result._finished(timings, total)
         return redrawn
+
+    def _loop_chunks(self, batch: ViewBatch, prog: Program, deepest: int) -> int | None:
+        """More chunks for a frame whose deepest raster workgroup took more pairs than this device's loops run
+        (LOOP_PAIRS, CPU devices only), or None when it did not, or when no more fit in CHUNK_BYTES (then it warns)."""
+        limit = LOOP_PAIRS["gs_raster_conic" if raster_conic(batch) else "gs_raster"]
+        if not self.ctx.is_cpu or deepest <= limit:
+            return None
+        want = -(-deepest * prog.chunks // limit)
+        if want > prog.max_chunks:
+            if want > prog.chunks and not getattr(self, "_loop_warned", False):
+                self._loop_warned = True
+                warnings.warn(f"a tile holds {deepest * prog.chunks:,} splats, more than this CPU device's shader "
+                              f"loops run in {prog.max_chunks} chunks: its image leaves the farthest out",
+                              RuntimeWarning, stacklevel=3)
+            return None if prog.max_chunks <= prog.chunks else prog.max_chunks
+        return want
 
     @staticmethod
     def _shape(batch: ViewBatch, lod_k: float = 0.0, group: int = 1) -> tuple:
@@ -590,7 +619,7 @@ class SplatRenderer:
         shape = self._shape(batch, lod_k, group)
         caps = self._caps(shape)
         key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
-               check_colour_space(self.colour_space), PLANE_FORMS)
+               check_colour_space(self.colour_space), PLANE_FORMS, self._min_chunks.get(shape, 1))
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -600,6 +629,7 @@ class SplatRenderer:
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
+        self.chunks = prog.chunks
         return prog
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
@@ -619,8 +649,10 @@ class SplatRenderer:
         g_image = self._frame_buffer("group_image", group * total_pixels * 16) if split else image
         g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
         # the same chunks for every group (the last, smaller one included): partial sized for a full group
-        chunks = chunks_max = raster_chunks(total_tiles, group, group * total_pixels * (16 + (4 if depth else 0)),
-                                            target_groups(c))
+        chunk_bytes = group * total_pixels * (16 + (4 if depth else 0))
+        fit = max(1, CHUNK_BYTES // chunk_bytes)  # the most chunks whose partials CHUNK_BYTES holds
+        chunks = chunks_max = min(max(raster_chunks(total_tiles, group, chunk_bytes, target_groups(c)),
+                                      self._min_chunks.get(self._shape(batch, lod_k, group), 1)), fit)
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
@@ -645,7 +677,7 @@ class SplatRenderer:
                 self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
             rec.dispatch(KERNELS["gs_raster_conic" if raster_conic(batch) else "gs_raster"],
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
-                          partial_depth if chunks > 1 else depth_buf],
+                          partial_depth if chunks > 1 else depth_buf, self.count],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
                          chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS))
             if chunks > 1:
@@ -657,8 +689,9 @@ class SplatRenderer:
             rec.copy(self.count, counts, 16, 0, k * 16)
             if n_groups > 6:
                 rec.timestamp("probes")
-        self.chunks = chunks_max
-        return rec.program()
+        prog = rec.program()
+        prog.chunks, prog.max_chunks = chunks_max, fit  # what resolve's loop limit asks more of
+        return prog
 
     def _record_sort_emit(self, rec: Recorder, batch: ViewBatch, origins: Buffer, probes: int, n: int,
                           count_index: int, tiles: int, lod_k: float, stamp, caps: tuple[int, int]) -> None:

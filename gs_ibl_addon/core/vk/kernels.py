@@ -45,7 +45,7 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
 
 
 _SORT_PUSH = "n_blocks shift count_index drop drop_key"
-_RASTER = ("Views Ranges InstVal Prepared Image Depth",
+_RASTER = ("Views Ranges InstVal Prepared Image Depth Count",
            "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
