@@ -100,6 +100,8 @@ def trial_dirs(folder: str | None) -> list[str]:
     """The trial builds under ``folder``: its subfolders holding SPIR-V, by name."""
     if not folder:
         return []
+    if not os.path.isdir(folder):
+        raise SystemExit(f"--trials {folder}: no such folder (python benchmarks/kernel_trials.py build makes it)")
     subs = [os.path.join(folder, d) for d in sorted(os.listdir(folder))]
     return [d for d in subs if os.path.isdir(d) and any(f.endswith(".spv") for f in os.listdir(d))]
 

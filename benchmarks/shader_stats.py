@@ -109,7 +109,7 @@ def main() -> int:
     ap.add_argument("--kernels", default="gs_raster,gs_raster_conic,radix8_scatter,gs_emit,gs_preprocess")
     ap.add_argument("--spv", default="", help="KERNEL:PATH,...: other builds of a kernel, as rows of their own")
     ap.add_argument("--trials", help="a folder of trial builds (benchmarks/kernel_trials.py build): each of their "
-                    "kernels as a row of its own, labelled KERNEL:TRIAL")
+                    "kernels named in --kernels as a row of its own, labelled KERNEL:TRIAL")
     ap.add_argument("--device", default=os.environ.get("GS_IBL_DEVICE"))
     ap.add_argument("--csv")
     args = ap.parse_args()
@@ -121,10 +121,13 @@ def main() -> int:
         if x:
             name, spv = x.split(":", 1)
             builds.append((name, spv, f"{name}:{os.path.basename(spv)}"))
+    if args.trials and not os.path.isdir(args.trials):
+        raise SystemExit(f"--trials {args.trials}: no such folder (python benchmarks/kernel_trials.py build makes it)")
+    kernels = set(args.kernels.split(","))
     for trial in sorted(os.listdir(args.trials)) if args.trials else []:
         folder = os.path.join(args.trials, trial)
         for f in sorted(os.listdir(folder)) if os.path.isdir(folder) else []:
-            if f.endswith(".spv"):
+            if f.endswith(".spv") and f[:-4] in kernels:  # beside the committed build's row
                 builds.append((f[:-4], os.path.join(folder, f), f"{f[:-4]}:{trial}"))
     for name, spv, label in builds:
         for exe, stat, value in kernel_stats(vk, device, name, spv):

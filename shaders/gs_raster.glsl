@@ -15,8 +15,8 @@ layout(std430, binding = 4) writeonly buffer Image { vec4 image[]; };  // chunks
 // Depth: the alpha-weighted sum of each contribution's distance along the view axis, sum(T alpha z); divided by
 // the coverage it is the expected depth of what the pixel shows. It composes across chunks like the colour.
 layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
-// [3]: the most pairs one workgroup (a tile's chunk) composited, for the renderer's loop limit (LOOP_PAIRS: CPU
-// drivers end a shader's loops after 65,535 iterations in all, and would leave the rest of a deeper list out).
+// [3]: the most pairs one workgroup (a tile's chunk) went through, for the renderer's loop limit (LOOP_PAIRS: lavapipe
+// ends a shader's loops after 65,535 iterations in all, and would leave the rest of a deeper list out).
 layout(std430, binding = 6) buffer Count { uint count[]; };
 // write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
 // plane_forms 0: every pair takes the ray test (plane_form; the conic kernel has none).
@@ -182,11 +182,11 @@ void main() {
     uint q = len / p.chunks, rem = len % p.chunks;  // chunk c starts at c*q + min(c, rem): no overflow
     uvec2 range = whole.x + uvec2(chunk * q + min(chunk, rem), (chunk + 1u) * q + min(chunk + 1u, rem));
     uint lid = gl_LocalInvocationIndex;
-    if (lid == 0u) atomicMax(count[3], range.y - range.x);
     bool done = !inside;
     vec3 color = vec3(0.0);
     float T = 1.0, zsum = 0.0;
-    for (uint start = range.x; start < range.y; start += 256u) {
+    uint start = range.x;
+    for (; start < range.y; start += 256u) {
         barrier();
         if (lid == 0u) s_done = 0u;
         barrier();
@@ -228,6 +228,8 @@ void main() {
         [[dont_unroll]] for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum);
 #endif
     }
+    // the pairs this workgroup went through: up to the batch where every pixel was opaque, or the whole chunk
+    if (lid == 0u) atomicMax(count[3], min(start, range.y) - range.x);
     if (inside) {
         if (p.chunks == 1u) {
             image[out_index] = vec4(color, 1.0 - T);

@@ -68,7 +68,7 @@ CHUNK_BELOW_TILES = 64
 CHUNK_BYTES = 128 << 20
 # llvmpipe (lavapipe) ends every loop of a shader invocation once they have run 65,535 iterations in all (Mesa's
 # LP_MAX_TGSI_LOOP_ITERATIONS), silently: a raster workgroup past it composites no more pairs (a 1M-splat shell at
-# 16² faces came out 0.95 opaque for the reference's 0.999). So on a CPU device the pairs one workgroup takes stay
+# 16² faces came out 0.987 covered for the reference's 0.995). So on a CPU device the pairs one workgroup takes stay
 # within these, per raster kernel (its loop steps a pair: one, and one a batch of 256; the conic's up to two, its
 # 32-step mask loop and the ray tests of those that pass); a frame whose deepest chunk is past them is drawn again in
 # more chunks (resolve; tests/test_loop_limit.py).
@@ -246,7 +246,8 @@ class GpuFrame:
 
     def wait(self) -> bool:
         """Finish the render (``render(..., wait=False)`` returns before the GPU is done). True when it had to be
-        drawn again (its instance list outgrew the renderer's capacity): work queued on the frame meanwhile saw an
+        drawn again (its instance list outgrew the renderer's capacity, or a CPU device's loops needed more chunks:
+        LOOP_PAIRS): work queued on the frame meanwhile saw an
         incomplete image and must run again."""
         self.check()
         return self.renderer.resolve()
@@ -545,8 +546,8 @@ class SplatRenderer:
         return result
 
     def resolve(self, result: RenderResult | None = None) -> bool:
-        """Finish the submitted render, if one is in flight; True when it was drawn again with room for more
-        instances (see render's ``wait``)."""
+        """Finish the submitted render, if one is in flight; True when it was drawn again, with room for more
+        instances or, on a CPU device, in more chunks (LOOP_PAIRS) (see render's ``wait``)."""
         pending = getattr(self, "_pending", None)
         if pending is None or (result is not None and pending[1] is not result):
             return False
@@ -594,12 +595,12 @@ class SplatRenderer:
             return None
         want = -(-deepest * prog.chunks // limit)
         if want > prog.max_chunks:
-            if want > prog.chunks and not getattr(self, "_loop_warned", False):
-                self._loop_warned = True
+            if prog.max_chunks <= prog.chunks:
                 warnings.warn(f"a tile holds {deepest * prog.chunks:,} splats, more than this CPU device's shader "
                               f"loops run in {prog.max_chunks} chunks: its image leaves the farthest out",
-                              RuntimeWarning, stacklevel=3)
-            return None if prog.max_chunks <= prog.chunks else prog.max_chunks
+                              RuntimeWarning, stacklevel=4)  # render() or GpuFrame.wait()'s caller
+                return None
+            return prog.max_chunks
         return want
 
     @staticmethod
