@@ -105,3 +105,13 @@ def kernels_from(folder: str | None):
         yield
     finally:
         pipelines._load_spirv = load
+
+
+def trial_dirs(folder: str | None) -> list[str]:
+    """The trial builds under ``folder`` (benchmarks/kernel_trials.py build): its subfolders holding SPIR-V, by name."""
+    if not folder:
+        return []
+    if not os.path.isdir(folder):
+        raise SystemExit(f"--trials {folder}: no such folder (python benchmarks/kernel_trials.py build makes it)")
+    subs = [os.path.join(folder, d) for d in sorted(os.listdir(folder))]
+    return [d for d in subs if os.path.isdir(d) and any(f.endswith(".spv") for f in os.listdir(d))]

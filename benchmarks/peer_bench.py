@@ -41,7 +41,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, HERE)
 
-from bench_common import append_csv, bench_scene, kernels_from, shell_scene  # noqa: E402
+from bench_common import append_csv, bench_scene, kernels_from, shell_scene, trial_dirs  # noqa: E402
 
 STAGES = ("preprocess", "sort_depth", "emit", "sort_tiles", "ranges", "raster")
 SCENES = {"random": lambda n: bench_scene(n, 3, 5.0), "shell": shell_scene}
@@ -94,16 +94,6 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 
 # A/B rows (--ab): our renderer with a raster switch off, measured in the same blocks as the rest.
 VARIANTS = {"ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False))}  # no plane forms
-
-
-def trial_dirs(folder: str | None) -> list[str]:
-    """The trial builds under ``folder``: its subfolders holding SPIR-V, by name."""
-    if not folder:
-        return []
-    if not os.path.isdir(folder):
-        raise SystemExit(f"--trials {folder}: no such folder (python benchmarks/kernel_trials.py build makes it)")
-    subs = [os.path.join(folder, d) for d in sorted(os.listdir(folder))]
-    return [d for d in subs if os.path.isdir(d) and any(f.endswith(".spv") for f in os.listdir(d))]
 
 
 class Ours:

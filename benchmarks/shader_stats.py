@@ -18,7 +18,9 @@ import sys
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
+sys.path.insert(0, HERE)
 
+from bench_common import trial_dirs  # noqa: E402
 from gs_ibl_addon.core.vk.kernels import KERNELS  # noqa: E402
 from gs_ibl_addon.core.vk.pipelines import _load_spirv  # noqa: E402
 
@@ -121,14 +123,11 @@ def main() -> int:
         if x:
             name, spv = x.split(":", 1)
             builds.append((name, spv, f"{name}:{os.path.basename(spv)}"))
-    if args.trials and not os.path.isdir(args.trials):
-        raise SystemExit(f"--trials {args.trials}: no such folder (python benchmarks/kernel_trials.py build makes it)")
     kernels = set(args.kernels.split(","))
-    for trial in sorted(os.listdir(args.trials)) if args.trials else []:
-        folder = os.path.join(args.trials, trial)
-        for f in sorted(os.listdir(folder)) if os.path.isdir(folder) else []:
+    for folder in trial_dirs(args.trials):
+        for f in sorted(os.listdir(folder)):
             if f.endswith(".spv") and f[:-4] in kernels:  # beside the committed build's row
-                builds.append((f[:-4], os.path.join(folder, f), f"{f[:-4]}:{trial}"))
+                builds.append((f[:-4], os.path.join(folder, f), f"{f[:-4]}:{os.path.basename(folder)}"))
     for name, spv, label in builds:
         for exe, stat, value in kernel_stats(vk, device, name, spv):
             out.append({"device": dev_name, "kernel": label, "executable": exe, "statistic": stat, "value": value})

@@ -80,6 +80,11 @@ def target_groups(ctx) -> int:
     return CPU_RASTER_TARGET_GROUPS if ctx.is_cpu else RASTER_TARGET_GROUPS
 
 
+def chunks_that_fit(partial_bytes_per_chunk: int) -> int:
+    """The most chunks whose partial images (``partial_bytes_per_chunk`` each) CHUNK_BYTES holds, at least one."""
+    return max(1, CHUNK_BYTES // max(1, int(partial_bytes_per_chunk)))
+
+
 def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk: int = 0,
                   target: int | None = None) -> int:
     """Chunks per tile list for a group of ``probes`` probes of ``tiles_per_probe`` tiles each;
@@ -90,7 +95,7 @@ def raster_chunks(tiles_per_probe: int, probes: int = 1, partial_bytes_per_chunk
     target = RASTER_TARGET_GROUPS if target is None else int(target)
     chunks = min(MAX_RASTER_CHUNKS, max(1, target // max(1, tiles_per_probe * max(1, probes))))
     if partial_bytes_per_chunk > 0:
-        chunks = min(chunks, CHUNK_BYTES // partial_bytes_per_chunk)
+        chunks = min(chunks, chunks_that_fit(partial_bytes_per_chunk))
     return int(max(1, chunks))
 
 
@@ -111,6 +116,11 @@ def raster_conic(batch: ViewBatch) -> bool:
     """Whether ``batch`` rasters with the conic pre-test (every view's larger side within the conic's range)."""
     sides = [max(v.width, v.height) for v in batch.views]
     return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
+
+
+def raster_kernel(batch: ViewBatch) -> str:
+    """The raster kernel that draws ``batch``."""
+    return "gs_raster_conic" if raster_conic(batch) else "gs_raster"
 
 
 # The plain raster kernel evaluates each pair whose centre is well in front of the view through its exact forms in
@@ -247,8 +257,7 @@ class GpuFrame:
     def wait(self) -> bool:
         """Finish the render (``render(..., wait=False)`` returns before the GPU is done). True when it had to be
         drawn again (its instance list outgrew the renderer's capacity, or a CPU device's loops needed more chunks:
-        LOOP_PAIRS): work queued on the frame meanwhile saw an
-        incomplete image and must run again."""
+        LOOP_PAIRS): work queued on the frame meanwhile saw an incomplete image and must run again."""
         self.check()
         return self.renderer.resolve()
 
@@ -590,7 +599,7 @@ class SplatRenderer:
     def _loop_chunks(self, batch: ViewBatch, prog: Program, deepest: int) -> int | None:
         """More chunks for a frame whose deepest raster workgroup took more pairs than this device's loops run
         (LOOP_PAIRS, CPU devices only), or None when it did not, or when no more fit in CHUNK_BYTES (then it warns)."""
-        limit = LOOP_PAIRS["gs_raster_conic" if raster_conic(batch) else "gs_raster"]
+        limit = LOOP_PAIRS[raster_kernel(batch)]
         if not self.ctx.is_cpu or deepest <= limit:
             return None
         want = -(-deepest * prog.chunks // limit)
@@ -618,15 +627,15 @@ class SplatRenderer:
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
                  depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
         shape = self._shape(batch, lod_k, group)
-        caps = self._caps(shape)
+        caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
         key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
-               check_colour_space(self.colour_space), PLANE_FORMS, self._min_chunks.get(shape, 1))
+               check_colour_space(self.colour_space), PLANE_FORMS, min_chunks)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
             prog = None
         if prog is None:
-            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps)
+            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, min_chunks)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
@@ -634,10 +643,11 @@ class SplatRenderer:
         return prog
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                depth: bool, lod_k: float, group: int, caps: tuple[int, int]) -> Program:
+                depth: bool, lod_k: float, group: int, caps: tuple[int, int], min_chunks: int = 1) -> Program:
         """One submission: the probes in groups of ``group``, one group after another through the same pair
         buffers (a batch of one probe, or one that fits, is a single group). ``total_tiles`` / ``total_pixels``
-        are one probe's; ``caps`` the (instances, cut nodes) it sorts (_caps)."""
+        are one probe's; ``caps`` the (instances, cut nodes) it sorts (_caps); ``min_chunks`` what the loop limit
+        asked for (_loop_chunks)."""
         c, nv, probes = self.ctx, len(batch.views), batch.n_probes
         n_groups = -(-probes // group)
         tree = self.lod
@@ -651,9 +661,8 @@ class SplatRenderer:
         g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
         # the same chunks for every group (the last, smaller one included): partial sized for a full group
         chunk_bytes = group * total_pixels * (16 + (4 if depth else 0))
-        fit = max(1, CHUNK_BYTES // chunk_bytes)  # the most chunks whose partials CHUNK_BYTES holds
-        chunks = chunks_max = min(max(raster_chunks(total_tiles, group, chunk_bytes, target_groups(c)),
-                                      self._min_chunks.get(self._shape(batch, lod_k, group), 1)), fit)
+        fit = chunks_that_fit(chunk_bytes)
+        chunks = chunks_max = min(max(raster_chunks(total_tiles, group, chunk_bytes, target_groups(c)), min_chunks), fit)
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
@@ -676,7 +685,7 @@ class SplatRenderer:
             n = tree.count if tree is not None else self.scene_count
             if n:
                 self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
-            rec.dispatch(KERNELS["gs_raster_conic" if raster_conic(batch) else "gs_raster"],
+            rec.dispatch(KERNELS[raster_kernel(batch)],
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf, self.count],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
