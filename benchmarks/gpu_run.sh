@@ -2,8 +2,12 @@
 # The GPU machine's runs, in as few device calls as they can take (it has no registry and no glslc).
 #   bash benchmarks/gpu_run.sh prepare   here: the Vulkan loader debs (.gl), the wheels (.whl), the kernel trials
 #                                        (out/trials); then carry .gl, .whl and out/trials
-#   bash benchmarks/gpu_run.sh trials    there: shader statistics and peer_bench at 1024² for every trial, beside
-#                                        the committed kernels and gsplat in one process; CSVs into $OUT
+#   bash benchmarks/gpu_run.sh trials    there: shader statistics and peer_bench at 1024² for every trial and the
+#                                        strip kernels (--ab strips), beside the committed kernels and gsplat in one
+#                                        process; CSVs into $OUT
+#   bash benchmarks/gpu_run.sh grid      there: the whole peer grid (100k-6M, 64²-1024², both scenes) with the
+#                                        strip kernels as A/B rows, docs/performance.png's chart, and the LOD probe
+#                                        (lod_bench, 1M at 32²); CSVs and PNGs into $OUT
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -22,7 +26,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials)
+trials|grid)
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .whl/*.whl
@@ -33,17 +37,25 @@ trials)
   fi
   out=${OUT:-out/bench}
   nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv,noheader
-  python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic --trials out/trials --csv "$out/trial_stats.csv" \
-    | grep -E "Register|Shared Memory|Spill" || true
-  python3 benchmarks/peer_bench.py bench --scenes random,shell --counts 1000000,6000000 --faces 1024 \
-    --trials out/trials --csv "$out/trials.csv" --png "$out/trials.png"
+  if [ "$1" = trials ]; then
+    python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic,gs_raster_strips,gs_raster_conic_strips \
+      --trials out/trials --csv "$out/trial_stats.csv" | grep -E "Register|Shared Memory|Spill" || true
+    python3 benchmarks/peer_bench.py bench --scenes random,shell --counts 1000000,6000000 --faces 1024 \
+      --ab strips --trials out/trials --csv "$out/trials.csv" --png "$out/trials.png"
+  else
+    python3 benchmarks/peer_bench.py bench --scenes random,shell --counts 100000,1000000,6000000 \
+      --faces 64,128,256,1024 --ab strips --csv "$out/peer.csv"
+    python3 benchmarks/peer_bench.py plot --csv "$out/peer.csv" --png "$out/performance.png"
+    python3 benchmarks/lod_bench.py --counts 1000000 --faces 32 --ks 4 --hold-clock --skip-accuracy \
+      --csv "$out/lod.csv"
+  fi
   if [ -z "${GSPLAT_SO:-}" ]; then
     so=$(find / -name "gsplat_cuda*.so" -path "*torch_extensions*" 2>/dev/null | head -1)
     [ -n "$so" ] && xz -1 -c "$so" > "$out/gsplat_cuda.so.xz"
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid" >&2
   exit 2
   ;;
 esac

@@ -44,6 +44,7 @@ sys.path.insert(0, HERE)
 from bench_common import append_csv, bench_scene, kernels_from, shell_scene, trial_dirs  # noqa: E402
 
 STAGES = ("preprocess", "sort_depth", "emit", "sort_tiles", "ranges", "raster")
+DEFAULTS: dict = {}  # default_switches(), taken before any row sets them
 SCENES = {"random": lambda n: bench_scene(n, 3, 5.0), "shell": shell_scene}
 T0 = time.perf_counter()
 
@@ -93,7 +94,19 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 
 
 # A/B rows (--ab): our renderer with a raster switch off, measured in the same blocks as the rest.
-VARIANTS = {"ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False))}  # no plane forms
+# A/B rows: our renderer with some of the raster's module switches set otherwise (renderer.py says what each does)
+VARIANTS = {
+    "ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False)),  # no plane forms
+    "plain": ("gs-ibl without strips", dict(RASTER_STRIPS=False)),  # the kernels GPUs take by default
+    "strips": ("gs-ibl strips", dict(RASTER_STRIPS=True)),  # the strip kernels (CPU devices' default)
+    "strips-noconic": ("gs-ibl strips, no conic", dict(RASTER_STRIPS=True, CONIC_MAX_FACE=0)),
+}
+
+
+def default_switches() -> dict:
+    """Every switch a variant sets, at the renderer's own values (each row sets all of them before it renders)."""
+    from gs_ibl_addon.core.render import renderer
+    return {k: getattr(renderer, k) for _, sw in VARIANTS.values() for k in sw}
 
 
 class Ours:
@@ -112,7 +125,9 @@ class Ours:
         self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
         if trial:
             self.name = f"gs-ibl [{os.path.basename(os.path.normpath(trial))}]"
-        self.switches = {"PLANE_FORMS": True, **off}
+        if not DEFAULTS:  # the first row is made before any row has set a switch
+            DEFAULTS.update(default_switches())
+        self.switches = {**DEFAULTS, **off}
 
     def _switch(self) -> None:
         from gs_ibl_addon.core.render import renderer
@@ -342,7 +357,8 @@ def run_plot(args) -> None:
     fig, axes = plt.subplots(len(scenes), len(faces), figsize=(4.2 * len(faces), 3.6 * len(scenes)), squeeze=False,
                              sharey=True)
     style = {("gs-ibl", "gpu_ms"): ("C0", "-", "ours GPU"), ("gs-ibl", "wall_ms"): ("C0", ":", "ours wall"),
-             ("gsplat", "gpu_ms"): ("C3", "-", "gsplat GPU"), ("gsplat", "wall_ms"): ("C3", ":", "gsplat wall")}
+             ("gsplat", "gpu_ms"): ("C3", "-", "gsplat GPU"), ("gsplat", "wall_ms"): ("C3", ":", "gsplat wall"),
+             ("gs-ibl strips", "gpu_ms"): ("C2", "--", "ours GPU, strip kernels (A/B)")}  # drawn where measured
     for i, sc in enumerate(scenes):
         for j, face in enumerate(faces):
             ax = axes[i][j]

@@ -5,7 +5,8 @@ const uint TILE = 16u;
 const uint MAX_VIEWS = 6u;
 const uint PREP = 5u;
 const uint DEPTH_KEY_SHIFT = 8u;
-const uint TIE_BITS = 8u;
 const uint SCAN_BLOCK = 1024u;
 const uint SORT_BLOCK = 4096u;
+const float STRIP_PAD_REL = 0.001;
+const float STRIP_PAD_ABS = 4e-07;
 #endif

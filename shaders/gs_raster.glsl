@@ -63,6 +63,14 @@ void footprint_conic(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float
 }
 #endif
 shared uint s_done;
+#ifdef RASTER_STRIPS
+// Per strip of two pixel rows (a warp of 32 lanes on NVIDIA, eight lanes' rows on lavapipe) and per 32 pairs of the
+// batch, which pairs' footprints may reach the strip's rows (strip_mask): each strip composites only those, in
+// order, and steps over the rest unread. Sub-pixel splats reach one or two strips of eight, so a pixel visits a
+// quarter or less of the pairs the tile holds.
+shared uint s_bits[64];
+shared vec2 s_trow;  // t of the tile's first pixel row, and t from one row to the next
+#endif
 // The tile's view (forward, right, down) for the loaders, from shared memory: read again each batch rather than
 // held in registers through the pixel loop, which would cost occupancy (docs/benchmarks.md: registers).
 shared vec3 s_view[3];
@@ -113,6 +121,39 @@ void plane_form(vec3 fwd, vec3 r, vec3 dn, uint k, vec3 centre) {
     s_w2[k] = vec4(dot(a, a) * id0, 2.0 * dot(a, b) * id0, dot(b, b) * id0, 0.0);
     s_cut[k] = -s_cut[k];
 }
+#endif
+
+#ifdef RASTER_STRIPS
+// The tile's strips of two rows that a footprint e(ds, dt) = A ds^2 + B2 ds dt + C dt^2 + D ds + E dt + F <= 0 about
+// the image point (., t0) may reach, as bits (render/splat_math.py strip_mask mirrors it): the rows t where
+// min over s of e <= 0, an interval where e's quadratic part is positive definite, widened by far more than e's
+// rounding at a pixel; every strip when e is not an ellipse (the ray test alone decides those pairs), none when no
+// row's pixel centre is within reach.
+uint strip_mask(float t0, float A, float B2, float C, float D, float E, float F) {
+    float ia = 0.25 / A;
+    float a = C - B2 * B2 * ia, b = E - B2 * D * (2.0 * ia), cc = F - D * D * ia;
+    if (!(A > 0.0 && a > 0.0)) return 0xFFu;
+    float h = sqrt(max(b * b - 4.0 * a * cc, 0.0)) / (2.0 * a), mid = -b / (2.0 * a);
+    vec2 tr = s_trow;
+    float pad = STRIP_PAD_REL * (h + tr.y) + STRIP_PAD_ABS * (abs(t0) + 1.0);
+    float lo = ceil((t0 + mid - h - pad - tr.x) / tr.y), hi = floor((t0 + mid + h + pad - tr.x) / tr.y);
+    if (isnan(lo) || isnan(hi)) return 0xFFu;
+    if (hi < 0.0 || lo > 15.0 || lo > hi) return 0u;
+    uint s0 = uint(max(lo, 0.0)) / 2u, s1 = uint(min(hi, 15.0)) / 2u;
+    return ((2u << s1) - 1u) & ~((1u << s0) - 1u);
+}
+
+#ifndef RASTER_CONIC
+// Pair k's strips from its plane form: the footprint test m <= c is e = q - c (1 - l + v) <= 0
+uint plane_strips(uint k) {
+    float cut = s_cut[k];
+    if (!(cut < 0.0)) return 0xFFu;
+    vec4 f0 = s_w0[k], f1 = s_w1[k], f2 = s_w2[k];
+    float c = -cut;
+    return strip_mask(f0.y, f0.z - c * f2.x, f1.x - c * f2.y, f0.w - c * f2.z, c * f1.y, c * f1.z, -c);
+}
+#endif
+
 #endif
 
 // Pair k of the batch along the pixel's ray d (image coordinates s, t): composited front to back if the ray passes
@@ -175,6 +216,9 @@ void main() {
                      + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
     if (gl_LocalInvocationIndex == 0u) {
         s_view[0] = vw.fwd.xyz; s_view[1] = vw.right_tanx.xyz; s_view[2] = vw.down_tany.xyz;
+#ifdef RASTER_STRIPS
+        s_trow = vec2(t, 2.0 * vw.down_tany.w / float(vw.dims.y));  // lane 0's row is the tile's first
+#endif
     }
 
     uvec2 whole = ranges[probe * p.total_tiles + g];
@@ -189,6 +233,9 @@ void main() {
     for (; start < range.y; start += 256u) {
         barrier();
         if (lid == 0u) s_done = 0u;
+#ifdef RASTER_STRIPS
+        if (lid < 64u) s_bits[lid] = 0u;
+#endif
         barrier();
         if (done) atomicAdd(s_done, 1u);
         uint j = start + lid;
@@ -201,14 +248,39 @@ void main() {
 #ifdef RASTER_CONIC
             footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_cut[lid], s_qa[lid],
                             s_qb[lid]);
+#ifdef RASTER_STRIPS
+            vec4 qa = s_qa[lid], qb = s_qb[lid];
+            uint strips = strip_mask(qa.y, qa.z, qb.x, qa.w, qb.y, qb.z, qb.w);
+#endif
 #else
             if (p.plane_forms != 0u) plane_form(s_view[0], s_view[1], s_view[2], lid, from_octahedral(e.zw));
+#ifdef RASTER_STRIPS
+            uint strips = plane_strips(lid);
+#endif
+#endif
+#ifdef RASTER_STRIPS
+            [[unroll]] for (uint w = 0u; w < 8u; ++w)  // unrolled: lavapipe counts every loop step (LOOP_PAIRS)
+                if ((strips & (1u << w)) != 0u) atomicOr(s_bits[w * 8u + lid / 32u], 1u << (lid % 32u));
 #endif
         }
         barrier();
         if (s_done == 256u) break;
         uint batch = min(256u, range.y - start);
+#ifdef RASTER_STRIPS
+        // the strip's pairs, lowest first (front to back); with the conic, each one's conic before its ray test
+        uint strip = gl_LocalInvocationID.y / 2u;
+        for (uint w = 0u; w < 8u && !done; ++w) {
+            uint bits = s_bits[strip * 8u + w];
+            while (bits != 0u && !done) {
+                uint k = w * 32u + uint(findLSB(bits));
+                bits &= bits - 1u;
 #ifdef RASTER_CONIC
+                if (conic_hit(k, s, t))
+#endif
+                done = composite(k, d, s, t, color, T, zsum);
+            }
+        }
+#elif defined(RASTER_CONIC)
         // 32 pairs' conics first, then the ray test of those that pass, lowest first (front to back). The mask
         // loop runs its 32 steps whatever the batch holds, the bound tested inside: bounded by the batch's
         // remainder, lavapipe rastered one tile of the guitar test wrongly.

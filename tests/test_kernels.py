@@ -102,7 +102,7 @@ def test_constants_glsl_is_generated_from_python():
     sys.path.insert(0, str(ROOT / "scripts"))
     import build_shaders
     assert (ROOT / "shaders" / "constants.glsl").read_text() == build_shaders.constants_glsl()
-    assert constants.DEPTH_KEY_BITS + constants.DEPTH_KEY_SHIFT - constants.TIE_BITS == 32
+    assert constants.DEPTH_KEY_BITS + constants.DEPTH_KEY_SHIFT == 31  # the distance's bits but its sign's
 
 
 def test_compiled_shaders_are_current():

@@ -7,7 +7,8 @@ probe position travels in a buffer), so a render costs the host one submit and o
 
 Stages (each a compute dispatch, timed with timestamp queries when asked):
   preprocess   per splat, once for all views: cull, ray-evaluation frame, SH colour, tiles touched, depth key
-  sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces)
+  sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces); its input
+               lists splats in tie order (splat_math.tie_rank), which its stable passes keep among equal keys
   emit         prefix sum of tile counts in depth order, then one (tile, splat) instance per touched tile
   sort_tiles   stable radix sort of instances by tile id (depth order survives inside each tile)
   ranges       each tile's run of instances
@@ -16,13 +17,13 @@ The instance list is sized from the previous frame; if a frame needs more, it is
 
 With a level of detail (``SplatRenderer(scene, lod=True)``, render/lod.py) the GPU holds every node of the tree
 and ``render(batch, lod_k=k)`` draws the cut of threshold k x pixel angle: preprocess decides per node and flags
-the drawn ones, a prefix sum and gs_lod_compact pack them in storage order, and the later stages see only those.
+the drawn ones, a prefix sum and gs_lod_compact pack them in tie order, and the later stages see only those.
 
 Many probes in one submission (``render_probes(origins, face_size)``, a ViewBatch.cubemaps). Every stage above
 works on (probe, splat) pairs instead of splats: gs_preprocess runs once per pair (workgroup x = the probe) and
 writes its outputs at pair index probe * n + splat, with the probe's own distance, colour, cut and first tile id.
 One depth sort of all pairs by their depth key then leaves each probe's pairs in exactly the order its own render
-would give them (a stable sort; equal keys keep pair order, and within a probe that is splat order), the tile ids
+would give them (a stable sort; equal keys keep pair order, and within a probe that is tie order), the tile ids
 of emit span the 6N faces, and the stable tile sort, ranges and raster (workgroup z = the probe) need nothing
 more. So each probe of a batch is the single-probe render of its position, up to the raster's chunking (a 32^2
 probe alone is split into chunks, a batch of them is not): float rounding, <= 2e-4 (tests/test_multi_probe.py).
@@ -46,7 +47,7 @@ from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
 from ..vk.kernels import KERNELS
 from .gpu_sort import RadixSorter, Scanner
 from .lod import LodTree, build_lod
-from .splat_math import DEFAULT_NEAR
+from .splat_math import DEFAULT_NEAR, tie_rank
 from .views import ViewBatch
 
 # A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles per probe each
@@ -72,7 +73,9 @@ CHUNK_BYTES = 128 << 20
 # within these, per raster kernel (its loop steps a pair: one, and one a batch of 256; the conic's up to two, its
 # 32-step mask loop and the ray tests of those that pass); a frame whose deepest chunk is past them is drawn again in
 # more chunks (resolve; tests/test_loop_limit.py).
-LOOP_PAIRS = {"gs_raster": 60_000, "gs_raster_conic": 30_000}
+# The strip kernels step once a pair of the pixel's strip, once per 32 pairs and once a batch: 60k pairs stay within.
+LOOP_PAIRS = {"gs_raster": 60_000, "gs_raster_conic": 30_000, "gs_raster_strips": 60_000,
+              "gs_raster_conic_strips": 60_000}
 
 
 def target_groups(ctx) -> int:
@@ -118,9 +121,24 @@ def raster_conic(batch: ViewBatch) -> bool:
     return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
 
 
-def raster_kernel(batch: ViewBatch) -> str:
-    """The raster kernel that draws ``batch``."""
-    return "gs_raster_conic" if raster_conic(batch) else "gs_raster"
+# Strip masks (gs_raster.glsl RASTER_STRIPS): the loader bounds each pair's footprint to the tile's strips of two
+# pixel rows it may reach, and a pixel steps only over its strip's pairs. The images are the same bit for bit (the
+# bound is padded far past rounding and drops only pairs every pixel of the strip would reject). On a CPU device,
+# which runs a workgroup's lanes one after another, the pairs a pixel steps over are the raster's time, and
+# sub-pixel splats reach one or two strips of eight: lavapipe raster ms in docs/benchmarks.md ("strip masks on CPU
+# devices"). GPUs keep the kernels timed on the H200 until the strips are timed there (benchmarks/gpu_run.sh).
+RASTER_STRIPS: bool | None = None  # None: CPU devices only; True / False: every device (tests, benchmarks' A/B)
+
+
+def raster_strips(ctx) -> bool:
+    """Whether rasters on ``ctx``'s device use the strip kernels."""
+    return bool(ctx.is_cpu) if RASTER_STRIPS is None else bool(RASTER_STRIPS)
+
+
+def raster_kernel(batch: ViewBatch, strips: bool = False) -> str:
+    """The raster kernel that draws ``batch`` (``strips``: raster_strips of the device)."""
+    name = "gs_raster_conic" if raster_conic(batch) else "gs_raster"
+    return name + "_strips" if strips else name
 
 
 # The plain raster kernel evaluates each pair whose centre is well in front of the view through its exact forms in
@@ -401,6 +419,9 @@ class SplatRenderer:
             self._n_count = None  # (probes of a full group, of the last) it holds
             self.views = buf(MAX_VIEWS * 80, "views")
             self.no_depth = buf(16, "no-depth")  # bound where depth is not written
+            self.tie_rank = buf(n * 4, "tie_rank")  # gs_preprocess writes the depth sort's input in this order
+            if scene.count:
+                self.tie_rank.write(tie_rank(scene.positions))
             if self.lod is not None:
                 self.lod_words = buf(n * 8, "lod")
                 self.lod_words.write(self.lod.words())
@@ -599,7 +620,7 @@ class SplatRenderer:
     def _loop_chunks(self, batch: ViewBatch, prog: Program, deepest: int) -> int | None:
         """More chunks for a frame whose deepest raster workgroup took more pairs than this device's loops run
         (LOOP_PAIRS, CPU devices only), or None when it did not, or when no more fit in CHUNK_BYTES (then it warns)."""
-        limit = LOOP_PAIRS[raster_kernel(batch)]
+        limit = LOOP_PAIRS[raster_kernel(batch, raster_strips(self.ctx))]
         if not self.ctx.is_cpu or deepest <= limit:
             return None
         want = -(-deepest * prog.chunks // limit)
@@ -629,7 +650,7 @@ class SplatRenderer:
         shape = self._shape(batch, lod_k, group)
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
         key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
-               check_colour_space(self.colour_space), PLANE_FORMS, min_chunks)
+               check_colour_space(self.colour_space), PLANE_FORMS, raster_strips(self.ctx), min_chunks)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -685,7 +706,7 @@ class SplatRenderer:
             n = tree.count if tree is not None else self.scene_count
             if n:
                 self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
-            rec.dispatch(KERNELS[raster_kernel(batch)],
+            rec.dispatch(KERNELS[raster_kernel(batch, raster_strips(c))],
                          [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf, self.count],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
@@ -716,7 +737,8 @@ class SplatRenderer:
                      [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
                       self.depth_key, self.depth_val, self.rects, origins,
                       self.lod_words if tree is not None else self.no_depth,
-                      self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
+                      self.offsets,  # Live: written only with a level of detail (offsets are free until emit)
+                      self.tie_rank],
                      (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
                      n=n, dilation_angle=batch.dilation, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
@@ -726,7 +748,8 @@ class SplatRenderer:
         if tree is not None:
             # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)
             live_total = self.lod_scanner.record(rec, self.offsets, pairs)
-            rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
+            rec.dispatch(KERNELS["gs_lod_compact"],
+                         [self.depth_key, self.depth_val, self.offsets, self.sort_key, self.sort_val],
                          groups(pairs, 256, c), n=pairs)
             rec.copy(live_total, self.count, 4, dst_offset=8)  # read back with the pair counts
             stamp("lod_compact")

@@ -30,7 +30,7 @@ import numpy as np
 from ..colour import splat_radiance
 from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
-from ..vk.constants import DEPTH_KEY_SHIFT, TIE_BITS  # shared with the GLSL
+from ..vk.constants import DEPTH_KEY_SHIFT, STRIP_PAD_ABS, STRIP_PAD_REL, TIE_BITS, TILE  # shared with the GLSL
 
 DILATION_PX2 = 0.3
 PROBE_DILATION_ANGLE = 2.0 / 1024  # a 1024^2 cube face's pixel: the truth every probe face size converges to
@@ -148,6 +148,45 @@ def plane_form_m(form: PlaneForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndar
     return q / den, c["z"] * (1 - 0.5 * lin) / den, lin < 2
 
 
+STRIP_ROWS = 2  # pixel rows a strip of the strip raster (gs_raster.glsl RASTER_STRIPS): a warp of 32 on NVIDIA
+
+
+def strip_mask(form: PlaneForm, cut: np.ndarray, t_first: float, t_step: float,
+               dtype: type = np.float64) -> np.ndarray:
+    """Which strips of STRIP_ROWS rows of a tile each held form's footprint may reach, as gs_raster.glsl strip_mask
+    gives them: (S,) uint32 bits, strip i = rows 2i, 2i + 1 of the tile, whose first row's centre is at image
+    coordinate ``t_first``, ``t_step`` apart. ``dtype``: the arithmetic's (float32 is the GPU's).
+
+    The footprint test m <= c is e = q - c (1 - l + v) <= 0 (1 - l + v = |Wd|^2 / D0 > 0), a quadratic in (ds, dt).
+    Where its ds^2 coefficient and its minimum over ds are both convex in dt, the rows it reaches are the interval
+    of dt where min over ds of e <= 0: the roots of a quadratic, mid +- h. Padded by STRIP_PAD_REL of (h + a row) and
+    STRIP_PAD_ABS of |t0| + 1, which is far past float32's rounding of e at a pixel, so a pixel the footprint test
+    takes is never outside its strip's mask; a footprint that is not an ellipse reaches every strip."""
+    f = lambda x: np.asarray(x, dtype)  # noqa: E731
+    c = f(cut)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        A = f(form.qss) - c * f(form.vss)
+        B2 = f(2 * form.qst) - c * f(2 * form.vst)
+        C = f(form.qtt) - c * f(form.vtt)
+        D, E, F = c * f(form.ls), c * f(form.lt), -c
+        ia = f(0.25) / A
+        a, b, cc = C - B2 * B2 * ia, E - B2 * D * (f(2) * ia), F - D * D * ia
+        h = np.sqrt(np.maximum(b * b - f(4) * a * cc, f(0))) / (f(2) * a)
+        mid = -b / (f(2) * a)
+        t0, tf, ts = f(form.t0), f(t_first), f(t_step)
+        pad = f(STRIP_PAD_REL) * (h + ts) + f(STRIP_PAD_ABS) * (np.abs(t0) + f(1))
+        lo = np.ceil((t0 + mid - h - pad - tf) / ts)
+        hi = np.floor((t0 + mid + h + pad - tf) / ts)
+    rows = TILE - 1
+    ellipse = (A > 0) & (a > 0) & ~np.isnan(lo) & ~np.isnan(hi)
+    reach = ellipse & (hi >= 0) & (lo <= rows) & (lo <= hi)
+    s0 = np.where(reach, np.clip(lo, 0, rows), 0).astype(np.int64) // STRIP_ROWS
+    s1 = np.where(reach, np.clip(hi, 0, rows), 0).astype(np.int64) // STRIP_ROWS
+    bits = ((np.int64(2) << s1) - 1) & ~((np.int64(1) << s0) - 1)
+    every = (1 << (TILE // STRIP_ROWS)) - 1
+    return np.where(~ellipse, every, np.where(reach, bits, 0)).astype(np.uint32)
+
+
 def _pcg(v: np.ndarray) -> np.ndarray:
     """PCG hash of uint32s (Jarzynski & Olano 2020), as pcg() in shaders/gs_preprocess.comp."""
     state = v * np.uint32(747796405) + np.uint32(2891336453)
@@ -163,10 +202,21 @@ def tie_hash(positions: np.ndarray) -> np.ndarray:
 
 
 def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
-    """The GPU's sort keys: float32 distance bits without their low 8 bits, then TIE_BITS of tie_hash. Splats whose
+    """The depth order's keys: float32 distance bits without their low 8 bits, then TIE_BITS of tie_hash. Splats whose
     distances agree to 3e-5 composite in an order set by their positions, whatever the file's order; only those
-    whose hashes also agree keep storage order, on the GPU (stable radix sort) and here (stable argsort) alike."""
+    whose hashes also agree keep storage order, on the GPU and here (stable argsort) alike. The GPU sorts the
+    distance bits alone, each splat's key written at its tie_rank: the same order (constants.py)."""
     mu = scene.positions.astype(np.float32) - np.asarray(origin, np.float32)
     dist = np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
     tie = tie_hash(scene.positions) >> np.uint32(32 - TIE_BITS)
     return ((dist.view(np.uint32) >> np.uint32(DEPTH_KEY_SHIFT)) << np.uint32(TIE_BITS)) | tie
+
+
+def tie_rank(positions: np.ndarray) -> np.ndarray:
+    """(N,) uint32: each splat's place when splats are ordered stably by TIE_BITS of tie_hash (storage order within
+    equal bits). gs_preprocess writes a splat's depth key and value there, so the depth sort's input lists
+    co-distant splats in tie order and its stable passes over the distance alone keep it: depth_keys' order."""
+    order = np.argsort(tie_hash(positions) >> np.uint32(32 - TIE_BITS), kind="stable")
+    rank = np.empty(len(order), np.uint32)
+    rank[order] = np.arange(len(order), dtype=np.uint32)
+    return rank

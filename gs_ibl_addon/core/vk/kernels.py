@@ -49,10 +49,10 @@ _RASTER = ("Views Ranges InstVal Prepared Image Depth Count",
            "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
-    _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
+    _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live TieRank",
        "n dilation_angle:float near:float sh_k n_views energy_preserving lod lod_tau:float lod_cell:float "
        "lod_ox:float lod_oy:float lod_oz:float srgb"),
-    _k("gs_lod_compact", "DepthKey Live SortKey SortVal", "n"),
+    _k("gs_lod_compact", "DepthKey DepthVal Live SortKey SortVal", "n"),
     _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets Count", "n count_index"),
     _k("gs_emit_owners", "Offsets Total Owners", "n capacity"),
     _k("gs_emit", "Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners",
@@ -60,6 +60,8 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("gs_ranges", "InstKey Count Ranges"),
     _k("gs_raster", *_RASTER),
     _k("gs_raster_conic", *_RASTER),  # the same gs_raster.glsl with the conic pre-test
+    _k("gs_raster_strips", *_RASTER),  # ... with strip masks
+    _k("gs_raster_conic_strips", *_RASTER),  # ... with both
     _k("gs_merge", "Partial Image PartialDepth Depth", "chunks total_pixels write_depth"),
     # prefix sums and radix sorts (render/gpu_sort.py)
     _k("scan_block", "Data Sums", "n"),
