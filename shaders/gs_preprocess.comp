@@ -1,7 +1,6 @@
 #version 450
 // Per splat, once for all views of the batch: cull, whitening transform for the per-ray evaluation, SH colour
-// toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin),
-// written at its place in the tie order (tie_rank).
+// toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin).
 // With a level of detail (p.lod = 1; render/lod.py) the splats are the nodes of its tree and each first decides
 // whether it is in the probe's cut; the drawn ones are flagged in `live` for gs_lod_compact.
 // Several probes in one batch (SplatRenderer.render_probes): workgroup x is the probe and (y, z) the block of 256
@@ -27,10 +26,6 @@ layout(std430, binding = 10) readonly buffer Origin { vec4 origins[]; };  // one
 // Per node: x = cell x | cell y << 16, y = cell z | level << 16 | parent level << 24 (LodTree.words()).
 layout(std430, binding = 11) readonly buffer Lod { uvec2 lod[]; };
 layout(std430, binding = 12) writeonly buffer Live { uint live[]; };
-// Per splat, its place in the tie order (render/splat_math.py tie_rank): the depth key and value (and `live`) go
-// there, so the depth sort's input lists co-distant splats in the order the tie rule gives them, and its stable
-// passes sort the distance alone: three 8-bit passes, where keys holding the tie bits took four.
-layout(std430, binding = 13) readonly buffer TieRank { uint tie_rank[]; };
 layout(push_constant) uniform P {
     uint n; float dilation_angle; float near; uint sh_k; uint n_views;
     uint energy_preserving;  // 1: the dilation keeps each splat's integral (probes); 0: 3DGS's look (views)
@@ -103,7 +98,9 @@ vec3 sh_color(uint i, vec3 d) {
     return splat_radiance(c + 0.5);
 }
 
-// The distance's float bits without their low DEPTH_KEY_SHIFT (constants.py): co-distant splats keep the tie order.
+// The distance's float bits without their low DEPTH_KEY_SHIFT (constants.py). Splats are uploaded in tie order
+// (render/splat_math.py tie_order), which the stable sort keeps among equal keys: co-distant splats composite in
+// the order of a hash of their position, not of the file's storage.
 uint depth_sort_key(float dist) {
     return floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
 }
@@ -112,16 +109,15 @@ void main() {
     uint i = (gl_WorkGroupID.z * gl_NumWorkGroups.y + gl_WorkGroupID.y) * 256u + gl_LocalInvocationID.x;  // splat
     if (i >= p.n) return;
     uint probe = gl_WorkGroupID.x;
-    uint q = probe * p.n + i;  // the (probe, splat) pair: index of every per-pair output but the sort's
-    uint r = probe * p.n + tie_rank[i];  // the pair's place in the depth sort's input
+    uint q = probe * p.n + i;  // the (probe, splat) pair: index of every per-pair output
     origin = origins[probe].xyz;
-    depth_key[r] = 0xFFFFFFFFu;
+    depth_key[q] = 0xFFFFFFFFu;
     if (p.lod != 0u) {
         // nodes out of the cut read nothing more: most of a big scene's nodes end here
-        live[r] = 0u;
+        live[q] = 0u;
         if (!in_cut(lod[i])) return;
     } else {
-        depth_val[r] = q;
+        depth_val[q] = q;
         tile_count[q] = 0u;
     }
     vec4 po = pos_op[i];
@@ -155,10 +151,7 @@ void main() {
         rects[q * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
     }
     if (count == 0u) return;
-    if (p.lod != 0u) {
-        live[r] = 1u;
-        depth_val[r] = q;
-    }
+    if (p.lod != 0u) live[q] = 1u;
     vec3 inv = inversesqrt(s2);
     vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
     vec3 ol = -vec3(dot(w0, mu), dot(w1, mu), dot(w2, mu));
@@ -172,5 +165,5 @@ void main() {
     // .y: exact below 2^24 (renderer.py); .zw: the centre's direction, octahedral, for the raster's plane forms
     prepared[PREP * q + 4u] = vec4(cutoff, float(probe * probe_tiles), octahedral(mu));
     tile_count[q] = count;
-    depth_key[r] = depth_sort_key(dist);
+    depth_key[q] = depth_sort_key(dist);
 }

@@ -22,7 +22,7 @@ from gs_ibl_addon.core.image_io import read_exr
 from gs_ibl_addon.core.probe.latlong import cube_to_latlong
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
-from gs_ibl_addon.core.render.splat_math import depth_keys, tie_hash, tie_rank
+from gs_ibl_addon.core.render.splat_math import depth_keys, tie_hash, tie_order
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.vk.constants import TIE_BITS
 
@@ -57,33 +57,32 @@ def test_storage_order_does_not_bias_the_irradiance(irradiance):
 
 def test_gpu_sorts_by_the_reference_keys(shells):
     """The depth sort's order on the GPU is depth_keys' (distance, then the position hash, then storage order), read
-    back after a render: the GPU sorts the distance bits alone, its input laid out in tie order (tie_rank)."""
+    back after a render: the GPU sorts the distance bits alone, of splats uploaded in tie order (render/upload.py)."""
     scene = shells["ordered"]
     with SplatRenderer(scene) as r:
         r.render(ViewBatch.cubemap((0, 0, 0), 16))
-        keys, order = r.depth_key.read(np.uint32, scene.count), r.depth_val.read(np.uint32, scene.count)
+        keys, vals = r.depth_key.read(np.uint32, scene.count), r.depth_val.read(np.uint32, scene.count)
+        order = r.upload_order[vals]  # the scene's splat of each sorted entry
     assert np.all(np.diff(keys.astype(np.int64)) >= 0)
-    assert sorted(order.tolist()) == list(range(scene.count))  # every splat once (a single probe: pair = splat)
+    assert sorted(order.tolist()) == list(range(scene.count))  # every splat once
     want = depth_keys(scene, np.zeros(3))
     assert np.mean(keys == want[order] >> np.uint32(TIE_BITS)) > 0.999  # float32 distances may differ by an ulp
     ties = keys[1:] == keys[:-1]  # co-distant neighbours: their tie bits ascend, and storage order within equal ones
     assert ties.sum() > 100
-    hashed = (tie_hash(scene.positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64)
-    step = np.diff(hashed)
+    step = np.diff((tie_hash(scene.positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64))
     assert np.all(step[ties] >= 0)
     assert np.all(np.diff(order.astype(np.int64))[ties & (step == 0)] > 0)
     # the whole order is the reference's stable argsort of depth_keys (float32 distances may differ by an ulp)
     assert np.mean(order == np.argsort(want, kind="stable")) > 0.99
 
 
-def test_tie_rank_is_the_stable_order_of_the_tie_bits():
+def test_tie_order_is_the_stable_order_of_the_tie_bits():
     positions = np.random.default_rng(4).normal(size=(5000, 3)).astype(np.float32)
-    rank = tie_rank(positions)
-    order = np.empty_like(rank)
-    order[rank] = np.arange(len(rank), dtype=np.uint32)
-    bits = tie_hash(positions)[order] >> np.uint32(32 - TIE_BITS)
-    assert np.all(np.diff(bits.astype(np.int64)) >= 0)
-    assert np.all(np.diff(order.astype(np.int64))[np.diff(bits.astype(np.int64)) == 0] > 0)
+    order = tie_order(positions)
+    bits = (tie_hash(positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64)
+    assert sorted(order.tolist()) == list(range(len(positions)))
+    assert np.all(np.diff(bits) >= 0)
+    assert np.all(np.diff(order)[np.diff(bits) == 0] > 0)
 
 
 def test_reference_follows_the_tie_rule():

@@ -7,8 +7,8 @@ probe position travels in a buffer), so a render costs the host one submit and o
 
 Stages (each a compute dispatch, timed with timestamp queries when asked):
   preprocess   per splat, once for all views: cull, ray-evaluation frame, SH colour, tiles touched, depth key
-  sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces); its input
-               lists splats in tie order (splat_math.tie_rank), which its stable passes keep among equal keys
+  sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces); splats are
+               uploaded in tie order (render/upload.py), which its stable passes keep among equal keys
   emit         prefix sum of tile counts in depth order, then one (tile, splat) instance per touched tile
   sort_tiles   stable radix sort of instances by tile id (depth order survives inside each tile)
   ranges       each tile's run of instances
@@ -47,7 +47,8 @@ from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
 from ..vk.kernels import KERNELS
 from .gpu_sort import RadixSorter, Scanner
 from .lod import LodTree, build_lod
-from .splat_math import DEFAULT_NEAR, tie_rank
+from .splat_math import DEFAULT_NEAR
+from .upload import gpu_splats
 from .views import ViewBatch
 
 # A 32^2 cubemap has only 24 tiles, too few workgroups for a GPU: below CHUNK_BELOW_TILES tiles per probe each
@@ -408,23 +409,23 @@ class SplatRenderer:
             buf = self._buffer
             self.pos_op, self.scale, self.rot = buf(n * 16, "pos_op"), buf(n * 16, "scale"), buf(n * 16, "rot")
             self.sh = buf(n * self.sh_k * 12, "sh")
+            # in tie order (render/upload.py): the GPU's splat i is the scene's (or the tree's node) order[i]
+            up = gpu_splats(scene)
+            self.upload_order = up.order
             if scene.count:
-                self.pos_op.write(np.concatenate([scene.positions, scene.opacities[:, None]], 1).astype(np.float32))
-                self.scale.write(np.concatenate([scene.scales, np.zeros((scene.count, 1))], 1).astype(np.float32))
-                self.rot.write(scene.rotations.astype(np.float32))
-                # coefficient-major (K, 3, N): see sh_coeff() in shaders/gs_preprocess.comp
-                self.sh.write(np.ascontiguousarray(np.transpose(scene.sh, (1, 2, 0)), np.float32))
+                self.pos_op.write(up.pos_op)
+                self.scale.write(up.scale)
+                self.rot.write(up.rot)
+                self.sh.write(up.sh)
+            del up
             self.count = buf(16, "count")
             self.n_count = buf(16, "n_count")  # pairs of a full group, of the last group
             self._n_count = None  # (probes of a full group, of the last) it holds
             self.views = buf(MAX_VIEWS * 80, "views")
             self.no_depth = buf(16, "no-depth")  # bound where depth is not written
-            self.tie_rank = buf(n * 4, "tie_rank")  # gs_preprocess writes the depth sort's input in this order
-            if scene.count:
-                self.tie_rank.write(tie_rank(scene.positions))
             if self.lod is not None:
                 self.lod_words = buf(n * 8, "lod")
-                self.lod_words.write(self.lod.words())
+                self.lod_words.write(self.lod.words()[self.upload_order])
                 self.cut_sorter = None
             self.nodes = n  # splats, or every node of the level of detail: what one probe's pairs run over
             self.slots = 0  # probes the pair buffers hold (a group)
@@ -737,8 +738,7 @@ class SplatRenderer:
                      [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
                       self.depth_key, self.depth_val, self.rects, origins,
                       self.lod_words if tree is not None else self.no_depth,
-                      self.offsets,  # Live: written only with a level of detail (offsets are free until emit)
-                      self.tie_rank],
+                      self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
                      (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
                      n=n, dilation_angle=batch.dilation, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
@@ -748,8 +748,7 @@ class SplatRenderer:
         if tree is not None:
             # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)
             live_total = self.lod_scanner.record(rec, self.offsets, pairs)
-            rec.dispatch(KERNELS["gs_lod_compact"],
-                         [self.depth_key, self.depth_val, self.offsets, self.sort_key, self.sort_val],
+            rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
                          groups(pairs, 256, c), n=pairs)
             rec.copy(live_total, self.count, 4, dst_offset=8)  # read back with the pair counts
             stamp("lod_compact")

@@ -205,18 +205,15 @@ def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
     """The depth order's keys: float32 distance bits without their low 8 bits, then TIE_BITS of tie_hash. Splats whose
     distances agree to 3e-5 composite in an order set by their positions, whatever the file's order; only those
     whose hashes also agree keep storage order, on the GPU and here (stable argsort) alike. The GPU sorts the
-    distance bits alone, each splat's key written at its tie_rank: the same order (constants.py)."""
+    distance bits alone of splats uploaded in tie_order: the same order (constants.py)."""
     mu = scene.positions.astype(np.float32) - np.asarray(origin, np.float32)
     dist = np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
     tie = tie_hash(scene.positions) >> np.uint32(32 - TIE_BITS)
     return ((dist.view(np.uint32) >> np.uint32(DEPTH_KEY_SHIFT)) << np.uint32(TIE_BITS)) | tie
 
 
-def tie_rank(positions: np.ndarray) -> np.ndarray:
-    """(N,) uint32: each splat's place when splats are ordered stably by TIE_BITS of tie_hash (storage order within
-    equal bits). gs_preprocess writes a splat's depth key and value there, so the depth sort's input lists
-    co-distant splats in tie order and its stable passes over the distance alone keep it: depth_keys' order."""
-    order = np.argsort(tie_hash(positions) >> np.uint32(32 - TIE_BITS), kind="stable")
-    rank = np.empty(len(order), np.uint32)
-    rank[order] = np.arange(len(order), dtype=np.uint32)
-    return rank
+def tie_order(positions: np.ndarray) -> np.ndarray:
+    """(N,) indices: the splats ordered stably by TIE_BITS of tie_hash (storage order within equal bits). The
+    renderer uploads splats in this order, and its stable depth sort of the distance bits alone keeps it among
+    co-distant splats: depth_keys' order without a pass for the tie bits."""
+    return np.argsort(tie_hash(positions) >> np.uint32(32 - TIE_BITS), kind="stable")

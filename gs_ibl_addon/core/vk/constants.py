@@ -11,8 +11,8 @@ PREP = 5  # vec4s per prepared splat (three rows of the ray frame, colour + opac
 # distance (a shell around the probe, a trainer's background sphere) then composite in the order of TIE_BITS of a
 # hash of their position, whatever order the file stores them in: a stable sort alone keeps storage order, and a
 # Morton-sorted file tinted every pixel toward one side (docs/stability.md). The reference sorts by keys holding
-# both (splat_math.depth_keys); the GPU writes each splat's key where its tie order puts it (splat_math.tie_rank)
-# and its stable sort takes the distance's 23 bits alone (the sign bit is 0): three 8-bit passes, the same order.
+# both (splat_math.depth_keys); the renderer uploads splats in that hash's order (splat_math.tie_order) and its
+# stable sort takes the distance's 23 bits alone (the sign bit is 0): three 8-bit passes, the same order.
 DEPTH_KEY_SHIFT = 8
 TIE_BITS = 8
 DEPTH_KEY_BITS = 31 - DEPTH_KEY_SHIFT

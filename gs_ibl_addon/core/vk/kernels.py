@@ -49,10 +49,10 @@ _RASTER = ("Views Ranges InstVal Prepared Image Depth Count",
            "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
-    _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live TieRank",
+    _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
        "n dilation_angle:float near:float sh_k n_views energy_preserving lod lod_tau:float lod_cell:float "
        "lod_ox:float lod_oy:float lod_oz:float srgb"),
-    _k("gs_lod_compact", "DepthKey DepthVal Live SortKey SortVal", "n"),
+    _k("gs_lod_compact", "DepthKey Live SortKey SortVal", "n"),
     _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets Count", "n count_index"),
     _k("gs_emit_owners", "Offsets Total Owners", "n capacity"),
     _k("gs_emit", "Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners",
