@@ -93,8 +93,8 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
             "ranges": 4 * drawn + 8 * tiles, "raster": 4 * drawn + PREP * 16 * n + 16 * pixels}
 
 
-# A/B rows (--ab): our renderer with a raster switch off, measured in the same blocks as the rest.
-# A/B rows: our renderer with some of the raster's module switches set otherwise (renderer.py says what each does)
+# A/B rows (--ab): our renderer with some of the raster's module switches set otherwise (renderer.py says what each
+# does), measured in the same blocks as the rest.
 VARIANTS = {
     "ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False)),  # no plane forms
     "plain": ("gs-ibl without strips", dict(RASTER_STRIPS=False)),  # the kernels GPUs take by default

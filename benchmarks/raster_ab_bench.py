@@ -9,8 +9,10 @@ is the kernels before it. The first variant is the baseline; every row gives its
 Each variant is a renderer of its own (a switch is read when a batch shape's program is first recorded). Per scene
 x count x face: one warm-up render each, then ``rounds`` rounds of one render of each variant in turn; medians of
 the raster's and the whole frame's GPU time (timestamps) and of the wall time of render(). The images of every
-variant are compared with the baseline's (max |difference|: 0 for the strip kernels, which skip only pairs every
-pixel of a strip rejects).
+variant are compared with the baseline's (max |difference|: 0 for strips against plain, which skip only pairs
+every pixel of a strip rejects; "strips-noconic" at 64²-256² also swaps the conic kernel's ray test for the plain
+kernel's plane forms, so its row differs by their rounding, up to a flipped edge pixel, and its ratio is of both
+changes).
 """
 from __future__ import annotations
 

@@ -9,4 +9,5 @@ const uint SCAN_BLOCK = 1024u;
 const uint SORT_BLOCK = 4096u;
 const float STRIP_PAD_REL = 0.001;
 const float STRIP_PAD_ABS = 4e-07;
+const float STRIP_MAX_COND = 10000.0;
 #endif

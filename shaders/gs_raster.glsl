@@ -127,15 +127,17 @@ void plane_form(vec3 fwd, vec3 r, vec3 dn, uint k, vec3 centre) {
 // The tile's strips of two rows that a footprint e(ds, dt) = A ds^2 + B2 ds dt + C dt^2 + D ds + E dt + F <= 0 about
 // the image point (., t0) may reach, as bits (render/splat_math.py strip_mask mirrors it): the rows t where
 // min over s of e <= 0, an interval where e's quadratic part is positive definite, widened by far more than e's
-// rounding at a pixel; every strip when e is not an ellipse (the ray test alone decides those pairs), none when no
-// row's pixel centre is within reach.
+// rounding at a pixel; every strip when e is not an ellipse (the ray test alone decides those pairs) or too thin to
+// bound in float, none when no row's pixel centre is within reach. Assumes TILE = 16: eight strips of two rows.
 uint strip_mask(float t0, float A, float B2, float C, float D, float E, float F) {
     float ia = 0.25 / A;
     float a = C - B2 * B2 * ia, b = E - B2 * D * (2.0 * ia), cc = F - D * D * ia;
-    if (!(A > 0.0 && a > 0.0)) return 0xFFu;
+    // a needle's a cancels in float (its error grows as the form's condition, tr^2 / det = (A + C)^2 / (A a)):
+    // past STRIP_MAX_COND it takes every strip
+    if (!(A > 0.0 && a > 0.0 && (A + C) * (A + C) <= STRIP_MAX_COND * (A * a))) return 0xFFu;
     float h = sqrt(max(b * b - 4.0 * a * cc, 0.0)) / (2.0 * a), mid = -b / (2.0 * a);
     vec2 tr = s_trow;
-    float pad = STRIP_PAD_REL * (h + tr.y) + STRIP_PAD_ABS * (abs(t0) + 1.0);
+    float pad = STRIP_PAD_REL * (h + abs(mid) + tr.y) + STRIP_PAD_ABS * (abs(t0) + 1.0);
     float lo = ceil((t0 + mid - h - pad - tr.x) / tr.y), hi = floor((t0 + mid + h + pad - tr.x) / tr.y);
     if (isnan(lo) || isnan(hi)) return 0xFFu;
     if (hi < 0.0 || lo > 15.0 || lo > hi) return 0u;

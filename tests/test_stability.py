@@ -55,25 +55,43 @@ def test_storage_order_does_not_bias_the_irradiance(irradiance):
     assert max(off.values()) < 0.002, {k: f"{100 * v:.3f}%" for k, v in off.items()}
 
 
+def _in_reference_order(keys: np.ndarray, order: np.ndarray, scene, origin) -> None:
+    """GPU keys (distance bits) ascend, each is its splat's reference key without the tie bits, and co-distant
+    neighbours come in the tie rule's order: hash bits ascending, then storage order."""
+    assert np.all(np.diff(keys.astype(np.int64)) >= 0)
+    assert len(np.unique(order)) == len(order)
+    want = depth_keys(scene, origin)
+    assert np.mean(keys == want[order] >> np.uint32(TIE_BITS)) > 0.999  # float32 distances may differ by an ulp
+    ties = keys[1:] == keys[:-1]
+    assert ties.sum() > 100
+    step = np.diff((tie_hash(scene.positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64))
+    assert np.all(step[ties] >= 0)
+    assert np.all(np.diff(order.astype(np.int64))[ties & (step == 0)] > 0)
+
+
 def test_gpu_sorts_by_the_reference_keys(shells):
     """The depth sort's order on the GPU is depth_keys' (distance, then the position hash, then storage order), read
     back after a render: the GPU sorts the distance bits alone, of splats uploaded in tie order (render/upload.py)."""
     scene = shells["ordered"]
     with SplatRenderer(scene) as r:
         r.render(ViewBatch.cubemap((0, 0, 0), 16))
-        keys, vals = r.depth_key.read(np.uint32, scene.count), r.depth_val.read(np.uint32, scene.count)
-        order = r.upload_order[vals]  # the scene's splat of each sorted entry
-    assert np.all(np.diff(keys.astype(np.int64)) >= 0)
+        keys, order = r.read_depth_order(scene.count)  # and the scene's splat of each sorted entry
     assert sorted(order.tolist()) == list(range(scene.count))  # every splat once
-    want = depth_keys(scene, np.zeros(3))
-    assert np.mean(keys == want[order] >> np.uint32(TIE_BITS)) > 0.999  # float32 distances may differ by an ulp
-    ties = keys[1:] == keys[:-1]  # co-distant neighbours: their tie bits ascend, and storage order within equal ones
-    assert ties.sum() > 100
-    step = np.diff((tie_hash(scene.positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64))
-    assert np.all(step[ties] >= 0)
-    assert np.all(np.diff(order.astype(np.int64))[ties & (step == 0)] > 0)
+    _in_reference_order(keys, order, scene, np.zeros(3))
     # the whole order is the reference's stable argsort of depth_keys (float32 distances may differ by an ulp)
-    assert np.mean(order == np.argsort(want, kind="stable")) > 0.99
+    assert np.mean(order == np.argsort(depth_keys(scene, np.zeros(3)), kind="stable")) > 0.99
+
+
+def test_gpu_sorts_a_level_of_details_cut_by_the_reference_keys(shells):
+    """The same for a level of detail's cut: its nodes are uploaded in tie order and packed in that order."""
+    scene = shells["ordered"]
+    origin = np.array([0.2, -0.1, 0.05])
+    with SplatRenderer(scene, lod=True) as r:
+        r.render(ViewBatch.cubemap(origin, 16), lod_k=2.0)
+        cut = int(r.count.read(np.uint32, 4)[2])
+        keys, nodes = r.read_depth_order(cut)
+        assert 1000 < cut < r.lod.scene.count
+        _in_reference_order(keys, nodes, r.lod.scene, origin)
 
 
 def test_tie_order_is_the_stable_order_of_the_tie_bits():

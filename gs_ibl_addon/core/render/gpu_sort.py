@@ -103,8 +103,11 @@ class RadixSorter:
         self.scanner = Scanner(ctx, self.bins * self.n_blocks)
 
     def record(self, rec: Recorder, keys: Buffer, vals: Buffer, count: Buffer, count_index: int, bits: int,
-               drop_key: int | None = None, stamps: str | None = None, n: int | None = None) -> None:
-        """Sort in place (the result ends in ``keys``/``vals``; an odd pass count costs one extra copy).
+               drop_key: int | None = None, stamps: str | None = None, n: int | None = None,
+               in_place: bool = True) -> tuple[Buffer, Buffer]:
+        """Sort; returns the (keys, values) buffers the result is in. ``in_place``: always ``keys``/``vals`` (an odd
+        pass count then costs a copy of both); else whichever the last pass wrote, ``keys``/``vals`` or this
+        sorter's scratch buffers (valid until its next recorded sort runs).
 
         ``n``: the most pairs ``count`` may hold for this recording (default the capacity): blocks past it are not
         dispatched, so a short list in a large sorter costs what its own blocks do. A count past ``n`` sorts only
@@ -147,10 +150,12 @@ class RadixSorter:
                 rec.copy(total, count, 4, src_offset=total_at, dst_offset=4 * count_index)
             stamp("scatter")
             src_k, src_v, dst_k, dst_v = dst_k, dst_v, src_k, src_v
-        if src_k is not keys:
+        if in_place and src_k is not keys:
             rec.copy(src_k, keys, n * 4)
             rec.copy(src_v, vals, n * 4)
             stamp("copy")
+            src_k, src_v = keys, vals
+        return src_k, src_v
 
     def destroy(self) -> None:
         for b in (self.keys_tmp, self.vals_tmp, self.hist):

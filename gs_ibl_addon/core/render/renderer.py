@@ -439,6 +439,12 @@ class SplatRenderer:
             self.close()  # a failure partway (out of memory) leaves nothing on the GPU
             raise
 
+    def read_depth_order(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """The first ``count`` entries of the last render's depth sort (its first group): their keys and the scene's
+        splat (or the tree's node) each one is, for tests of the tie rule."""
+        keys, vals = self._sorted_depth
+        return keys.read(np.uint32, count), self.upload_order[vals.read(np.uint32, count) % self.nodes]
+
     def _own(self, obj):
         self._owned.append(obj)
         return obj
@@ -608,7 +614,7 @@ class SplatRenderer:
                 if shape not in self._budgets:  # its first frame: later ones are sized for what it drew
                     self._budgets[shape] = (budget_fit(needed, pairs_cap),
                                             budget_fit(self.drawn, cut_cap) if self.lod is not None else cut_cap)
-                chunks = self._loop_chunks(batch, prog, int(counts[:, 3].max()))
+                chunks = self._loop_chunks(prog, int(counts[:, 3].max()))
                 if chunks is None:
                     break
                 self._min_chunks[shape] = chunks
@@ -618,10 +624,10 @@ class SplatRenderer:
         result._finished(timings, total)
         return redrawn
 
-    def _loop_chunks(self, batch: ViewBatch, prog: Program, deepest: int) -> int | None:
+    def _loop_chunks(self, prog: Program, deepest: int) -> int | None:
         """More chunks for a frame whose deepest raster workgroup took more pairs than this device's loops run
         (LOOP_PAIRS, CPU devices only), or None when it did not, or when no more fit in CHUNK_BYTES (then it warns)."""
-        limit = LOOP_PAIRS[raster_kernel(batch, raster_strips(self.ctx))]
+        limit = LOOP_PAIRS[prog.raster_kernel]
         if not self.ctx.is_cpu or deepest <= limit:
             return None
         want = -(-deepest * prog.chunks // limit)
@@ -705,10 +711,11 @@ class SplatRenderer:
             rec.fill(self.count)
             rec.fill(ranges, 0, (tiles + 1) * 8)
             n = tree.count if tree is not None else self.scene_count
+            inst_val = self.inst_val  # (no splats: the raster's ranges are empty and it reads none)
             if n:
-                self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
+                inst_val = self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
             rec.dispatch(KERNELS[raster_kernel(batch, raster_strips(c))],
-                         [self.views, ranges, self.inst_val, self.prepared, partial if chunks > 1 else g_image,
+                         [self.views, ranges, inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf, self.count],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
                          chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS))
@@ -723,12 +730,14 @@ class SplatRenderer:
                 rec.timestamp("probes")
         prog = rec.program()
         prog.chunks, prog.max_chunks = chunks_max, fit  # what resolve's loop limit asks more of
+        prog.raster_kernel = raster_kernel(batch, raster_strips(c))  # whose LOOP_PAIRS it asks against
         return prog
 
     def _record_sort_emit(self, rec: Recorder, batch: ViewBatch, origins: Buffer, probes: int, n: int,
-                          count_index: int, tiles: int, lod_k: float, stamp, caps: tuple[int, int]) -> None:
+                          count_index: int, tiles: int, lod_k: float, stamp, caps: tuple[int, int]) -> Buffer:
         """preprocess -> [the cut's compaction] -> depth sort -> counts -> emit -> tile sort -> ranges, for the
-        (probe, splat) pairs of ``probes`` probes at ``origins``."""
+        (probe, splat) pairs of ``probes`` probes at ``origins``; returns the buffer the tile-sorted pairs' splats
+        are in (the sorts leave their results where their last pass wrote them)."""
         c, tree, nv = self.ctx, self.lod, len(batch.views)
         capacity, cut_capacity = caps
         grid = (dict(lod=1, lod_tau=lod_k * batch.pixel_angle, lod_cell=tree.cell1, lod_ox=tree.origin[0],
@@ -746,7 +755,7 @@ class SplatRenderer:
         stamp("preprocess")
         pairs = n * probes
         if tree is not None:
-            # the cut, packed in storage order: its count stays on the GPU (first uint of live_total)
+            # the cut, packed in storage order (the upload's tie order): its count stays on the GPU (live_total[0])
             live_total = self.lod_scanner.record(rec, self.offsets, pairs)
             rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
                          groups(pairs, 256, c), n=pairs)
@@ -757,8 +766,10 @@ class SplatRenderer:
             pairs = cut_capacity  # from here on only the cut's entries
         else:
             keys, vals, sort_count, sorter = self.depth_key, self.depth_val, self.n_count, self.depth_sorter
-        sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS,
-                      stamps="sort_depth" if PROFILE_SORTS else None, n=pairs)
+        # the sorted pairs stay where the last pass wrote them (three passes: the sorter's scratch), no copy back
+        keys, vals = sorter.record(rec, keys, vals, sort_count, count_index, DEPTH_KEY_BITS,
+                                   stamps="sort_depth" if PROFILE_SORTS else None, n=pairs, in_place=False)
+        self._sorted_depth = (keys, vals)
         stamp("sort_depth")
         rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                      groups(pairs, 256, c), n=pairs, count_index=count_index)
@@ -772,11 +783,13 @@ class SplatRenderer:
         stamp("emit")
         # `tiles` is the key of instances whose tile the footprint missed: the sort drops them (count[0] becomes
         # the pairs kept), so its second pass, ranges and raster never see them
-        self.tile_sorter.record(rec, self.inst_key, self.inst_val, self.count, 0, max(1, int(tiles - 1).bit_length()),
-                                drop_key=tiles, stamps="sort_tiles" if PROFILE_SORTS else None, n=capacity)
+        inst_key, inst_val = self.tile_sorter.record(
+            rec, self.inst_key, self.inst_val, self.count, 0, max(1, int(tiles - 1).bit_length()), drop_key=tiles,
+            stamps="sort_tiles" if PROFILE_SORTS else None, n=capacity, in_place=False)
         stamp("sort_tiles")
-        rec.dispatch(KERNELS["gs_ranges"], [self.inst_key, self.count, self._frame["ranges"]], groups(capacity, 256, c))
+        rec.dispatch(KERNELS["gs_ranges"], [inst_key, self.count, self._frame["ranges"]], groups(capacity, 256, c))
         stamp("ranges")
+        return inst_val
 
     def close(self) -> None:
         self._pending = None

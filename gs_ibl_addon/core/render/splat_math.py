@@ -30,7 +30,8 @@ import numpy as np
 from ..colour import splat_radiance
 from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
-from ..vk.constants import DEPTH_KEY_SHIFT, STRIP_PAD_ABS, STRIP_PAD_REL, TIE_BITS, TILE  # shared with the GLSL
+# shared with the GLSL
+from ..vk.constants import DEPTH_KEY_SHIFT, STRIP_MAX_COND, STRIP_PAD_ABS, STRIP_PAD_REL, TIE_BITS, TILE
 
 DILATION_PX2 = 0.3
 PROBE_DILATION_ANGLE = 2.0 / 1024  # a 1024^2 cube face's pixel: the truth every probe face size converges to
@@ -151,40 +152,46 @@ def plane_form_m(form: PlaneForm, s: np.ndarray, t: np.ndarray) -> tuple[np.ndar
 STRIP_ROWS = 2  # pixel rows a strip of the strip raster (gs_raster.glsl RASTER_STRIPS): a warp of 32 on NVIDIA
 
 
-def strip_mask(form: PlaneForm, cut: np.ndarray, t_first: float, t_step: float,
-               dtype: type = np.float64) -> np.ndarray:
-    """Which strips of STRIP_ROWS rows of a tile each held form's footprint may reach, as gs_raster.glsl strip_mask
-    gives them: (S,) uint32 bits, strip i = rows 2i, 2i + 1 of the tile, whose first row's centre is at image
-    coordinate ``t_first``, ``t_step`` apart. ``dtype``: the arithmetic's (float32 is the GPU's).
+def strip_bits(t0, A, B2, C, D, E, F, t_first: float, t_step: float, dtype: type = np.float64) -> np.ndarray:
+    """The strips of STRIP_ROWS rows of a tile that footprints e(ds, dt) = A ds^2 + B2 ds dt + C dt^2 + D ds + E dt
+    + F <= 0 about image points (., t0) may reach, as gs_raster.glsl strip_mask gives them: uint32 bits, strip i =
+    rows 2i, 2i + 1 of the tile, whose first row's centre is at image coordinate ``t_first``, ``t_step`` apart.
+    Arguments broadcast; ``dtype``: the arithmetic's (float32 is the GPU's).
 
-    The footprint test m <= c is e = q - c (1 - l + v) <= 0 (1 - l + v = |Wd|^2 / D0 > 0), a quadratic in (ds, dt).
-    Where its ds^2 coefficient and its minimum over ds are both convex in dt, the rows it reaches are the interval
-    of dt where min over ds of e <= 0: the roots of a quadratic, mid +- h. Padded by STRIP_PAD_REL of (h + a row) and
-    STRIP_PAD_ABS of |t0| + 1, which is far past float32's rounding of e at a pixel, so a pixel the footprint test
-    takes is never outside its strip's mask; a footprint that is not an ellipse reaches every strip."""
+    Where e's ds^2 coefficient and its minimum over ds are both convex in dt, the rows e reaches are the interval
+    of dt where min over ds of e <= 0: the roots of a quadratic, mid +- h. Padded by STRIP_PAD_REL of (h + |mid| + a
+    row) and STRIP_PAD_ABS of |t0| + 1, far past float32's rounding of e at a pixel; a footprint that is no
+    ellipse, or one conditioned worse than STRIP_MAX_COND (a needle, whose bound cancels in float32), reaches every
+    strip."""
     f = lambda x: np.asarray(x, dtype)  # noqa: E731
-    c = f(cut)
+    A, B2, C, D, E, F, t0 = (f(x) for x in (A, B2, C, D, E, F, t0))
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        A = f(form.qss) - c * f(form.vss)
-        B2 = f(2 * form.qst) - c * f(2 * form.vst)
-        C = f(form.qtt) - c * f(form.vtt)
-        D, E, F = c * f(form.ls), c * f(form.lt), -c
         ia = f(0.25) / A
         a, b, cc = C - B2 * B2 * ia, E - B2 * D * (f(2) * ia), F - D * D * ia
         h = np.sqrt(np.maximum(b * b - f(4) * a * cc, f(0))) / (f(2) * a)
         mid = -b / (f(2) * a)
-        t0, tf, ts = f(form.t0), f(t_first), f(t_step)
-        pad = f(STRIP_PAD_REL) * (h + ts) + f(STRIP_PAD_ABS) * (np.abs(t0) + f(1))
+        tf, ts = f(t_first), f(t_step)
+        pad = f(STRIP_PAD_REL) * (h + np.abs(mid) + ts) + f(STRIP_PAD_ABS) * (np.abs(t0) + f(1))
         lo = np.ceil((t0 + mid - h - pad - tf) / ts)
         hi = np.floor((t0 + mid + h + pad - tf) / ts)
+        ellipse = (A > 0) & (a > 0) & ((A + C) * (A + C) <= f(STRIP_MAX_COND) * (A * a))
     rows = TILE - 1
-    ellipse = (A > 0) & (a > 0) & ~np.isnan(lo) & ~np.isnan(hi)
+    ellipse &= ~np.isnan(lo) & ~np.isnan(hi)
     reach = ellipse & (hi >= 0) & (lo <= rows) & (lo <= hi)
     s0 = np.where(reach, np.clip(lo, 0, rows), 0).astype(np.int64) // STRIP_ROWS
     s1 = np.where(reach, np.clip(hi, 0, rows), 0).astype(np.int64) // STRIP_ROWS
     bits = ((np.int64(2) << s1) - 1) & ~((np.int64(1) << s0) - 1)
     every = (1 << (TILE // STRIP_ROWS)) - 1
     return np.where(~ellipse, every, np.where(reach, bits, 0)).astype(np.uint32)
+
+
+def strip_mask(form: PlaneForm, cut: np.ndarray, t_first: float, t_step: float,
+               dtype: type = np.float64) -> np.ndarray:
+    """strip_bits of each held plane form's footprint (the plain kernel's plane_strips): the footprint test m <= c
+    is e = q - c (1 - l + v) <= 0 (1 - l + v = |Wd|^2 / D0 > 0), a quadratic in (ds, dt). (S,) uint32."""
+    c = np.asarray(cut, np.float64)
+    return strip_bits(form.t0, form.qss - c * form.vss, 2 * form.qst - c * 2 * form.vst, form.qtt - c * form.vtt,
+                      c * form.ls, c * form.lt, -c, t_first, t_step, dtype)
 
 
 def _pcg(v: np.ndarray) -> np.ndarray:
