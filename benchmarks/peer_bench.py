@@ -100,6 +100,8 @@ VARIANTS = {
     "plain": ("gs-ibl without strips", dict(RASTER_STRIPS=False)),  # the kernels GPUs take by default
     "strips": ("gs-ibl strips", dict(RASTER_STRIPS=True)),  # the strip kernels (CPU devices' default)
     "strips-noconic": ("gs-ibl strips, no conic", dict(RASTER_STRIPS=True, CONIC_MAX_FACE=0)),
+    "emit-slot": ("gs-ibl emit per slot", dict(EMIT_PER_SPLAT=False)),  # the emit GPUs take by default
+    "emit-splat": ("gs-ibl emit per splat", dict(EMIT_PER_SPLAT=True)),  # CPU devices' default
 }
 
 

@@ -136,6 +136,21 @@ def raster_strips(ctx) -> bool:
     return bool(ctx.is_cpu) if RASTER_STRIPS is None else bool(RASTER_STRIPS)
 
 
+# Emit with one thread per splat (gs_emit.glsl EMIT_PER_SPLAT) on CPU devices: each splat writes its own instance
+# slots, with no search for the splat owning a slot and its footprint's quadric taken once, where one thread per
+# slot suits a GPU (a near splat's hundreds of tiles would hold a warp back). Same slots, same keys. Its loop steps
+# once per instance of a splat, so it is taken while a probe's views hold at most EMIT_PER_SPLAT_MAX_TILES tiles
+# (lavapipe's loop limit, LOOP_PAIRS above). Lavapipe ms in docs/benchmarks.md.
+EMIT_PER_SPLAT: bool | None = None  # None: CPU devices only; True / False: every device (tests, benchmarks' A/B)
+EMIT_PER_SPLAT_MAX_TILES = 60_000
+
+
+def emit_per_splat(ctx, tiles_per_probe: int) -> bool:
+    """Whether a batch of ``tiles_per_probe`` tiles a probe emits its instances one thread per splat on ``ctx``."""
+    on = bool(ctx.is_cpu) if EMIT_PER_SPLAT is None else bool(EMIT_PER_SPLAT)
+    return on and tiles_per_probe <= EMIT_PER_SPLAT_MAX_TILES
+
+
 def raster_kernel(batch: ViewBatch, strips: bool = False) -> str:
     """The raster kernel that draws ``batch`` (``strips``: raster_strips of the device)."""
     name = "gs_raster_conic" if raster_conic(batch) else "gs_raster"
@@ -657,7 +672,7 @@ class SplatRenderer:
         shape = self._shape(batch, lod_k, group)
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
         key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
-               check_colour_space(self.colour_space), PLANE_FORMS, raster_strips(self.ctx), min_chunks)
+               check_colour_space(self.colour_space), PLANE_FORMS, raster_strips(self.ctx), EMIT_PER_SPLAT, min_chunks)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -774,12 +789,16 @@ class SplatRenderer:
         rec.dispatch(KERNELS["gs_gather_counts"], [keys, vals, self.tile_count, self.offsets, sort_count],
                      groups(pairs, 256, c), n=pairs, count_index=count_index)
         total_buf = self.scanner.record(rec, self.offsets, pairs)
-        rec.dispatch(KERNELS["gs_emit_owners"], [self.offsets, total_buf, self.owners], groups(pairs, 256, c),
-                     n=pairs, capacity=capacity)
-        rec.dispatch(KERNELS["gs_emit"],
-                     [self.views, keys, vals, self.offsets, total_buf, self.inst_key,
-                      self.inst_val, self.count, self.prepared, self.rects, self.owners],
-                     groups(capacity, 256, c), n=pairs, capacity=capacity, n_views=nv, n_tiles=tiles)
+        emit_buffers = [self.views, keys, vals, self.offsets, total_buf, self.inst_key, self.inst_val, self.count,
+                        self.prepared, self.rects, self.owners]
+        if emit_per_splat(c, tiles // probes):
+            rec.dispatch(KERNELS["gs_emit_per_splat"], emit_buffers, groups(pairs, 256, c), n=pairs,
+                         capacity=capacity, n_views=nv, n_tiles=tiles)
+        else:
+            rec.dispatch(KERNELS["gs_emit_owners"], [self.offsets, total_buf, self.owners], groups(pairs, 256, c),
+                         n=pairs, capacity=capacity)
+            rec.dispatch(KERNELS["gs_emit"], emit_buffers, groups(capacity, 256, c), n=pairs, capacity=capacity,
+                         n_views=nv, n_tiles=tiles)
         stamp("emit")
         # `tiles` is the key of instances whose tile the footprint missed: the sort drops them (count[0] becomes
         # the pairs kept), so its second pass, ranges and raster never see them

@@ -45,6 +45,7 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
 
 
 _SORT_PUSH = "n_blocks shift count_index drop drop_key"
+_EMIT = ("Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners", "n capacity n_views n_tiles")
 _RASTER = ("Views Ranges InstVal Prepared Image Depth Count",
            "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
@@ -55,8 +56,8 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("gs_lod_compact", "DepthKey Live SortKey SortVal", "n"),
     _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets Count", "n count_index"),
     _k("gs_emit_owners", "Offsets Total Owners", "n capacity"),
-    _k("gs_emit", "Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners",
-       "n capacity n_views n_tiles"),
+    _k("gs_emit", *_EMIT),
+    _k("gs_emit_per_splat", *_EMIT),  # the same gs_emit.glsl, one thread per splat (Owners unread)
     _k("gs_ranges", "InstKey Count Ranges"),
     _k("gs_raster", *_RASTER),
     _k("gs_raster_conic", *_RASTER),  # the same gs_raster.glsl with the conic pre-test
