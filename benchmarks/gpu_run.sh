@@ -2,9 +2,9 @@
 # The GPU machine's runs, in as few device calls as they can take (it has no registry and no glslc).
 #   bash benchmarks/gpu_run.sh prepare   here: the Vulkan loader debs (.gl), the wheels (.whl), the kernel trials
 #                                        (out/trials); then carry .gl, .whl and out/trials
-#   bash benchmarks/gpu_run.sh trials    there: shader statistics and peer_bench at 1024² for every trial and the
-#                                        strip kernels (--ab strips), beside the committed kernels and gsplat in one
-#                                        process; CSVs into $OUT
+#   bash benchmarks/gpu_run.sh trials    there: shader statistics and peer_bench at 1024² for every trial, the
+#                                        strip kernels and the per-splat emit (--ab strips,emit-splat: CPU devices'
+#                                        defaults), beside the committed kernels and gsplat in one process; CSVs into $OUT
 #   bash benchmarks/gpu_run.sh grid      there: the whole peer grid (100k-6M, 64²-1024², both scenes) with the
 #                                        strip kernels as A/B rows, docs/performance.png's chart, and the LOD probe
 #                                        (lod_bench, 1M at 32²); CSVs and PNGs into $OUT
@@ -41,7 +41,7 @@ trials|grid)
     python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic,gs_raster_strips,gs_raster_conic_strips \
       --trials out/trials --csv "$out/trial_stats.csv" | grep -E "Register|Shared Memory|Spill" || true
     python3 benchmarks/peer_bench.py bench --scenes random,shell --counts 1000000,6000000 --faces 1024 \
-      --ab strips --trials out/trials --csv "$out/trials.csv" --png "$out/trials.png"
+      --ab strips,emit-splat --trials out/trials --csv "$out/trials.csv" --png "$out/trials.png"
   else
     python3 benchmarks/peer_bench.py bench --scenes random,shell --counts 100000,1000000,6000000 \
       --faces 64,128,256,1024 --ab strips --csv "$out/peer.csv"
