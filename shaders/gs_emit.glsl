@@ -1,8 +1,9 @@
 // One (tile, splat) instance per tile each splat touches, written in depth order; a stable sort by tile then keeps
 // front-to-back order inside every tile. One thread per instance: the thread finds the splat owning its slot by a
 // binary search of the depth-ordered prefix sums, so the work is even however unevenly the tiles are spread (the
-// nearest splats, which cover whole faces, all sit at the front of the depth order). Instances past the capacity
-// are dropped and reported.
+// nearest splats, which cover whole faces, all sit at the front of the depth order); with EMIT_PER_SPLAT (CPU
+// devices) one thread per splat writes its own slots instead (main below). Instances past the capacity are dropped
+// and reported.
 // The tile rectangle bounds the splat's footprint; a tile inside it that the footprint misses (a long diagonal
 // splat's corners) gets the key `n_tiles`, one past the last tile, so the sort moves it out of every tile's run.
 #include "splat_common.glsl"

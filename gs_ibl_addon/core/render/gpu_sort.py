@@ -164,8 +164,9 @@ class RadixSorter:
 
 
 def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32, digit_bits: int | None = None,
-               drop_key: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Convenience for tests: sort host arrays on the GPU (pairs with key ``drop_key`` left out)."""
+               drop_key: int | None = None, in_place: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Convenience for tests: sort host arrays on the GPU (pairs with key ``drop_key`` left out), read back from
+    the buffers the sorter says hold the result."""
     n = len(keys)
     kb, vb = Buffer(ctx, n * 4, "k"), Buffer(ctx, n * 4, "v")
     cb = Buffer(ctx, 16, "count")
@@ -174,9 +175,11 @@ def sort_pairs(ctx, keys: np.ndarray, vals: np.ndarray, bits: int = 32, digit_bi
     cb.write(np.array([n, 0, 0, 0], np.uint32))
     sorter = RadixSorter(ctx, n, digit_bits)
     with Recorder(ctx) as rec:
-        sorter.record(rec, kb, vb, cb, 0, bits, drop_key)
+        rk, rv = sorter.record(rec, kb, vb, cb, 0, bits, drop_key, in_place=in_place)
+    passes = -(-int(bits) // sorter.digit_bits)
+    assert (rk is kb) == (in_place or passes % 2 == 0) and (rk is kb) == (rv is vb)
     kept = int(cb.read(np.uint32, 1)[0])
-    out = kb.read(np.uint32, n)[:kept], vb.read(np.uint32, n)[:kept]
+    out = rk.read(np.uint32, n)[:kept], rv.read(np.uint32, n)[:kept]
     sorter.destroy()
     for b in (kb, vb, cb):
         b.destroy()

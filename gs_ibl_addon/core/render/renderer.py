@@ -419,6 +419,7 @@ class SplatRenderer:
         self._budgets: dict[tuple, tuple[int, int]] = {}
         self._min_chunks: dict[tuple, int] = {}  # per batch shape, the chunks the loop limit asked for (LOOP_PAIRS)
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
+        self._sorted_depth: tuple[Buffer, Buffer] | None = None  # where the depth sort leaves its result
         try:
             n = max(1, scene.count)
             buf = self._buffer
@@ -426,7 +427,7 @@ class SplatRenderer:
             self.sh = buf(n * self.sh_k * 12, "sh")
             # in tie order (render/upload.py): the GPU's splat i is the scene's (or the tree's node) order[i]
             up = gpu_splats(scene)
-            self.upload_order = up.order
+            self.upload_order = up.order.astype(np.uint32)  # kept for the renderer's life: 4 bytes a splat
             if scene.count:
                 self.pos_op.write(up.pos_op)
                 self.scale.write(up.scale)
@@ -455,8 +456,10 @@ class SplatRenderer:
             raise
 
     def read_depth_order(self, count: int) -> tuple[np.ndarray, np.ndarray]:
-        """The first ``count`` entries of the last render's depth sort (its first group): their keys and the scene's
-        splat (or the tree's node) each one is, for tests of the tie rule."""
+        """The first ``count`` entries of the last render's depth sort (of its last group of probes): their keys and
+        the scene's splat (or the tree's node) each one is, for tests of the tie rule."""
+        if self._sorted_depth is None:
+            raise RuntimeError("read_depth_order: nothing was rendered yet")
         keys, vals = self._sorted_depth
         return keys.read(np.uint32, count), self.upload_order[vals.read(np.uint32, count) % self.nodes]
 
