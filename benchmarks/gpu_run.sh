@@ -20,9 +20,10 @@ prepare)
   o=(-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64)
   apt-get "${o[@]}" update >/dev/null
   (cd .gl && apt-get "${o[@]}" download libvulkan1 libegl1 libglvnd0 libopengl0 libgl1 libglx0 libgles2)
+  # gsplat imports rich (not on the GPU machine; jaxtyping, ninja and torch are there: device/KINDS.md)
   python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
     --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d .whl \
-    cffi==2.0.0 pycparser vulkan==1.3.275.1 plyfile gsplat==1.5.3
+    cffi==2.0.0 pycparser vulkan==1.3.275.1 plyfile gsplat==1.5.3 rich markdown-it-py mdurl pygments
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
