@@ -126,8 +126,9 @@ def raster_conic(batch: ViewBatch) -> bool:
 # pixel rows it may reach, and a pixel steps only over its strip's pairs. The images are the same bit for bit (the
 # bound is padded far past rounding and drops only pairs every pixel of the strip would reject). On a CPU device,
 # which runs a workgroup's lanes one after another, the pairs a pixel steps over are the raster's time, and
-# sub-pixel splats reach one or two strips of eight: lavapipe raster ms in docs/benchmarks.md ("strip masks on CPU
-# devices"). GPUs keep the kernels timed on the H200 until the strips are timed there (benchmarks/gpu_run.sh).
+# sub-pixel splats reach one or two strips of eight: lavapipe raster ms in docs/benchmarks.md ("strip masks and a
+# per-splat emit on CPU devices"). GPUs keep the kernels timed on the H200 until the strips are timed there
+# (benchmarks/gpu_run.sh).
 RASTER_STRIPS: bool | None = None  # None: CPU devices only; True / False: every device (tests, benchmarks' A/B)
 
 
