@@ -714,6 +714,7 @@ class SplatRenderer:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
                              else self.no_depth)
+        kernel = raster_kernel(batch, raster_strips(c))
         rec = Recorder(c, timestamps=timestamps, reusable=True)
         rec.fill(image, 0, probes * total_pixels * 16)
         if depth:
@@ -733,7 +734,7 @@ class SplatRenderer:
             inst_val = self.inst_val  # (no splats: the raster's ranges are empty and it reads none)
             if n:
                 inst_val = self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
-            rec.dispatch(KERNELS[raster_kernel(batch, raster_strips(c))],
+            rec.dispatch(KERNELS[kernel],
                          [self.views, ranges, inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf, self.count],
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
@@ -749,7 +750,7 @@ class SplatRenderer:
                 rec.timestamp("probes")
         prog = rec.program()
         prog.chunks, prog.max_chunks = chunks_max, fit  # what resolve's loop limit asks more of
-        prog.raster_kernel = raster_kernel(batch, raster_strips(c))  # whose LOOP_PAIRS it asks against
+        prog.raster_kernel = kernel  # whose LOOP_PAIRS it asks against
         return prog
 
     def _record_sort_emit(self, rec: Recorder, batch: ViewBatch, origins: Buffer, probes: int, n: int,
