@@ -1,6 +1,6 @@
-"""Our renderer against itself with the raster's or emit's switches set otherwise (peer_bench.VARIANTS), same scenes and cube
-faces, interleaved in one process: for a device gsplat cannot run on (lavapipe), where the peer of a kernel change
-is the kernels before it. The first variant is the baseline; every row gives its ratio to it.
+"""Our renderer against itself with the raster's or emit's switches set otherwise (peer_bench.VARIANTS), same scenes
+and cube faces, interleaved in one process: for a device gsplat cannot run on (lavapipe), where the peer of a kernel
+change is the kernels before it. The first variant is the baseline; every row gives its ratio to it.
 
   python benchmarks/raster_ab_bench.py [--variants plain,strips,strips-noconic] [--scenes shell,random]
          [--counts 1000000] [--faces 32,64,128,256,512] [--rounds 3] [--csv out/bench/raster_ab.csv]
@@ -60,15 +60,14 @@ def run(args) -> list[dict]:
                     base = base or med
                     row = {"device": ctx.device_name, "date": date, "load": round(load, 1), "scene": kind,
                            "splats": n, "face": face, "variant": v, "renderer": VARIANTS[v][0],
-                           "raster_ms": round(med["raster"], 2), "gpu_ms": round(med["gpu_ms"], 2),
-                           "wall_ms": round(med["wall_ms"], 2),
-                           **{f"{st}_ms": round(med[st], 2) for st in STAGES if st != "raster"},
+                           **{f"{st}_ms": round(med[st], 2) for st in STAGES},
+                           "gpu_ms": round(med["gpu_ms"], 2), "wall_ms": round(med["wall_ms"], 2),
                            "raster_ratio": round(med["raster"] / base["raster"], 3),
                            "gpu_ratio": round(med["gpu_ms"] / base["gpu_ms"], 3), "max_image_diff": diff,
                            "pairs": reps[v][-1]["pairs"], "rounds": args.rounds}
                     rows.append(row)
-                    log(f"{kind} {n:>9,} {face:>5} {v:>15}: raster {row['raster_ms']:9.1f} ms ({row['raster_ratio']:.2f}x)"
-                        f" emit {row['emit_ms']:8.1f} frame {row['gpu_ms']:9.1f} ({row['gpu_ratio']:.2f}x) wall "
+                    log(f"{kind} {n:>9,} {face:>5} {v:>15}: raster {row['raster_ms']:9.1f} ms "
+                        f"({row['raster_ratio']:.2f}x) emit {row['emit_ms']:8.1f} frame {row['gpu_ms']:9.1f} ({row['gpu_ratio']:.2f}x) wall "
                         f"{row['wall_ms']:9.1f} | diff {diff:.1e}")
                 append_csv(args.csv, rows[-len(names):])
             for r in rends:

@@ -22,7 +22,7 @@ from gs_ibl_addon.core.image_io import read_exr
 from gs_ibl_addon.core.probe.latlong import cube_to_latlong
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
-from gs_ibl_addon.core.render.splat_math import depth_keys, tie_hash, tie_order
+from gs_ibl_addon.core.render.splat_math import depth_keys, tie_bits, tie_order
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.vk.constants import TIE_BITS
 
@@ -64,7 +64,7 @@ def _in_reference_order(keys: np.ndarray, order: np.ndarray, scene, origin) -> N
     assert np.mean(keys == want[order] >> np.uint32(TIE_BITS)) > 0.999  # float32 distances may differ by an ulp
     ties = keys[1:] == keys[:-1]
     assert ties.sum() > 100
-    step = np.diff((tie_hash(scene.positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64))
+    step = np.diff(tie_bits(scene.positions)[order].astype(np.int64))
     assert np.all(step[ties] >= 0)
     assert np.all(np.diff(order.astype(np.int64))[ties & (step == 0)] > 0)
 
@@ -97,7 +97,7 @@ def test_gpu_sorts_a_level_of_details_cut_by_the_reference_keys(shells):
 def test_tie_order_is_the_stable_order_of_the_tie_bits():
     positions = np.random.default_rng(4).normal(size=(5000, 3)).astype(np.float32)
     order = tie_order(positions)
-    bits = (tie_hash(positions)[order] >> np.uint32(32 - TIE_BITS)).astype(np.int64)
+    bits = tie_bits(positions)[order].astype(np.int64)
     assert sorted(order.tolist()) == list(range(len(positions)))
     assert np.all(np.diff(bits) >= 0)
     assert np.all(np.diff(order)[np.diff(bits) == 0] > 0)

@@ -208,6 +208,11 @@ def tie_hash(positions: np.ndarray) -> np.ndarray:
         return _pcg(b[:, 0] ^ _pcg(b[:, 1] ^ _pcg(b[:, 2])))
 
 
+def tie_bits(positions: np.ndarray) -> np.ndarray:
+    """(N,) uint32: the TIE_BITS of tie_hash that order co-distant splats."""
+    return tie_hash(positions) >> np.uint32(32 - TIE_BITS)
+
+
 def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
     """The depth order's keys: float32 distance bits without their low 8 bits, then TIE_BITS of tie_hash. Splats whose
     distances agree to 3e-5 composite in an order set by their positions, whatever the file's order; only those
@@ -215,12 +220,11 @@ def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
     distance bits alone of splats uploaded in tie_order: the same order (constants.py)."""
     mu = scene.positions.astype(np.float32) - np.asarray(origin, np.float32)
     dist = np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
-    tie = tie_hash(scene.positions) >> np.uint32(32 - TIE_BITS)
-    return ((dist.view(np.uint32) >> np.uint32(DEPTH_KEY_SHIFT)) << np.uint32(TIE_BITS)) | tie
+    return ((dist.view(np.uint32) >> np.uint32(DEPTH_KEY_SHIFT)) << np.uint32(TIE_BITS)) | tie_bits(scene.positions)
 
 
 def tie_order(positions: np.ndarray) -> np.ndarray:
-    """(N,) indices: the splats ordered stably by TIE_BITS of tie_hash (storage order within equal bits). The
+    """(N,) indices: the splats ordered stably by their tie_bits (storage order within equal bits). The
     renderer uploads splats in this order, and its stable depth sort of the distance bits alone keeps it among
     co-distant splats: depth_keys' order without a pass for the tie bits."""
-    return np.argsort(tie_hash(positions) >> np.uint32(32 - TIE_BITS), kind="stable")
+    return np.argsort(tie_bits(positions), kind="stable")
