@@ -25,7 +25,9 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(HERE, "..", "tests", "real_blender"))
 from bench_common import append_csv, gpu_clock, hold_gpu_clock  # noqa: E402
+from blender_scene import ROOM_SPHERE  # noqa: E402 (native_bench.py's sphere)
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
@@ -35,8 +37,8 @@ from gs_ibl_addon.core.probe.result import write_probe  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 
 REPO = os.path.dirname(HERE)
-PROBE = np.array([0.0, 0.45, 1.0])
-RADIUS = 0.3
+PROBE = np.array(ROOM_SPHERE["centre"])
+RADIUS = ROOM_SPHERE["radius"]
 TOLERANCE = 0.05  # the panel's Variation Tolerance
 
 

@@ -8,9 +8,10 @@ Run:  .venv/bin/python benchmarks/auto_light_bench.py [--native-samples 8192] [-
       .venv/bin/python benchmarks/auto_light_bench.py --replot build/auto-light/run   (tables and chart again)
 Needs the trixie root (scripts/blender_roots.sh ensure trixie). The Blender side is benchmarks/auto_light_scene.py,
 run in bpy 5.3 with the built zip installed by Blender's own installer through tests/real_blender/test_matrix.py's
-machinery (built_zip, Runner, run_script). Writes docs/auto_light.csv, docs/img/auto_light.png (the chart) and
-docs/img/auto_light_renders.png (every render), keeps the renders (.npy) and the result in build/auto-light/run,
-and prints a markdown table. A full run took 36 min on a loaded 2-core machine (the ten 8,192-spp references 15).
+machinery (built_zip, Runner, run_script), with the scene and set-up of tests/real_blender/blender_scene.py.
+Writes docs/auto_light.csv, docs/img/auto_light.png (the chart) and docs/img/auto_light_renders.png (every render),
+keeps the renders (.npy) and the result in build/auto-light/run, and prints a markdown table. A full run took 36 min
+on a loaded 2-core machine (the ten 8,192-spp references 15).
 
 The room (samples/room.ply, its colours re-encoded for Blender's sRGB rule) is imported by Blender's PLY importer
 as native splats, hidden from the camera. Each mesh is rendered alone from its own camera (40x40, 40 degrees):
@@ -37,7 +38,8 @@ HERE = Path(__file__).resolve().parent
 REPO = HERE.parent
 sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests" / "real_blender"))
-from native_bench import mesh_mask  # noqa: E402 (its in-Blender half needs it too)
+import blender_scene as bs  # noqa: E402
+from blender_scene import mesh_mask  # noqa: E402
 
 RESULT_TAG = "GSIBL-AUTO-BENCH"
 WORK = REPO / "build" / "auto-light"
@@ -287,10 +289,7 @@ def main() -> None:
     result: dict = {}
     kept: dict = {}
     try:
-        room = read_scene(REPO / "samples" / "room.ply")
-        room.sh = linear_sh_for_srgb_rule(room.sh)  # Blender decodes every splat as sRGB: it gets the linear light
-        room.colour_space = "srgb"
-        write_ply(runner.host / "room.ply", room)
+        room = bs.write_room_for_blender(runner.host / "room.ply", REPO / "samples" / "room.ply")
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": a.size, "albedo": 0.8,
                 "radius": 0.25, "suzanne_size": 0.4, "fov_deg": 40.0, "places": places,
                 "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": a.native_samples,

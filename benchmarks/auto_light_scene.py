@@ -27,65 +27,33 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # blender_scene.py, copied beside this file
+import blender_scene as bs  # noqa: E402 (tests/real_blender/blender_scene.py)
+from blender_scene import MODULE  # noqa: E402
+
 RESULT_TAG = "GSIBL-AUTO-BENCH "
-MODULE = "bl_ext.user_default.gs_ibl"
 ARGS = json.load(open(sys.argv[1]))
 
 
 def _setup() -> None:
-    scene = bpy.context.scene
-    for coll in (bpy.data.objects, bpy.data.meshes, bpy.data.cameras, bpy.data.materials):
-        for block in list(coll):
-            coll.remove(block)
-    world = bpy.data.worlds.new("Black")
-    world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bg.inputs["Strength"].default_value = 0.0
-    scene.world = world
-    r = scene.render
-    r.resolution_x = r.resolution_y = ARGS["size"]
-    r.resolution_percentage = 100
-    r.image_settings.file_format = "OPEN_EXR"
-    r.image_settings.color_depth = "32"
-    r.threads_mode, r.threads = "FIXED", ARGS["threads"]
-    r.film_transparent = True
-    scene.view_settings.view_transform = "Standard"
-    c = scene.cycles
-    c.device, c.use_denoising, c.use_adaptive_sampling, c.seed = "CPU", False, False, 0
-    c.max_bounces = c.diffuse_bounces = 4
-    c.glossy_bounces = c.transmission_bounces = c.volume_bounces = 0
-    c.transparent_max_bounces = 256
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.filter_width = 0.01
+    bs.clear()
+    bs.black_world()
+    bs.reference_render_settings(ARGS["size"], ARGS["threads"])
     for key, value in ARGS.get("cycles_settings", {}).items():  # a trial of Cycles' own options (every render)
-        setattr(c, key, value)
-
-
-def _material() -> bpy.types.Material:
-    mat = bpy.data.materials.new("White")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    bsdf.inputs["Color"].default_value = (*(ARGS["albedo"],) * 3, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.0
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    return mat
+        setattr(bpy.context.scene.cycles, key, value)
 
 
 def _mesh(kind: str, place: str, mat: bpy.types.Material) -> bpy.types.Object:
     p = ARGS["places"][place]
     centre = Vector(p["centre"])
     if kind == "sphere":
-        bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=ARGS["radius"], location=centre)
+        obj = bs.sphere(centre, ARGS["radius"], mat, f"{kind}_{place}", segments=96, rings=48)
     else:
         bpy.ops.mesh.primitive_monkey_add(size=ARGS["suzanne_size"], location=centre)
-    obj = bpy.context.active_object
-    obj.name = f"{kind}_{place}"
-    bpy.ops.object.shade_smooth()
-    if kind == "suzanne":
+        obj = bpy.context.active_object
+        obj.name = f"{kind}_{place}"
+        bpy.ops.object.shade_smooth()
+        obj.data.materials.append(mat)
         to_cam = Vector(p["camera"]) - centre
         obj.rotation_euler = (0.0, 0.0, math.atan2(to_cam.y, to_cam.x) + math.pi / 2)  # its face (-Y) to the camera
         mod = obj.modifiers.new("Subdivision", "SUBSURF")
@@ -95,7 +63,6 @@ def _mesh(kind: str, place: str, mat: bpy.types.Material) -> bpy.types.Object:
         zmin = min((obj.matrix_world @ Vector(c)).z for c in obj.bound_box)
         obj.location.z += p["rest_on"] + 0.005 - zmin
         bpy.context.view_layer.update()
-    obj.data.materials.append(mat)
     return obj
 
 
@@ -104,44 +71,21 @@ def _camera(place: str) -> None:
     name = f"cam_{place}"
     obj = bpy.data.objects.get(name)
     if obj is None:
-        data = bpy.data.cameras.new(name)
-        data.sensor_fit, data.angle, data.clip_start = "HORIZONTAL", math.radians(ARGS["fov_deg"]), 1e-3
-        obj = bpy.data.objects.new(name, data)
-        bpy.context.collection.objects.link(obj)
-        obj.location = p["camera"]
-        obj.rotation_mode = "QUATERNION"
-        obj.rotation_quaternion = (Vector(p["centre"]) - Vector(p["camera"])).to_track_quat("-Z", "Y")
+        obj = bs.camera(name, p["camera"], p["centre"], ARGS["fov_deg"])
     bpy.context.scene.camera = obj
-
-
-def _engine(name: str) -> str:
-    ids = {i.identifier for i in bpy.context.scene.render.bl_rna.properties["engine"].enum_items}
-    if name == "CYCLES":
-        return "CYCLES"
-    return next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE") if e in ids)
 
 
 def _render(name: str, engine: str, samples: int) -> float:
     scene = bpy.context.scene
-    scene.render.engine = _engine(engine)
+    scene.render.engine = "CYCLES" if engine == "CYCLES" else bs.eevee_engine()
     if engine == "CYCLES":
         scene.cycles.samples = samples
     else:
         scene.eevee.taa_render_samples = samples
         for key, value in ARGS.get("eevee_settings", {}).items():  # a trial of EEVEE's own options
             setattr(scene.eevee, key, value)
-    path = os.path.join(ARGS["work"], f"{name}.exr")
-    scene.render.filepath = path
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    seconds = time.perf_counter() - t0
-    img = bpy.data.images.load(path)
-    w, h = img.size
-    px = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(px)
-    bpy.data.images.remove(img)
-    os.remove(path)
-    np.save(os.path.join(ARGS["work"], f"{name}.npy"), px.reshape(h, w, 4)[::-1])
+    px, seconds = bs.render_still(os.path.join(ARGS["work"], f"{name}.exr"))
+    np.save(os.path.join(ARGS["work"], f"{name}.npy"), px)
     print(f"[auto-bench] {name}: {seconds:.1f} s", flush=True)
     return seconds
 
@@ -158,9 +102,7 @@ def _each(meshes: dict, fn) -> None:
 
 
 def main() -> dict:
-    import addon_utils
-    if not addon_utils.check(MODULE)[1]:
-        bpy.ops.preferences.addon_enable(module=MODULE)
+    bs.enable_extension()
     gb = importlib.import_module(f"{MODULE}.blender.bake")
     so = importlib.import_module(f"{MODULE}.blender.splat_object")
     ll = importlib.import_module(f"{MODULE}.blender.local_light")
@@ -169,13 +111,12 @@ def main() -> dict:
     steps = ARGS["steps"]
     try:
         _setup()
-        bpy.ops.wm.ply_import(filepath=ARGS["ply"])
-        splats = bpy.context.active_object
+        splats = bs.import_blender_ply(ARGS["ply"])
         rec["native"] = so.is_native_splats(splats)
         splats.gs_ibl_splats.colour_space = "SRGB"
         splats.visible_camera = False  # the mesh alone in the picture; bounce and shadow rays still see the splats
         rec["positions_head"] = so.scene_from_object(splats).positions[:64].tolist()
-        mat = _material()
+        mat = bs.white_material("White", ARGS["albedo"])
         meshes = {(kind, place): _mesh(kind, place, mat) for place in ARGS["places"] for kind in ARGS["meshes"]}
         rec["boxes"] = {f"{k[0]}_{k[1]}": [list(map(float, o.matrix_world @ Vector(c))) for c in o.bound_box]
                         for k, o in meshes.items()}
@@ -189,11 +130,8 @@ def main() -> dict:
         if "world" not in steps and "auto" not in steps:
             rec["ok"] = True
             return rec
-        bpy.ops.object.empty_add(location=ARGS["probe"])
-        probe = bpy.context.active_object
-        probe.name = "GS-IBL Probe"
+        probe = bs.add_probe(ARGS["probe"], splats, "GS-IBL Probe", keep_background=False)  # panel's defaults else
         s = probe.gs_ibl_probe
-        s.is_probe, s.splats, s.keep_background = True, splats, False  # the panel's defaults otherwise
 
         def ours(tag: str) -> None:
             def one(k):

@@ -22,7 +22,7 @@ var(R1 - R2), which is independent of the render measured), over the mean's RMS,
 too. The move's error pools its first and last frames, each against its own reference. Time: wall seconds of the
 render call; ours adds the warm re-bake (the first bake of the session, Vulkan start included, is recorded).
 
-Inside Blender this same file runs with --in-blender ARGS.json.
+Inside Blender this same file runs with --in-blender ARGS.json (tests/real_blender/blender_scene.py beside it).
 """
 from __future__ import annotations
 
@@ -38,25 +38,15 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.abspath(os.path.join(HERE, ".."))
+# the scene and the Blender set-up: tests/real_blender/blender_scene.py here, copied beside this file in Blender
+sys.path[:0] = [os.path.join(REPO, "tests", "real_blender"), HERE]
+import blender_scene as bs  # noqa: E402
+from blender_scene import MODULE, mesh_mask  # noqa: E402
+
 RESULT_TAG = "GSIBL-NATIVE-BENCH "
-MODULE = "bl_ext.user_default.gs_ibl"
 
 
 # ---------------------------------------------------------------------------------------------------- in Blender
-
-def mesh_mask(*renders, erode: int = 1):
-    """Pixels covered (alpha > 0.999) in every render, ``erode`` pixels in from the outline (numpy only: this file
-    also runs inside Blender)."""
-    m = np.logical_and.reduce([r[..., 3] > 0.999 for r in renders])
-    for _ in range(erode):
-        e = m.copy()
-        e[1:] &= m[:-1]
-        e[:-1] &= m[1:]
-        e[:, 1:] &= m[:, :-1]
-        e[:, :-1] &= m[:, 1:]
-        m = e
-    return m
-
 
 # name: (width, height, camera offset from the sphere (m), lens (mm)); the sphere is 33, 70 and 210 px wide
 FRAMES = {"48x48": (48, 48, (0.0, -1.2, 0.25), 50.0),
@@ -70,37 +60,22 @@ def _in_blender(args: dict) -> dict:
     import math
 
     import bpy
-    import addon_utils  # noqa: I001 (importable once bpy is)
     import numpy as np
     from bpy_extras.object_utils import world_to_camera_view
     from mathutils import Matrix, Vector
 
-    if not addon_utils.check(MODULE)[1]:
-        bpy.ops.preferences.addon_enable(module=MODULE)
+    bs.enable_extension()
     gb = importlib.import_module(f"{MODULE}.blender.bake")
     so = importlib.import_module(f"{MODULE}.blender.splat_object")
-    for o in list(bpy.data.objects):
-        bpy.data.objects.remove(o)
+    bs.clear("objects")
     scene = bpy.context.scene
-    world = bpy.data.worlds.new("Black")
-    world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
-    scene.world = world
+    bs.black_world()
     assert bpy.ops.gs_ibl.import_splats(filepath=args["room"]) == {"FINISHED"}
     room = bpy.context.active_object
     out = {"blender": bpy.app.version_string, "native": so.is_native_splats(room), "rows": [], "frames": {}}
     at = room.matrix_world @ Vector(args["probe_in_room"])
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=at, segments=64, ring_count=32)
-    sphere = bpy.context.active_object
-    bpy.ops.object.shade_smooth()
-    mat = bpy.data.materials.new("White")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    diffuse = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
-    nt.links.new(diffuse.outputs["BSDF"], nt.nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
-    sphere.data.materials.append(mat)
+    radius = bs.ROOM_SPHERE["radius"]
+    sphere = bs.sphere(at, radius, bs.white_material("White", bs.ALBEDO), segments=64, rings=32)
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(cam)
     scene.camera = cam
@@ -118,8 +93,7 @@ def _in_blender(args: dict) -> dict:
     c.use_adaptive_sampling = False
     c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
     c.transparent_max_bounces = 64
-    eevee = next(e for e in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE")
-                 if e in {i.identifier for i in r.bl_rna.properties["engine"].enum_items})
+    eevee = bs.eevee_engine()
     work = args["work"]
 
     def place_camera(frame: str, turn: float = 0.0) -> None:
@@ -139,12 +113,7 @@ def _in_blender(args: dict) -> dict:
             scene.eevee.taa_render_samples = samples
 
     def load(path: str) -> np.ndarray:
-        img = bpy.data.images.load(path)
-        px = np.empty(len(img.pixels), np.float32)
-        img.pixels.foreach_get(px)
-        shape = (img.size[1], img.size[0], 4)
-        bpy.data.images.remove(img)
-        return px.reshape(shape)
+        return bs.read_image(path, top_first=False)
 
     def render(engine: str, samples: int, denoise: bool = False, seed: int = 0, border=None):
         setup(engine, samples, denoise, seed)
@@ -255,9 +224,7 @@ def _in_blender(args: dict) -> dict:
                 px, s = render_move("CYCLES", n, denoise)
                 row("move", first, "native Cycles" + (" + denoiser" if denoise else ""), n, s, px, refs=move_refs)
     # ours: a probe at the sphere, default settings (Lighting Auto), baked from the same room
-    bpy.ops.object.empty_add(location=at)
-    probe = bpy.context.active_object
-    probe.gs_ibl_probe.is_probe, probe.gs_ibl_probe.splats = True, room
+    probe = bs.add_probe(at, room)
     assert probe.gs_ibl_probe.lighting == "AUTO"
     t0 = time.perf_counter()
     gb.bake_into_world(scene, probe)
@@ -268,7 +235,7 @@ def _in_blender(args: dict) -> dict:
     out["bake_report"] = report
     out["auto_choice"] = sphere.get("gs_ibl_grid_key")
     out["probe"] = list(at)
-    out["sphere_box"] = [list(at - Vector((0.3, 0.3, 0.3))), list(at + Vector((0.3, 0.3, 0.3)))]
+    out["sphere_box"] = [list(at - Vector((radius,) * 3)), list(at + Vector((radius,) * 3))]
     place_camera(frames[0] if frames else MOVE["frame"])
     _, out["eevee_first_frame_s"] = render(eevee, 1)  # shader compilation: once per session, not per frame
     for frame in frames:
@@ -445,6 +412,7 @@ def main() -> None:
         shutil.copy(zip_path, runner.host / "gs_ibl.zip")
         shutil.copy(os.path.join(REPO, "samples", "room.ply"), runner.host / "room.ply")
         shutil.copy(os.path.abspath(__file__), runner.host / "native_bench.py")
+        shutil.copy(bs.__file__, runner.host / "blender_scene.py")
         # samples per frame: the larger frames stop where native's time runs to minutes on this CPU
         args = {"work": str(runner.inner), "room": str(runner.inner / "room.ply"), "threads": a.threads,
                 "frames": frames, "move": not a.no_move,
@@ -453,7 +421,7 @@ def main() -> None:
                 "our_cycles_samples": {"48x48": [16, 64, 256], "320x180": [16, 64, 256], "960x540": [16, 64]},
                 "eevee_samples": {"48x48": [1, 4, 16], "320x180": [1, 4], "960x540": [1, 4]},
                 "move_samples": [16, 64], "move_our_cycles_samples": [16], "move_eevee_samples": [1, 4],
-                "probe_in_room": [0.0, 0.45, 1.0]}
+                "probe_in_room": list(bs.ROOM_SPHERE["centre"])}
         if a.quick:
             for key in ("reference", "samples", "our_cycles_samples", "eevee_samples"):
                 args[key] = {f: (64 if key == "reference" else [4]) for f in FRAMES}

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import math
 import os
 import sys
 import time
@@ -22,79 +21,27 @@ import traceback
 
 import bpy
 import numpy as np
-from mathutils import Matrix, Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # blender_scene.py, copied beside this file
+import blender_scene as bs  # noqa: E402
+from blender_scene import MODULE  # noqa: E402
 
 RESULT_TAG = "GSIBL-CYCLES-RESULT "
-MODULE = "bl_ext.user_default.gs_ibl"
 ARGS = json.load(open(sys.argv[1]))
 
 
 def _reset() -> None:
-    for coll in (bpy.data.objects, bpy.data.meshes, bpy.data.pointclouds, bpy.data.cameras, bpy.data.worlds,
-                 bpy.data.materials, bpy.data.images):
-        for block in list(coll):
-            coll.remove(block)
-    scene = bpy.context.scene
-    world = bpy.data.worlds.new("Black")
-    world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bg.inputs["Strength"].default_value = 0.0
-    scene.world = world
-    r = scene.render
-    r.engine = "CYCLES"
-    r.resolution_percentage = 100
-    r.image_settings.file_format = "OPEN_EXR"
-    r.image_settings.color_depth = "32"
-    r.threads_mode = "FIXED"
-    r.threads = ARGS.get("threads", 2)
-    scene.view_settings.view_transform = "Standard"  # EXR holds scene-linear values either way; said for clarity
-    c = scene.cycles
-    c.device = "CPU"
-    c.use_denoising = False
-    c.use_adaptive_sampling = False  # a fixed sample count: the noise the test states is the noise it gets
-    c.seed = ARGS.get("seed", 0)
-    c.max_bounces = c.diffuse_bounces = 4
-    c.glossy_bounces = c.transmission_bounces = c.volume_bounces = 0
-    c.transparent_max_bounces = 256  # a ray crosses several overlapping splats of the shell
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0  # no clamp: it would bias the bright splats
-    c.filter_width = 0.01  # pixel centres, as our pinhole renders and as the test computes the sphere's normals
+    """An empty scene, the World black, Cycles as the reference (blender_scene.reference_render_settings)."""
+    bs.clear("objects", "meshes", "pointclouds", "cameras", "worlds", "materials", "images")
+    bs.black_world()
+    bs.reference_render_settings(threads=ARGS.get("threads", 2), seed=ARGS.get("seed", 0))
 
 
 def _camera(cam: dict) -> bpy.types.Object:
     """A camera at cam["position"] looking at cam["look_at"], cam["up"] (default +Z) up, horizontal field of view
     cam["fov_deg"]: the geometry of core ViewBatch.pinhole (image right = forward x up)."""
-    data = bpy.data.cameras.new("Reference Camera")
-    data.sensor_fit = "HORIZONTAL"
-    data.angle = math.radians(cam["fov_deg"])
-    data.clip_start = 1e-3
-    obj = bpy.data.objects.new("Reference Camera", data)
-    bpy.context.collection.objects.link(obj)
-    obj.location = cam["position"]
-    forward = (Vector(cam["look_at"]) - Vector(cam["position"])).normalized()
-    right = forward.cross(Vector(cam.get("up", (0.0, 0.0, 1.0)))).normalized()
-    up = right.cross(forward)
-    obj.rotation_mode = "QUATERNION"  # the camera looks down its -Z with +Y up
-    obj.rotation_quaternion = Matrix((right, up, -forward)).transposed().to_quaternion()
-    bpy.context.scene.camera = obj
-    return obj
-
-
-def _sphere(centre, radius: float) -> bpy.types.Object:
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=128, ring_count=64, radius=radius, location=centre)
-    obj = bpy.context.active_object
-    bpy.ops.object.shade_smooth()
-    mat = bpy.data.materials.new("White")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")  # Lambertian (roughness 0): outgoing radiance = albedo E / pi
-    bsdf.inputs["Color"].default_value = (*(ARGS["albedo"],) * 3, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.0
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    obj.data.materials.append(mat)
-    return obj
+    return bs.camera("Reference Camera", cam["position"], cam["look_at"], cam["fov_deg"],
+                     up=cam.get("up", (0.0, 0.0, 1.0)))
 
 
 def _render(name: str, samples: int, size) -> tuple[np.ndarray, float]:
@@ -103,24 +50,11 @@ def _render(name: str, samples: int, size) -> tuple[np.ndarray, float]:
     scene.render.resolution_x, scene.render.resolution_y = size
     scene.cycles.samples = samples
     scene.render.film_transparent = True
-    path = os.path.join(ARGS["work"], f"{name}.exr")
-    scene.render.filepath = path
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    seconds = time.perf_counter() - t0
-    img = bpy.data.images.load(path)
-    w, h = img.size
-    px = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(px)
-    bpy.data.images.remove(img)
-    os.remove(path)
-    return px.reshape(h, w, 4)[::-1].copy(), seconds
+    return bs.render_still(os.path.join(ARGS["work"], f"{name}.exr"))
 
 
 def main() -> dict:
-    import addon_utils
-    if not addon_utils.check(MODULE)[1]:
-        bpy.ops.preferences.addon_enable(module=MODULE)
+    bs.enable_extension()
     gb = importlib.import_module(f"{MODULE}.blender.bake")
     so = importlib.import_module(f"{MODULE}.blender.splat_object")
     out = {"blender": bpy.app.version_string, "cases": {}}
@@ -129,11 +63,11 @@ def main() -> dict:
         rec = out["cases"][key] = {}
         try:
             _reset()
-            bpy.ops.wm.ply_import(filepath=case["ply"])  # Blender's importer: the reference owes nothing to ours
-            splats = bpy.context.active_object
+            splats = bs.import_blender_ply(case["ply"])  # Blender's importer: the reference owes nothing to ours
             rec.update(native=so.is_native_splats(splats), count=len(splats.data.points))
             splats.gs_ibl_splats.colour_space = case["colour_space"].upper()
-            sphere = _sphere(ARGS["sphere"]["centre"], ARGS["sphere"]["radius"])
+            sphere = bs.sphere(ARGS["sphere"]["centre"], ARGS["sphere"]["radius"],
+                               bs.white_material("White", ARGS["albedo"]))
             _camera(ARGS["sphere_camera"])
             px, rec["sphere_s"] = _render(f"sphere_{key}", ARGS["samples"], ARGS["size"])
             np.save(os.path.join(ARGS["work"], f"sphere_{key}.npy"), px)
@@ -145,12 +79,9 @@ def main() -> dict:
             # our light: a probe at the sphere's centre, baked from the same Point Cloud, lights it through our World
             sphere.hide_render = False
             _camera(ARGS["sphere_camera"])
-            bpy.ops.object.empty_add(location=ARGS["sphere"]["centre"])
-            probe = bpy.context.active_object
-            s = probe.gs_ibl_probe
-            s.is_probe, s.splats = True, splats
-            s.method, s.face_size, s.irradiance_size = "EXACT", ARGS["face_size"], 16
-            s.lighting = "WORLD"  # the World probe against Cycles (Lighting Auto adds local light)
+            # the World probe against Cycles (Lighting Auto adds local light)
+            probe = bs.add_probe(ARGS["sphere"]["centre"], splats, method="EXACT", face_size=ARGS["face_size"],
+                                 irradiance_size=16, lighting="WORLD")
             t0 = time.perf_counter()
             result, rec["report"], rec["warning"] = gb.bake_into_world(bpy.context.scene, probe)
             rec["bake_s"] = time.perf_counter() - t0
@@ -166,8 +97,7 @@ def main() -> dict:
         rec = out["cases"][cap["key"]] = {}
         try:
             _reset()
-            bpy.ops.wm.ply_import(filepath=cap["ply"])
-            splats = bpy.context.active_object
+            splats = bs.import_blender_ply(cap["ply"])
             rec.update(native=so.is_native_splats(splats), count=len(splats.data.points),
                        matrix=[list(r) for r in splats.matrix_world])
             _camera(cap["camera"])

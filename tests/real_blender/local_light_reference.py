@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import math
 import os
 import sys
 import time
@@ -21,86 +20,23 @@ import traceback
 
 import bpy
 import numpy as np
-from mathutils import Vector
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # blender_scene.py, copied beside this file
+import blender_scene as bs  # noqa: E402
+from blender_scene import MODULE  # noqa: E402
 
 RESULT_TAG = "GSIBL-LOCAL-RESULT "
-MODULE = "bl_ext.user_default.gs_ibl"
 ARGS = json.load(open(sys.argv[1]))
 
 
-def _setup() -> None:
-    scene = bpy.context.scene
-    for coll in (bpy.data.objects, bpy.data.meshes, bpy.data.cameras, bpy.data.materials):
-        for block in list(coll):
-            coll.remove(block)
-    world = bpy.data.worlds.new("Black")
-    world.use_nodes = True
-    bg = world.node_tree.nodes.get("Background")
-    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bg.inputs["Strength"].default_value = 0.0
-    scene.world = world
-    r = scene.render
-    r.engine = "CYCLES"
-    r.resolution_x = r.resolution_y = ARGS["size"]
-    r.resolution_percentage = 100
-    r.image_settings.file_format = "OPEN_EXR"
-    r.image_settings.color_depth = "32"
-    r.threads_mode, r.threads = "FIXED", ARGS.get("threads", 2)
-    r.film_transparent = True
-    scene.view_settings.view_transform = "Standard"
-    c = scene.cycles
-    c.device, c.use_denoising, c.use_adaptive_sampling, c.seed = "CPU", False, False, 0
-    c.max_bounces = c.diffuse_bounces = 4
-    c.glossy_bounces = c.transmission_bounces = c.volume_bounces = 0
-    c.transparent_max_bounces = 256
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.filter_width = 0.01
-
-
-def _sphere(name: str, centre, radius: float) -> bpy.types.Object:
-    bpy.ops.mesh.primitive_uv_sphere_add(segments=128, ring_count=64, radius=radius, location=centre)
-    obj = bpy.context.active_object
-    obj.name = name
-    bpy.ops.object.shade_smooth()
-    mat = bpy.data.materials.new(f"White {name}")
-    mat.use_nodes = True
-    nt = mat.node_tree
-    nt.nodes.clear()
-    bsdf = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    bsdf.inputs["Color"].default_value = (*(ARGS["albedo"],) * 3, 1.0)
-    bsdf.inputs["Roughness"].default_value = 0.0
-    out = nt.nodes.new("ShaderNodeOutputMaterial")
-    nt.links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    obj.data.materials.append(mat)
-    return obj
-
-
 def _camera(cam: dict) -> None:
-    data = bpy.data.cameras.new("cam")
-    data.sensor_fit, data.angle, data.clip_start = "HORIZONTAL", math.radians(cam["fov_deg"]), 1e-3
-    obj = bpy.data.objects.new("cam", data)
-    bpy.context.collection.objects.link(obj)
-    obj.location = cam["position"]
-    obj.rotation_mode = "QUATERNION"
-    obj.rotation_quaternion = (Vector(cam["look_at"]) - Vector(cam["position"])).to_track_quat("-Z", "Y")
-    bpy.context.scene.camera = obj
+    bs.camera("cam", cam["position"], cam["look_at"], cam["fov_deg"])
 
 
 def _render(name: str, samples: int) -> float:
-    scene = bpy.context.scene
-    scene.cycles.samples = samples
-    path = os.path.join(ARGS["work"], f"{name}.exr")
-    scene.render.filepath = path
-    t0 = time.perf_counter()
-    bpy.ops.render.render(write_still=True)
-    seconds = time.perf_counter() - t0
-    img = bpy.data.images.load(path)
-    w, h = img.size
-    px = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(px)
-    bpy.data.images.remove(img)
-    os.remove(path)
-    np.save(os.path.join(ARGS["work"], f"{name}.npy"), px.reshape(h, w, 4)[::-1])
+    bpy.context.scene.cycles.samples = samples
+    px, seconds = bs.render_still(os.path.join(ARGS["work"], f"{name}.exr"))
+    np.save(os.path.join(ARGS["work"], f"{name}.npy"), px)
     return seconds
 
 
@@ -116,23 +52,23 @@ def _render_spheres(spheres: dict, tag: str, samples: int, rec: dict) -> None:
 
 
 def main() -> dict:
-    import addon_utils
-    if not addon_utils.check(MODULE)[1]:
-        bpy.ops.preferences.addon_enable(module=MODULE)
+    bs.enable_extension()
     gb = importlib.import_module(f"{MODULE}.blender.bake")
     so = importlib.import_module(f"{MODULE}.blender.splat_object")
     op = importlib.import_module(f"{MODULE}.blender.object_probes")
     pgrid = importlib.import_module(f"{MODULE}.blender.probe_grid")
     rec: dict = {"blender": bpy.app.version_string}
     try:
-        _setup()
-        bpy.ops.wm.ply_import(filepath=ARGS["ply"])
-        splats = bpy.context.active_object
+        bs.clear()
+        bs.black_world()
+        bs.reference_render_settings(ARGS["size"], ARGS.get("threads", 2))
+        splats = bs.import_blender_ply(ARGS["ply"])
         rec["native"] = so.is_native_splats(splats)
         splats.gs_ibl_splats.colour_space = "SRGB"
         pos = so.scene_from_object(splats).positions
         rec["positions_head"] = pos[:64].tolist()  # the host checks Blender placed the file's splats as we do
-        spheres = {name: _sphere(name, s["centre"], s["radius"]) for name, s in ARGS["spheres"].items()}
+        spheres = {name: bs.sphere(s["centre"], s["radius"], bs.white_material(f"White {name}", ARGS["albedo"]), name)
+                   for name, s in ARGS["spheres"].items()}
         _render_spheres(spheres, "native", ARGS["native_samples"], rec)
         # what the camera sees of the native splats from each sphere's centre, all around (the spheres hidden):
         # the host compares its mean radiance with our probe's there
@@ -153,12 +89,10 @@ def main() -> dict:
         for obj in spheres.values():
             obj.hide_render = False
         # our light: the World probe, then per-object probes, then a grid
-        bpy.ops.object.empty_add(location=ARGS["probe"])
-        probe = bpy.context.active_object
+        # "one" is the World probe alone; local light is added below, by the operators
+        probe = bs.add_probe(ARGS["probe"], splats, method="EXACT", face_size=ARGS["face_size"], irradiance_size=16,
+                             keep_background=False, lighting="WORLD")
         s = probe.gs_ibl_probe
-        s.is_probe, s.splats = True, splats
-        s.method, s.face_size, s.irradiance_size, s.keep_background = "EXACT", ARGS["face_size"], 16, False
-        s.lighting = "WORLD"  # "one" is the World probe alone; local light is added below, by the operators
         t0 = time.perf_counter()
         _, rec["report"], rec["warning"] = gb.bake_into_world(bpy.context.scene, probe)
         rec["bake_s"] = time.perf_counter() - t0

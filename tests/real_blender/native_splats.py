@@ -17,15 +17,16 @@ import traceback
 import bpy
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))  # blender_scene.py, copied beside this file
+import blender_scene as bs  # noqa: E402
+from blender_scene import MODULE  # noqa: E402
+
 RESULT_TAG = "GSIBL-NATIVE-RESULT "
-MODULE = "bl_ext.user_default.gs_ibl"
 ARGS = json.load(open(sys.argv[1]))
 
 
 def main() -> dict:
-    import addon_utils
-    if not addon_utils.check(MODULE)[1]:
-        bpy.ops.preferences.addon_enable(module=MODULE)
+    bs.enable_extension()
     so = importlib.import_module(f"{MODULE}.blender.splat_object")
     gb = importlib.import_module(f"{MODULE}.blender.bake")
     core_bake = importlib.import_module(f"{MODULE}.core.bake")
@@ -33,8 +34,7 @@ def main() -> dict:
     for key, path, kind in ARGS["files"]:
         rec = out["files"][key] = {}
         try:
-            for o in list(bpy.data.objects):
-                bpy.data.objects.remove(o)
+            bs.clear("objects")
             importer = bpy.ops.wm.ply_import if kind == "ply" else bpy.ops.wm.spz_import
             t0 = time.perf_counter()
             rec["import"] = sorted(importer(filepath=path))
@@ -44,12 +44,9 @@ def main() -> dict:
                        splat_object=so.is_splat_object(obj), colour_space=so.colour_space_of(obj))
             world = so.scene_from_object(obj)
             probe_pos = core_bake.default_probe_position(world)
-            bpy.ops.object.empty_add(location=tuple(float(c) for c in probe_pos))
-            probe = bpy.context.active_object
+            probe = bs.add_probe(tuple(float(c) for c in probe_pos), obj, method="EXACT", face_size=64,
+                                 irradiance_size=16, lighting="WORLD")
             s = probe.gs_ibl_probe
-            s.is_probe, s.splats = True, obj
-            s.method, s.face_size, s.irradiance_size = "EXACT", 64, 16
-            s.lighting = "WORLD"
             t0 = time.perf_counter()
             result, text, warning = gb.bake_into_world(bpy.context.scene, probe)
             rec["bake_s"] = time.perf_counter() - t0

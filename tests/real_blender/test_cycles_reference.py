@@ -37,6 +37,7 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+import blender_scene as bs  # noqa: E402 (the scenes and Blender set-up shared with the benchmarks)
 import test_matrix as matrix  # noqa: E402 (the matrix's runner, installer and roots)
 
 REPO = matrix.REPO
@@ -98,38 +99,6 @@ def shell(space: str):
     return ours, blender
 
 
-def sphere_rays(cam: dict, size: int):
-    """Per pixel of the sphere camera (top row first): the sphere's unit normal where the centre ray hits it, and
-    a mask of pixels well inside its outline (their footprint wholly on the sphere)."""
-    from gs_ibl_addon.core.render.views import ViewBatch
-    batch = ViewBatch.pinhole(cam["position"], cam["look_at"], cam["fov_deg"], size, size)
-    d = batch.views[0].pixel_directions()
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    o = np.asarray(cam["position"], np.float64) - SPHERE["centre"]
-    b = d @ o
-    disc = b * b - (o @ o - SPHERE["radius"] ** 2)
-    t = -b - np.sqrt(np.maximum(disc, 0.0))
-    n = (o + t[..., None] * d) / SPHERE["radius"]
-    grazing = -(n * d).sum(-1)  # cos between the normal and the way back to the camera
-    return n, (disc > 0) & (grazing > 0.35)
-
-
-def block_errors(got: np.ndarray, want: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Per screen block (BLOCKS x BLOCKS over the masked pixels' bounds) and channel: mean(got) / mean(want) - 1."""
-    ys, xs = np.nonzero(mask)
-    y_edges = np.linspace(ys.min(), ys.max() + 1, BLOCKS + 1)
-    x_edges = np.linspace(xs.min(), xs.max() + 1, BLOCKS + 1)
-    errs = []
-    for i in range(BLOCKS):
-        for j in range(BLOCKS):
-            sel = mask.copy()
-            sel[:int(y_edges[i])], sel[int(y_edges[i + 1]):] = False, False
-            sel[:, :int(x_edges[j])], sel[:, int(x_edges[j + 1]):] = False, False
-            if sel.sum() >= 20:
-                errs.append(got[sel].mean(0) / want[sel].mean(0) - 1.0)
-    return np.array(errs)
-
-
 @pytest.fixture(scope="module")
 def cycles_run(tmp_path_factory):
     matrix.require_root(ENTRY.root)
@@ -177,12 +146,13 @@ def test_cycles_sphere_lit_by_native_splats_matches_our_bake(cycles_run, space):
     # the extension's bake inside Blender, from Blender's Point Cloud (sRGB-encoded), = our core bake of the scene
     in_blender = arrays[f"irradiance_{space}"][..., :3]
     bake_rel = float(np.sqrt(np.mean((in_blender - irr) ** 2) / np.mean(irr ** 2)))
-    n, mask = sphere_rays(SPHERE_CAMERA, SPHERE_SIZE)
+    # per pixel of the sphere camera: the sphere's normal, and the pixels wholly on the sphere
+    n, mask = bs.sphere_pixels(SPHERE_CAMERA, SPHERE["centre"], SPHERE["radius"], SPHERE_SIZE)
     want = ALBEDO * sample_cube_bilinear(irr, n)
     native = arrays[f"sphere_{space}"][..., :3].astype(np.float64)
     world = arrays[f"world_{space}"][..., :3].astype(np.float64)
-    err_native = block_errors(native, want, mask)
-    err_world = block_errors(world, native, mask)
+    err_native = bs.block_ratios(native, want, mask, BLOCKS)
+    err_world = bs.block_ratios(world, native, mask, BLOCKS)
     pixel_rel = float(np.sqrt(np.mean((native[mask] - want[mask]) ** 2)) / np.sqrt(np.mean(want[mask] ** 2)))
     print(f"\n[cycles reference] {space}: {rec['count']} native splats, sphere {mask.sum()} px in {BLOCKS}x{BLOCKS} "
           f"blocks; Cycles {SAMPLES} spp, denoiser off: {rec['sphere_s']:.1f} s; "

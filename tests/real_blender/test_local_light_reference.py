@@ -24,6 +24,7 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
+import blender_scene as bs  # noqa: E402 (the scenes and Blender set-up shared with the benchmarks)
 import test_matrix as matrix  # noqa: E402 (the matrix's runner, installer and roots)
 
 REPO = matrix.REPO
@@ -59,48 +60,18 @@ def _spheres_args():
 
 def sphere_mask(name: str) -> np.ndarray:
     """Pixels (top row first) well inside the sphere's outline."""
-    from gs_ibl_addon.core.render.views import ViewBatch
     s = _spheres_args()[name]
-    cam = s["camera"]
-    d = ViewBatch.pinhole(cam["position"], cam["look_at"], FOV, SIZE, SIZE).views[0].pixel_directions()
-    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    o = np.asarray(cam["position"]) - np.asarray(s["centre"])
-    b = d @ o
-    disc = b * b - (o @ o - s["radius"] ** 2)
-    t = -b - np.sqrt(np.maximum(disc, 0.0))
-    n = (o + t[..., None] * d) / s["radius"]
-    return (disc > 0) & (-(n * d).sum(-1) > 0.35)
-
-
-def blocks(got: np.ndarray, want: np.ndarray, mask: np.ndarray, k: int = 2) -> np.ndarray:
-    ys, xs = np.nonzero(mask)
-    ye = np.linspace(ys.min(), ys.max() + 1, k + 1).astype(int)
-    xe = np.linspace(xs.min(), xs.max() + 1, k + 1).astype(int)
-    out = []
-    for i in range(k):
-        for j in range(k):
-            sel = np.zeros_like(mask)
-            sel[ye[i]:ye[i + 1], xe[j]:xe[j + 1]] = True
-            sel &= mask
-            if sel.sum() >= 20:
-                out.append(got[sel].mean(0) / want[sel].mean(0) - 1.0)
-    return np.array(out)
+    return bs.sphere_pixels(s["camera"], s["centre"], s["radius"], SIZE)[1]
 
 
 @pytest.fixture(scope="module")
 def local_run(tmp_path_factory):
     matrix.require_root(ENTRY.root)
-    from gs_ibl_addon.core.colour import linear_sh_for_srgb_rule
     from gs_ibl_addon.core.formats import read_scene
-    from gs_ibl_addon.core.formats.ply import write_ply
     OUT.mkdir(parents=True, exist_ok=True)
     runner = matrix.Runner(ENTRY, tmp_path_factory.mktemp("local"))
     try:
-        room = read_scene(REPO / "samples" / "room.ply")
-        assert room.colour_space == "linear"
-        room.sh = linear_sh_for_srgb_rule(room.sh)  # Blender decodes every splat as sRGB: it gets the linear light
-        room.colour_space = "srgb"
-        write_ply(runner.host / "room.ply", room)
+        bs.write_room_for_blender(runner.host / "room.ply", REPO / "samples" / "room.ply")
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": SIZE, "albedo": ALBEDO,
                 "spheres": _spheres_args(), "probe": PROBE, "grid": GRID, "fine_grid": FINE_GRID, "face_size": 64,
                 "native_samples": NATIVE_SAMPLES, "samples": SAMPLES, "threads": 2,
@@ -165,7 +136,7 @@ def test_local_light_matches_native_cycles(local_run):
                 continue
             got = arrays[f"{m}_{name}"][..., :3].astype(np.float64)
             means[(name, m)] = got[mask].mean(0) / native[mask].mean(0)
-            worst[(name, m)] = np.abs(blocks(got, native, mask)).max()
+            worst[(name, m)] = np.abs(bs.block_ratios(got, native, mask, 2)).max()
             lines.append(f"  {name:6s} {m:8s}: whole sphere / native {np.round(means[(name, m)], 3)}, worst 2x2 "
                          f"block {worst[(name, m)]:.1%}")
     print("\n".join(lines + [f"  variation: {result['variation']}", f"  {result['grid_report']}",

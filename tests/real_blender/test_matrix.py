@@ -21,6 +21,9 @@ from pathlib import Path
 
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import blender_scene as bs  # noqa: E402 (the scenes and Blender set-up shared with the benchmarks)
+
 REPO = Path(__file__).resolve().parents[2]
 ROOTS_SH = REPO / "scripts" / "blender_roots.sh"
 OUT = REPO / "build" / "matrix"
@@ -192,10 +195,12 @@ def _install(runner: Runner, zip_inner: str) -> subprocess.CompletedProcess:
 
 def run_script(runner: Runner, script: Path, args: dict, tag: str, log: str) -> dict:
     """Install the built zip with Blender's installer in ``runner``'s bpy module, run ``script`` there on
-    args.json (``args``), and return the JSON of its stdout line starting with ``tag``."""
+    args.json (``args``) with blender_scene.py beside it (the scenes and set-up it imports), and return the JSON
+    of its stdout line starting with ``tag``."""
     zip_path = built_zip()
     shutil.copy(zip_path, runner.host / zip_path.name)
     shutil.copy(script, runner.host / script.name)
+    shutil.copy(HERE / "blender_scene.py", runner.host / "blender_scene.py")
     (runner.host / "args.json").write_text(json.dumps(args, indent=1))
     assert _install(runner, str(runner.inner / zip_path.name)).returncode == 0, \
         (runner.host / "install.log").read_text()[-2000:]
@@ -264,12 +269,13 @@ def test_entry(entry: Entry, tmp_path_factory):
     for key, path in files.items():
         shutil.copy(path, runner.host / path.name)
         inner[key] = str(runner.inner / path.name)
-    shutil.copy(HERE / "scenario.py", runner.host / "scenario.py")
+    for name in ("scenario.py", "blender_scene.py"):
+        shutil.copy(HERE / name, runner.host / name)
     args = {"entry": entry.name, "work": str(runner.inner), "user_dir": str(runner.inner / "home"),
             "result": str(runner.inner / "result.json"),
             "files": {k: inner[k] for k in ("room", "capture", "spz", "ply", "spz4", *CONVERTED)},
             "capture_count": CAPTURE_COUNT,
-            "probe_in_room": [0.0, 0.45, 1.0], "face_size": 64, "albedo": 0.8, "size": 48,
+            "probe_in_room": list(bs.ROOM_SPHERE["centre"]), "face_size": 64, "albedo": bs.ALBEDO, "size": 48,
             "eevee_samples": 4, "cycles_samples": 16, "gui_wait_s": 10.0}
     (runner.host / "args.json").write_text(json.dumps(args, indent=1))
 
