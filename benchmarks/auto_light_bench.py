@@ -276,9 +276,6 @@ def main() -> None:
         matrix.require_root(entry.root)
     except BaseException as e:  # pytest's skip outside pytest
         sys.exit(f"the bpy 5.3 root is not ready: {e}")
-    from gs_ibl_addon.core.colour import linear_sh_for_srgb_rule
-    from gs_ibl_addon.core.formats import read_scene
-    from gs_ibl_addon.core.formats.ply import write_ply
     unknown = [p for p in a.places.split(",") if p not in PLACES]
     if unknown:  # before the runner: a failed run replaces the last run's folder (and its references)
         sys.exit(f"unknown --places {','.join(unknown)}: choose from {','.join(PLACES)}")
