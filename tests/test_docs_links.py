@@ -16,15 +16,15 @@ _FENCE = re.compile(r"^\s*(```|~~~)")
 _CODE = re.compile(r"`[^`]*`")
 
 
-def _prose(text: str) -> list[tuple[int, str]]:
-    """(line number, line) outside fenced code blocks, inline code removed."""
+def _prose(text: str, keep_code: bool = False) -> list[tuple[int, str]]:
+    """(line number, line) outside fenced code blocks, inline code removed unless ``keep_code``."""
     out, fenced = [], False
     for n, line in enumerate(text.splitlines(), 1):
         if _FENCE.match(line):
             fenced = not fenced
             continue
         if not fenced:
-            out.append((n, _CODE.sub("", line)))
+            out.append((n, line if keep_code else _CODE.sub("", line)))
     return out
 
 
@@ -38,7 +38,7 @@ def slug(heading: str) -> str:
 def anchors(path: Path) -> set[str]:
     seen: dict[str, int] = {}
     out = set()
-    for _, line in _prose(path.read_text(encoding="utf-8")):
+    for _, line in _prose(path.read_text(encoding="utf-8"), keep_code=True):  # a heading's code is in its anchor
         m = re.match(r"^#{1,6}\s+(.*?)\s*#*\s*$", line)
         if not m:
             continue
@@ -77,6 +77,17 @@ def test_slug_matches_github():
     assert slug("Lighting Auto against native Cycles (five places)") == "lighting-auto-against-native-cycles-five-places"
     assert slug("What F12 renders contain") == "what-f12-renders-contain"
     assert slug("Probe and bake: `core/bake.py`") == "probe-and-bake-corebakepy"
+    assert "the-sort-benchmarkssort_benchpy-h200-2026-12-03" in anchors_of("## The sort (`benchmarks/sort_bench.py`, H200, 2026-12-03)")
+
+
+def anchors_of(text: str) -> set[str]:
+    import tempfile
+    with tempfile.NamedTemporaryFile("w", suffix=".md", delete=False, encoding="utf-8") as f:
+        f.write(text)
+    try:
+        return anchors(Path(f.name))
+    finally:
+        Path(f.name).unlink()
 
 
 @pytest.mark.parametrize("doc", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
