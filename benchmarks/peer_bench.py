@@ -1,13 +1,19 @@
-"""Our cube renderer against gsplat, same splats, same six cube-face views, one process, one GPU.
+"""Our renderer against gsplat, same splats, same views (six cube faces, or a camera frame), one process, one GPU.
 
 Adapted from shared/tools/gpu_peer/peer_bench.py (the same-process peer bench of 2026-12-01): gsplat's
 ``rasterization()`` (1.5.3, antialiased mode: its opacity compensation matches our energy-preserving probe
-dilation) renders the six faces of ``ViewBatch.cubemap`` in one call. Per scene x splat count x face size each
-renderer is warmed up, then timed in interleaved blocks; the SM clock (NVML) is read before and after each block.
+dilation) renders the six faces of ``ViewBatch.cubemap`` in one call; a camera frame (``--cameras 1920x1080``: one
+pinhole view at the scene's centre, 60° across) is drawn by both in 3DGS's look (gsplat "classic"). Per scene x
+splat count x view each renderer is warmed up, then timed in interleaved blocks; the SM clock (NVML) is read
+before and after each block. A/B rows (``--ab``) draw with the first row's renderer, switches set otherwise; every
+row of ours names the raster and emit kernels it ran (the kernel table's picks, render/kernel_table.py).
 
   python benchmarks/peer_bench.py bench [--scenes random,shell] [--counts 100000,1000000,6000000]
-         [--faces 64,256,1024] [--csv out/bench/peer.csv] [--profile-at 6000000@1024]
+         [--faces 64,256,1024] [--cameras 1920x1080,3840x2160] [--ab plain,strips,emit-slot,emit-splat]
+         [--gsplat-stages cameras] [--csv out/bench/peer.csv] [--camera-csv out/bench/camera.csv]
+         [--profile-at 6000000@1024] [--deadline SECONDS]
   python benchmarks/peer_bench.py plot --csv docs/bench/peer_nvidia-h200.csv --png docs/performance.png
+  python benchmarks/raster_ab_bench.py table out/bench/peer.csv ...   (the kernel table from the A/B rows)
 
 Rows (one per renderer and configuration): GPU ms (ours: Vulkan timestamps; gsplat: CUDA events around the call),
 wall ms (ours: render() on the host, the frame stays on the GPU; gsplat: the call and a synchronize), the pairs
@@ -94,15 +100,46 @@ def stage_floor_bytes(n: int, sh_k: int, pairs: int, drawn: int, tiles: int, pix
 
 
 # A/B rows (--ab): our renderer with some of the raster's module switches set otherwise (renderer.py says what each
-# does), measured in the same blocks as the rest.
+# does), measured in the same blocks as the rest. Without a switch set, the kernel table (render/kernel_table.json)
+# picks the raster and emit kernels; each row records which it ran (raster_kernel, emit_kernel).
 VARIANTS = {
     "ray": ("gs-ibl ray test only", dict(PLANE_FORMS=False)),  # no plane forms
-    "plain": ("gs-ibl without strips", dict(RASTER_STRIPS=False)),  # the kernels GPUs take by default
-    "strips": ("gs-ibl strips", dict(RASTER_STRIPS=True)),  # the strip kernels (CPU devices' default)
+    "plain": ("gs-ibl without strips", dict(RASTER_STRIPS=False)),
+    "strips": ("gs-ibl strips", dict(RASTER_STRIPS=True)),
     "strips-noconic": ("gs-ibl strips, no conic", dict(RASTER_STRIPS=True, CONIC_MAX_FACE=0)),
-    "emit-slot": ("gs-ibl emit per slot", dict(EMIT_PER_SPLAT=False)),  # the emit GPUs take by default
-    "emit-splat": ("gs-ibl emit per splat", dict(EMIT_PER_SPLAT=True)),  # CPU devices' default
+    "emit-slot": ("gs-ibl emit per slot", dict(EMIT_PER_SPLAT=False)),
+    "emit-splat": ("gs-ibl emit per splat", dict(EMIT_PER_SPLAT=True)),
 }
+# The variants that time one choice of the kernel table against the other (kernel_table.CHOICES): variant ->
+# (stage, kernel). raster_ab_bench.py table makes the table from rows of these.
+TABLE_VARIANTS = {"plain": ("raster", "plain"), "strips": ("raster", "strips"),
+                  "emit-slot": ("emit", "slot"), "emit-splat": ("emit", "splat")}
+CAMERA_FOV = 60.0  # degrees, horizontal; the camera sits at the scene's centre looking along +X (parse_views)
+
+
+def parse_views(faces: str, cameras: str = "") -> list[tuple[str, int, int]]:
+    """("cube", face, face) for each of ``faces`` and ("camera", width, height) for each WxH of ``cameras``."""
+    out = [("cube", int(f), int(f)) for f in faces.split(",") if f]
+    for c in cameras.split(","):
+        if c:
+            w, h = (int(x) for x in c.lower().split("x"))
+            out.append(("camera", w, h))
+    return out
+
+
+def view_batch(view: tuple[str, int, int]):
+    """Our ViewBatch for a parse_views entry: the probe cube at the origin, or a pinhole camera there (3DGS's
+    look: dilated by its pixel)."""
+    from gs_ibl_addon.core.render.views import ViewBatch
+    kind, w, h = view
+    if kind == "cube":
+        return ViewBatch.cubemap([0.0, 0.0, 0.0], w)
+    return ViewBatch.pinhole([0.0, 0.0, 0.0], [1.0, 0.0, 0.0], CAMERA_FOV, w, h)
+
+
+def view_label(view: tuple[str, int, int]) -> str:
+    kind, w, h = view
+    return f"{w}²" if kind == "cube" else f"{w}x{h}"
 
 
 def default_switches() -> dict:
@@ -114,15 +151,21 @@ def default_switches() -> dict:
 class Ours:
     """Our renderer; ``variant``: a VARIANTS key, an A/B row with one of the raster's switches off; ``trial``: a
     folder of trial kernels (benchmarks/kernel_trials.py build), an A/B row on a Vulkan context of its own whose
-    pipelines take those kernels."""
+    pipelines take those kernels. ``share``: a variant draws with that row's renderer (its scene uploaded once: a
+    switch is part of the key of the programs a renderer records, so each variant records and keeps its own)."""
 
-    def __init__(self, scene, ctx, variant: str | None = None, trial: str | None = None) -> None:
+    def __init__(self, scene, ctx, variant: str | None = None, trial: str | None = None,
+                 share: "Ours | None" = None) -> None:
         from gs_ibl_addon.core.render import renderer
         from gs_ibl_addon.core.vk.context import VulkanContext
-        self.trial = trial
+        self.trial, self.variant = trial, variant or ""
         self.own_ctx = VulkanContext() if trial else None
-        with kernels_from(trial):
-            self.r = renderer.SplatRenderer(scene, self.own_ctx or ctx)
+        self.owner = share is None or trial is not None
+        if self.owner:
+            with kernels_from(trial):
+                self.r = renderer.SplatRenderer(scene, self.own_ctx or ctx)
+        else:
+            self.r = share.r
         self.sh_k = scene.sh.shape[1]
         self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
         if trial:
@@ -137,10 +180,18 @@ class Ours:
             setattr(renderer, k, v)
 
     def set_face(self, face: int) -> None:
+        self.set_view(("cube", face, face))
+
+    def set_view(self, view: tuple[str, int, int]) -> None:
         from gs_ibl_addon.core.render.renderer import _views_buffer_data
-        from gs_ibl_addon.core.render.views import ViewBatch
-        self.batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
+        self.batch = view_batch(view)
         _, self.tiles, self.pixels = _views_buffer_data(self.batch)
+
+    def kernels(self) -> dict:
+        """The raster and emit kernels this row's switches take for the current batch (renderer.batch_kernels)."""
+        from gs_ibl_addon.core.render import renderer
+        self._switch()
+        return renderer.batch_kernels(self.r.ctx, self.batch, self.tiles)
 
     def rep(self) -> dict:
         self._switch()
@@ -164,7 +215,8 @@ class Ours:
             return np.stack(self.r.render(self.batch).images)
 
     def close(self) -> None:
-        self.r.close()
+        if self.owner:
+            self.r.close()
         if self.own_ctx is not None:
             self.own_ctx.close()
 
@@ -198,23 +250,32 @@ class Gsplat:
         self.e0, self.e1 = torch.cuda.Event(enable_timing=True), torch.cuda.Event(enable_timing=True)
 
     def set_face(self, face: int) -> None:
-        """gsplat's OpenCV cameras from our face frames: x = -right (a proper rotation: our frames are
-        left-handed), so its images are ours mirrored left-right; images() flips them back."""
-        from gs_ibl_addon.core.render.views import ViewBatch
-        batch = ViewBatch.cubemap([0.0, 0.0, 0.0], face)
-        vms, ks = [], []
+        self.set_view(("cube", face, face))
+
+    def set_view(self, view: tuple[str, int, int]) -> None:
+        """gsplat's OpenCV cameras (x right, y down, z forward: a proper rotation) from our views. Our cube faces
+        are left-handed: their cameras take x = -right, so gsplat's images are ours mirrored left-right and
+        images() flips them back. A cube is a probe, drawn with its opacity compensation ("antialiased", as our
+        energy-preserving probe dilation); a camera is 3DGS's look ("classic", as our pinhole batches)."""
+        batch = view_batch(view)
+        vms, ks, self.mirror = [], [], False
         for v in batch.views:
-            rot = np.stack([-np.asarray(v.right), np.asarray(v.down), np.asarray(v.forward)])
+            right = np.asarray(v.right)
+            if np.dot(np.cross(right, v.down), v.forward) < 0:
+                right, self.mirror = -right, True
+            rot = np.stack([right, np.asarray(v.down), np.asarray(v.forward)])
             m = np.eye(4)
             m[:3, :3], m[:3, 3] = rot, -rot @ batch.origin
             vms.append(m)
-            ks.append([[v.width / (2 * v.tan_x), 0, v.width / 2], [0, v.height / (2 * v.tan_y), v.height / 2], [0, 0, 1]])
+            ks.append([[v.width / (2 * v.tan_x), 0, v.width / 2], [0, v.height / (2 * v.tan_y), v.height / 2],
+                       [0, 0, 1]])
         tt = lambda a: self.torch.tensor(np.array(a), dtype=self.torch.float32, device="cuda")  # noqa: E731
-        self.face, self.vm, self.k = face, tt(vms), tt(ks)
+        self.size, self.vm, self.k = (view[1], view[2]), tt(vms), tt(ks)
+        self.mode = "antialiased" if view[0] == "cube" else "classic"
 
     def call(self):
-        return self.raster(*self.t, self.vm, self.k, self.face, self.face, sh_degree=3, near_plane=0.01,
-                           rasterize_mode="antialiased", packed=True)
+        return self.raster(*self.t, self.vm, self.k, *self.size, sh_degree=3, near_plane=0.01,
+                           rasterize_mode=self.mode, packed=True)
 
     def rep(self) -> dict:
         torch = self.torch
@@ -230,7 +291,7 @@ class Gsplat:
     def images(self) -> np.ndarray:
         colors, alphas, _ = self.call()
         im = np.concatenate([colors.float().cpu().numpy(), alphas.float().cpu().numpy()], -1)
-        return np.ascontiguousarray(im[:, :, ::-1])
+        return np.ascontiguousarray(im[:, :, ::-1] if self.mirror else im)
 
     def kernel_ms(self) -> list[tuple[str, float]]:
         """Per-kernel GPU ms per call (torch profiler over 5 calls), largest first."""
@@ -264,8 +325,25 @@ def timed(rends: list, nv: Nvml, warmup_s: float, rounds: int, block: int) -> di
     return {r.name: (reps[r.name], [c for c in clocks[r.name] if c != ""]) for r in rends}
 
 
+GSPLAT_STAGES = (("projection", "preprocess"), ("spherical_harmonics", "preprocess"), ("sh_", "preprocess"),
+                 ("isect_tiles", "emit"), ("intersect_tile", "emit"), ("radix", "sort_tiles"), ("sort", "sort_tiles"),
+                 ("isect_offset", "ranges"), ("intersect_offset", "ranges"), ("rasterize", "raster"))
+
+
+def gsplat_stages(kernels: list[tuple[str, float]]) -> dict[str, float]:
+    """gsplat's kernel times (Gsplat.kernel_ms) summed into our stages' names: projection and SH -> preprocess,
+    tile intersections -> emit, its one radix sort of (camera, tile, depth) keys -> sort_tiles (it has no sort by
+    depth of its own), tile offsets -> ranges, rasterize -> raster, the rest (torch's own kernels) -> other."""
+    out = dict.fromkeys(STAGES + ("other",), 0.0)
+    for name, ms in kernels:
+        low = name.lower()
+        out[next((st for key, st in GSPLAT_STAGES if key in low), "other")] += ms
+    return out
+
+
 def run_bench(args) -> None:
     import gs_ibl_addon.core.render.renderer as renderer_module
+    from gs_ibl_addon.core.render import kernel_table
     from gs_ibl_addon.core.vk import get_context
     nv = Nvml()
     info = nv.info()
@@ -277,29 +355,46 @@ def run_bench(args) -> None:
     ctx = get_context()
     date = datetime.date.today().isoformat()
     peak = info.get("peak_gbs", 0.0) * 1e9
-    log(f"device {ctx.device_name}, NVML {info}")
+    dev_class = kernel_table.context_class(ctx)
+    log(f"device {ctx.device_name} (kernel table class {dev_class}), NVML {info}")
     profile_at = {tuple(int(x) for x in p.split("@")) for p in args.profile_at.split(",") if p}
+    views = parse_views(args.faces, args.cameras)
+    deadline = T0 + args.deadline if args.deadline else None
     for kind in args.scenes.split(","):
         for n in [int(x) for x in args.counts.split(",")]:
+            if deadline and time.perf_counter() > deadline:
+                log(f"past --deadline {args.deadline:.0f} s: {kind} {n:,} left out")
+                continue
             t = time.perf_counter()
             scene = SCENES[kind](n)
             ours, peer = Ours(scene, ctx), Gsplat(scene)
-            variants = [Ours(scene, ctx, v) for v in args.ab.split(",") if v]
+            variants = [Ours(scene, ctx, v, share=ours) for v in args.ab.split(",") if v]
             variants += [Ours(scene, ctx, trial=t) for t in trial_dirs(args.trials)]
             log(f"{kind} {n:,}: scene and uploads {time.perf_counter() - t:.1f} s")
-            for face in [int(x) for x in args.faces.split(",")]:
+            for view in views:
+                if deadline and time.perf_counter() > deadline:
+                    log(f"past --deadline {args.deadline:.0f} s: {kind} {n:,} {view_label(view)} left out")
+                    continue
+                vkind, width, height = view
+                face = max(width, height)
                 for r in (ours, *variants, peer):
-                    r.set_face(face)
+                    r.set_view(view)
                 got = timed([ours, *variants, peer], nv, args.warmup, args.rounds, args.block)
                 ref, im = ours.images(), peer.images()
                 diff = float(np.abs(ref[..., :3] - im[..., :3]).mean() / max(float(ref[..., :3].mean()), 1e-12))
                 drawn = ours.drawn_pairs()
+                peer_stages = (gsplat_stages(peer.kernel_ms()) if args.gsplat_stages == "all" or
+                               (args.gsplat_stages == "cameras" and vkind == "camera") else None)
                 rows = []
                 for r in (ours, *variants, peer):
                     reps, clk = got[r.name]
                     gpu = [x["gpu_ms"] for x in reps]
-                    row = {"device": ctx.device_name, "driver": info.get("driver", ""), "date": date, "scene": kind,
-                           "splats": n, "face": face, "renderer": r.name, "gpu_ms": round(statistics.median(gpu), 4),
+                    kern = r.kernels() if r is not peer else {}
+                    row = {"device": ctx.device_name, "device_class": dev_class, "driver": info.get("driver", ""),
+                           "date": date, "scene": kind, "splats": n, "view": vkind, "width": width, "height": height,
+                           "face": face, "renderer": r.name, "variant": getattr(r, "variant", ""),
+                           "raster_kernel": kern.get("raster", ""), "emit_kernel": kern.get("emit", ""),
+                           "gpu_ms": round(statistics.median(gpu), 4),
                            "gpu_min_ms": round(min(gpu), 4), "gpu_max_ms": round(max(gpu), 4),
                            "wall_ms": round(statistics.median(x["wall_ms"] for x in reps), 3),
                            "pairs": reps[-1]["pairs"], "pairs_drawn": drawn if r is not peer else "",
@@ -307,30 +402,37 @@ def run_bench(args) -> None:
                            "image_diff": round(diff, 4) if r is peer else "",
                            "coverage": round(float((im if r is peer else ref)[..., 3].mean()), 4)}
                     if r is not peer:
-                        floors = stage_floor_bytes(n, ours.sh_k, row["pairs"], drawn, ours.tiles, ours.pixels, 6)
+                        floors = stage_floor_bytes(n, ours.sh_k, row["pairs"], drawn, ours.tiles, ours.pixels,
+                                                   len(ours.batch.views))
                         for s in STAGES:
                             row[f"{s}_ms"] = round(statistics.median(x[s] for x in reps), 4)
                             row[f"{s}_floor_ms"] = round(floors[s] / peak * 1e3, 4) if peak else ""
-                    else:
+                        row["other_ms"] = ""
+                    else:  # gsplat's kernels by stage, where asked (--gsplat-stages); no floors
                         for s in STAGES:
-                            row[f"{s}_ms"] = row[f"{s}_floor_ms"] = ""
+                            row[f"{s}_ms"] = round(peer_stages[s], 4) if peer_stages else ""
+                            row[f"{s}_floor_ms"] = ""
+                        row["other_ms"] = round(peer_stages["other"], 4) if peer_stages else ""
                     rows.append(row)
                 for v in variants:  # how far the variant's image is from ours: same image_diff measure
                     vim = v.images()
                     rows[1 + variants.index(v)]["image_diff"] = round(float(
                         np.abs(ref[..., :3] - vim[..., :3]).mean() / max(float(ref[..., :3].mean()), 1e-12)), 7)
-                append_csv(args.csv, rows)
+                append_csv(args.camera_csv if vkind == "camera" and args.camera_csv else args.csv, rows)
                 o, g = rows[0], rows[-1]
                 for v in rows[1:-1]:
                     log(f"  {v['renderer']}: {v['gpu_ms']:.3f} (raster {v['raster_ms']:.2f}; diff {v['image_diff']})")
-                log(f"{kind} {n:>9,} {face:>5}: ours {o['gpu_ms']:.3f} (wall {o['wall_ms']:.2f}) gsplat "
-                    f"{g['gpu_ms']:.3f} (wall {g['wall_ms']:.2f}) ratio {o['gpu_ms'] / g['gpu_ms']:.2f} | pairs "
-                    f"{o['pairs']:,}/{drawn:,} vs {g['pairs']:,} | SM {o['sm_mhz_min']}-{o['sm_mhz_max']} | "
-                    + " ".join(f"{s} {o[s + '_ms']:.2f}/{o[s + '_floor_ms']}" for s in STAGES) + f" | diff {diff:.3f}")
-                if (n, face) in profile_at:
+                log(f"{kind} {n:>9,} {view_label(view):>9}: ours {o['gpu_ms']:.3f} (wall {o['wall_ms']:.2f}; "
+                    f"{o['raster_kernel']}, {o['emit_kernel']}) gsplat {g['gpu_ms']:.3f} (wall {g['wall_ms']:.2f}) "
+                    f"ratio {o['gpu_ms'] / g['gpu_ms']:.2f} | pairs {o['pairs']:,}/{drawn:,} vs {g['pairs']:,} | SM "
+                    f"{o['sm_mhz_min']}-{o['sm_mhz_max']} | "
+                    + " ".join(f"{s} {o[s + '_ms']:.2f}/{o[s + '_floor_ms']}" for s in STAGES) + f" | diff {diff:.3f}"
+                    + (" | gsplat " + " ".join(f"{s} {g[s + '_ms']:.2f}" for s in STAGES + ("other",))
+                       if peer_stages else ""))
+                if (n, face) in profile_at and vkind == "cube":
                     renderer_module.PROFILE_SORTS = True
                     prof = Ours(scene, ctx)
-                    prof.set_face(face)
+                    prof.set_view(view)
                     for _ in range(5):
                         prof.rep()
                     tms = [prof.r.render(prof.batch, timestamps=True).timings_ms for _ in range(10)]
@@ -341,9 +443,9 @@ def run_bench(args) -> None:
                     renderer_module.PROFILE_SORTS = False
                     log("  gsplat kernels (ms per call): "
                         + ", ".join(f"{k} {v:.3f}" for k, v in peer.kernel_ms()[:12]))
-            ours.close()
             for v in variants:
                 v.close()
+            ours.close()
             del peer, scene
             torch.cuda.empty_cache()
 
@@ -353,14 +455,15 @@ def run_plot(args) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     with open(args.csv) as f:
-        rows = list(csv.DictReader(f))
+        rows = [r for r in csv.DictReader(f) if r.get("view", "cube") in ("cube", "")]  # cube faces only
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     faces = sorted({int(r["face"]) for r in rows})
     fig, axes = plt.subplots(len(scenes), len(faces), figsize=(4.2 * len(faces), 3.6 * len(scenes)), squeeze=False,
                              sharey=True)
     style = {("gs-ibl", "gpu_ms"): ("C0", "-", "ours GPU"), ("gs-ibl", "wall_ms"): ("C0", ":", "ours wall"),
              ("gsplat", "gpu_ms"): ("C3", "-", "gsplat GPU"), ("gsplat", "wall_ms"): ("C3", ":", "gsplat wall"),
-             ("gs-ibl strips", "gpu_ms"): ("C2", "--", "ours GPU, strip kernels (A/B)")}  # drawn where measured
+             ("gs-ibl strips", "gpu_ms"): ("C2", "--", "ours GPU, strip kernels (A/B)"),  # drawn where measured
+             ("gs-ibl without strips", "gpu_ms"): ("C1", "--", "ours GPU, plain raster (A/B)")}
     for i, sc in enumerate(scenes):
         for j, face in enumerate(faces):
             ax = axes[i][j]
@@ -392,7 +495,14 @@ def main() -> None:
     ap.add_argument("mode", choices=["bench", "plot"])
     ap.add_argument("--scenes", default="random,shell")
     ap.add_argument("--counts", default="100000,1000000,6000000")
-    ap.add_argument("--faces", default="64,256,1024")
+    ap.add_argument("--faces", default="64,256,1024", help="cube faces (six views at the origin); empty: none")
+    ap.add_argument("--cameras", default="", help="WxH,...: camera frames (one pinhole view at the origin along +X, "
+                    f"{CAMERA_FOV:.0f}° across), timed like the faces")
+    ap.add_argument("--camera-csv", help="where the camera frames' rows go (default: --csv)")
+    ap.add_argument("--gsplat-stages", choices=("", "cameras", "all"), default="",
+                    help="gsplat's kernels by stage (torch profiler, 5 calls) in its rows: for camera frames, or all")
+    ap.add_argument("--deadline", type=float, default=0.0, help="seconds: configurations not begun by then are "
+                    "left out (logged), so a run ends inside its machine's limit with what it measured")
     ap.add_argument("--warmup", type=float, default=1.0, help="seconds of warm-up per renderer and configuration")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--block", type=int, default=10)

@@ -6,7 +6,8 @@ always drawn) is split into 2^b cells per axis at level 1 and halved going up, l
 ``cell1 * 2^(L-1)`` wide. Level 0 are the splats. A level-L node merges everything in one occupied cell by moment
 matching: weight w = opacity x mean footprint area (the integral of the coverage a ray sees, averaged over view
 directions), mean and covariance = the weighted mean and the weighted second moment about it, colour = the
-weighted mean of every SH coefficient (of the light: an sRGB scene's colours are decoded first), and an opacity whose footprint integral is the children's summed weight
+weighted mean of every SH coefficient (of the light: an sRGB scene's colours are decoded first), and an opacity
+whose footprint integral is the children's summed weight
 (a Gaussian saturating at ALPHA_MAX keeps the integral with opacity > 1: ``o = a * exp(W / (a A) - 1)``, so an
 opaque wall stays opaque instead of turning into a lattice of half-transparent blobs). A cell holding a single
 child repeats that child exactly and is not stored; a node's ``parent_level`` is its nearest stored ancestor.
@@ -270,7 +271,7 @@ def build_lod(scene: SplatScene) -> LodTree:
     keys = (c1[inside, 0] << 32) | (c1[inside, 1] << 16) | c1[inside, 2]
     levels: list[dict] = []
     child_keys = keys
-    for level in range(1, bits + 2):
+    for _level in range(1, bits + 2):
         ukeys, inverse, _ = np.unique(child_keys, return_inverse=True, return_counts=True)
         children = np.bincount(inverse, minlength=len(ukeys))
         mom = mom.merged(inverse, len(ukeys))
@@ -299,8 +300,13 @@ def build_lod(scene: SplatScene) -> LodTree:
         sub = _Moments(lv["mom"].w[keep], lv["mom"].m1[keep], lv["mom"].m2[keep], lv["mom"].sh[keep])
         mu, s, q, o, sh = _splats_of(sub, sh_k, scene.colour_space == "srgb")
         k = lv["keys"][keep]
-        pos.append(mu); scl.append(s); rot.append(q); opa.append(o); shs.append(sh)
-        lvl.append(np.full(len(k), li + 1)); plv.append(lv["parent"][keep])
+        pos.append(mu)
+        scl.append(s)
+        rot.append(q)
+        opa.append(o)
+        shs.append(sh)
+        lvl.append(np.full(len(k), li + 1))
+        plv.append(lv["parent"][keep])
         cells.append(np.stack([k >> 32, (k >> 16) & 0xFFFF, k & 0xFFFF], 1))
     f32 = np.float32
     all_scene = SplatScene(

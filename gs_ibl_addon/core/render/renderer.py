@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import time
 import warnings
+import weakref
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -43,8 +44,9 @@ import numpy as np
 from ..colour import check_colour_space
 from ..scene import SplatScene
 from ..vk import Buffer, Program, Recorder, get_context, groups
-from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP
+from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP, TILE
 from ..vk.kernels import KERNELS
+from . import kernel_table
 from .gpu_sort import RadixSorter, Scanner
 from .lod import LodTree, build_lod
 from .splat_math import DEFAULT_NEAR
@@ -124,38 +126,75 @@ def raster_conic(batch: ViewBatch) -> bool:
 
 # Strip masks (gs_raster.glsl RASTER_STRIPS): the loader bounds each pair's footprint to the tile's strips of two
 # pixel rows it may reach, and a pixel steps only over its strip's pairs. The images are the same bit for bit (the
-# bound is padded far past rounding and drops only pairs every pixel of the strip would reject). On a CPU device,
-# which runs a workgroup's lanes one after another, the pairs a pixel steps over are the raster's time, and
-# sub-pixel splats reach one or two strips of eight: lavapipe raster ms in docs/benchmarks.md ("strip masks and a
-# per-splat emit on CPU devices"). GPUs keep the kernels timed on the H200 until the strips are timed there
-# (benchmarks/gpu_run.sh).
-RASTER_STRIPS: bool | None = None  # None: CPU devices only; True / False: every device (tests, benchmarks' A/B)
-
-
-def raster_strips(ctx) -> bool:
-    """Whether rasters on ``ctx``'s device use the strip kernels."""
-    return bool(ctx.is_cpu) if RASTER_STRIPS is None else bool(RASTER_STRIPS)
-
-
-# Emit with one thread per splat (gs_emit.glsl EMIT_PER_SPLAT) on CPU devices: each splat writes its own instance
-# slots, with no search for the splat owning a slot and its footprint's quadric taken once, where one thread per
-# slot suits a GPU (a near splat's hundreds of tiles would hold a warp back). Same slots, same keys. Its loop steps
-# once per instance of a splat, so it is taken while a probe's views hold at most EMIT_PER_SPLAT_MAX_TILES tiles
-# (lavapipe's loop limit, LOOP_PAIRS above). Lavapipe ms in docs/benchmarks.md.
-EMIT_PER_SPLAT: bool | None = None  # None: CPU devices only; True / False: every device (tests, benchmarks' A/B)
+# bound is padded far past rounding and drops only pairs every pixel of the strip would reject). Emit with one thread
+# per splat (gs_emit.glsl EMIT_PER_SPLAT): each splat writes its own instance slots, with no search for the splat
+# owning a slot and its footprint's quadric taken once, where one thread per slot keeps a warp's work even. Same
+# slots, same keys. Which of each pair a device takes, per frame size, is measured, not set here: the kernel table
+# (render/kernel_table.json, written by benchmarks/raster_ab_bench.py table from A/B timings; kernel_table.py has the
+# rule and the fallback for a device class it has no rows for).
+RASTER_STRIPS: bool | None = None  # None: the kernel table's choice; True / False: every device (tests, A/B rows)
+EMIT_PER_SPLAT: bool | None = None  # likewise for the per-splat emit
+# The per-splat emit's loop steps once per instance of a splat, so it is taken only while a probe's views hold at
+# most EMIT_PER_SPLAT_MAX_TILES tiles (lavapipe's loop limit, LOOP_PAIRS above), whatever the table says.
 EMIT_PER_SPLAT_MAX_TILES = 60_000
 
 
-def emit_per_splat(ctx, tiles_per_probe: int) -> bool:
-    """Whether a batch of ``tiles_per_probe`` tiles a probe emits its instances one thread per splat on ``ctx``."""
-    on = bool(ctx.is_cpu) if EMIT_PER_SPLAT is None else bool(EMIT_PER_SPLAT)
-    return on and tiles_per_probe <= EMIT_PER_SPLAT_MAX_TILES
+def batch_face(batch: ViewBatch) -> int:
+    """The frame size the kernel table is looked up by: the larger side of the batch's largest view."""
+    return max(max(v.width, v.height) for v in batch.views)
+
+
+_DEVICE_CLASS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()  # per context, asked of Vulkan once
+
+
+def _device_class(ctx) -> str:
+    cls = _DEVICE_CLASS.get(ctx)
+    if cls is None:
+        cls = _DEVICE_CLASS[ctx] = kernel_table.context_class(ctx)
+    return cls
+
+
+def kernel_picks(ctx, face: int) -> dict[str, kernel_table.Pick]:
+    """Per stage ("raster", "emit"), the kernel_table choice for frames of larger side ``face`` on ``ctx``, with the
+    module switches (RASTER_STRIPS, EMIT_PER_SPLAT) overriding it where they are set."""
+    table, cls = kernel_table.load(), _device_class(ctx)
+    picks = {stage: table.pick(cls, stage, face) for stage in kernel_table.CHOICES}
+    if RASTER_STRIPS is not None:
+        picks["raster"] = kernel_table.Pick("strips" if RASTER_STRIPS else "plain", "renderer.RASTER_STRIPS")
+    if EMIT_PER_SPLAT is not None:
+        picks["emit"] = kernel_table.Pick("splat" if EMIT_PER_SPLAT else "slot", "renderer.EMIT_PER_SPLAT")
+    return picks
+
+
+def raster_strips(ctx, face: int = 64) -> bool:
+    """Whether rasters of frames of larger side ``face`` on ``ctx``'s device use the strip kernels."""
+    return kernel_picks(ctx, face)["raster"].kernel == "strips"
+
+
+def emit_per_splat(ctx, tiles_per_probe: int, face: int | None = None) -> bool:
+    """Whether a batch of ``tiles_per_probe`` tiles a probe (frames of larger side ``face``; None: the cube faces
+    holding that many tiles) emits its instances one thread per splat on ``ctx``."""
+    if face is None:
+        face = TILE * max(1, round((tiles_per_probe / 6) ** 0.5))
+    return kernel_picks(ctx, face)["emit"].kernel == "splat" and tiles_per_probe <= EMIT_PER_SPLAT_MAX_TILES
 
 
 def raster_kernel(batch: ViewBatch, strips: bool = False) -> str:
     """The raster kernel that draws ``batch`` (``strips``: raster_strips of the device)."""
     name = "gs_raster_conic" if raster_conic(batch) else "gs_raster"
     return name + "_strips" if strips else name
+
+
+def batch_kernels(ctx, batch: ViewBatch, tiles_per_probe: int) -> dict[str, str]:
+    """The kernels a render of ``batch`` dispatches for its raster and emit (core/vk/kernels.py names; "emit" is
+    the last of the emit's kernels), and where the choice came from ("raster_source", "emit_source")."""
+    picks = kernel_picks(ctx, batch_face(batch))
+    splat = picks["emit"].kernel == "splat" and tiles_per_probe <= EMIT_PER_SPLAT_MAX_TILES
+    return {"raster": raster_kernel(batch, picks["raster"].kernel == "strips"),
+            "emit": "gs_emit_per_splat" if splat else "gs_emit",
+            "raster_source": picks["raster"].source,
+            "emit_source": picks["emit"].source if splat == (picks["emit"].kernel == "splat") else
+            f"{picks['emit'].source}, past EMIT_PER_SPLAT_MAX_TILES"}
 
 
 # The plain raster kernel evaluates each pair whose centre is well in front of the view through its exact forms in
@@ -300,7 +339,8 @@ class GpuFrame:
         out, off = [], 0
         for v in self.batch.views * self.batch.n_probes:
             npx = v.width * v.height
-            out.append(flat[off * channels:(off + npx) * channels].reshape((v.height, v.width, channels)[:2 + (channels > 1)]))
+            shape = (v.height, v.width, channels)[:2 + (channels > 1)]
+            out.append(flat[off * channels:(off + npx) * channels].reshape(shape))
             off += npx
         return out
 
@@ -421,6 +461,7 @@ class SplatRenderer:
         self._min_chunks: dict[tuple, int] = {}  # per batch shape, the chunks the loop limit asked for (LOOP_PAIRS)
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
         self._sorted_depth: tuple[Buffer, Buffer] | None = None  # where the depth sort leaves its result
+        self.kernels: dict[str, str] = {}  # the last recording's raster and emit kernels, and why (batch_kernels)
         try:
             n = max(1, scene.count)
             buf = self._buffer
@@ -567,7 +608,8 @@ class SplatRenderer:
         """
         t0 = time.perf_counter()
         if lod_k and self.lod is None:
-            raise ValueError("render(lod_k=...) needs a renderer built with a level of detail (SplatRenderer(..., lod=True))")
+            raise ValueError("render(lod_k=...) needs a renderer built with a level of detail "
+                             "(SplatRenderer(..., lod=True))")
         if not (lod_k >= 0 and np.isfinite(lod_k)):
             raise ValueError(f"lod_k {lod_k!r} must be 0 (every splat) or a positive number of pixels")
         self.resolve()  # the previous render reads the views and origins written below
@@ -675,26 +717,30 @@ class SplatRenderer:
                  depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
         shape = self._shape(batch, lod_k, group)
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
-        key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity, caps,
-               check_colour_space(self.colour_space), PLANE_FORMS, raster_strips(self.ctx), EMIT_PER_SPLAT, min_chunks)
+        kernels = batch_kernels(self.ctx, batch, total_tiles)
+        key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity,
+               caps, check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"], kernels["emit"], min_chunks)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
             prog = None
         if prog is None:
-            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, min_chunks)
+            prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, kernels,
+                                min_chunks)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
         self.chunks = prog.chunks
+        self.kernels = kernels  # the last recording's raster and emit kernels, and why (batch_kernels)
         return prog
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                depth: bool, lod_k: float, group: int, caps: tuple[int, int], min_chunks: int = 1) -> Program:
+                depth: bool, lod_k: float, group: int, caps: tuple[int, int], kernels: dict[str, str],
+                min_chunks: int = 1) -> Program:
         """One submission: the probes in groups of ``group``, one group after another through the same pair
         buffers (a batch of one probe, or one that fits, is a single group). ``total_tiles`` / ``total_pixels``
-        are one probe's; ``caps`` the (instances, cut nodes) it sorts (_caps); ``min_chunks`` what the loop limit
-        asked for (_loop_chunks)."""
+        are one probe's; ``caps`` the (instances, cut nodes) it sorts (_caps); ``kernels`` its raster and emit
+        (batch_kernels); ``min_chunks`` what the loop limit asked for (_loop_chunks)."""
         c, nv, probes = self.ctx, len(batch.views), batch.n_probes
         n_groups = -(-probes // group)
         tree = self.lod
@@ -709,12 +755,13 @@ class SplatRenderer:
         # the same chunks for every group (the last, smaller one included): partial sized for a full group
         chunk_bytes = group * total_pixels * (16 + (4 if depth else 0))
         fit = chunks_that_fit(chunk_bytes)
-        chunks = chunks_max = min(max(raster_chunks(total_tiles, group, chunk_bytes, target_groups(c)), min_chunks), fit)
+        chunks = chunks_max = min(max(raster_chunks(total_tiles, group, chunk_bytes, target_groups(c)), min_chunks),
+                                  fit)
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
             partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
                              else self.no_depth)
-        kernel = raster_kernel(batch, raster_strips(c))
+        kernel = kernels["raster"]
         rec = Recorder(c, timestamps=timestamps, reusable=True)
         rec.fill(image, 0, probes * total_pixels * 16)
         if depth:
@@ -733,7 +780,8 @@ class SplatRenderer:
             n = tree.count if tree is not None else self.scene_count
             inst_val = self.inst_val  # (no splats: the raster's ranges are empty and it reads none)
             if n:
-                inst_val = self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps)
+                inst_val = self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps,
+                                                  kernels["emit"])
             rec.dispatch(KERNELS[kernel],
                          [self.views, ranges, inst_val, self.prepared, partial if chunks > 1 else g_image,
                           partial_depth if chunks > 1 else depth_buf, self.count],
@@ -754,7 +802,8 @@ class SplatRenderer:
         return prog
 
     def _record_sort_emit(self, rec: Recorder, batch: ViewBatch, origins: Buffer, probes: int, n: int,
-                          count_index: int, tiles: int, lod_k: float, stamp, caps: tuple[int, int]) -> Buffer:
+                          count_index: int, tiles: int, lod_k: float, stamp, caps: tuple[int, int],
+                          emit: str) -> Buffer:
         """preprocess -> [the cut's compaction] -> depth sort -> counts -> emit -> tile sort -> ranges, for the
         (probe, splat) pairs of ``probes`` probes at ``origins``; returns the buffer the tile-sorted pairs' splats
         are in (the sorts leave their results where their last pass wrote them)."""
@@ -796,7 +845,7 @@ class SplatRenderer:
         total_buf = self.scanner.record(rec, self.offsets, pairs)
         emit_buffers = [self.views, keys, vals, self.offsets, total_buf, self.inst_key, self.inst_val, self.count,
                         self.prepared, self.rects, self.owners]
-        if emit_per_splat(c, tiles // probes):
+        if emit == "gs_emit_per_splat":
             rec.dispatch(KERNELS["gs_emit_per_splat"], emit_buffers, groups(pairs, 256, c), n=pairs,
                          capacity=capacity, n_views=nv, n_tiles=tiles)
         else:
