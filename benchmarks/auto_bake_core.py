@@ -4,7 +4,7 @@ costs (issue 22, goal 3).
 Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
 
 The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3), the panel's defaults and Lighting
-Auto's work as blender/bake.py bake_into_world and blender/auto_light.py do it, on one uploaded renderer (Blender's
+Auto's work as blender/lighting/bake.py bake_into_world and blender/lighting/auto_light.py do it, on one uploaded renderer (Blender's
 splat cache keeps it between bakes): the World probe's bake and its files (core CLI: write_probe), the 9-point
 measurement in one batch with the World probe's place, and the nodes of the sphere's grid the measurement did not
 place (18 of 3 x 3 x 3, 116 of 5 x 5 x 5), when it asks for a grid. Wall time: median of --repeats after one
@@ -53,7 +53,7 @@ def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
     choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
     t["measurement"] = time.perf_counter()
-    if choice.kind == "grid":  # the nodes the measurement did not place, as blender/auto_light.py
+    if choice.kind == "grid":  # the nodes the measurement did not place, as blender/lighting/auto_light.py
         spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
         bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
     t["grid"] = time.perf_counter()

@@ -103,9 +103,9 @@ def _each(meshes: dict, fn) -> None:
 
 def main() -> dict:
     bs.enable_extension()
-    gb = importlib.import_module(f"{MODULE}.blender.bake")
-    so = importlib.import_module(f"{MODULE}.blender.splat_object")
-    ll = importlib.import_module(f"{MODULE}.blender.local_light")
+    gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
+    so = importlib.import_module(f"{MODULE}.blender.splats.object")
+    ll = importlib.import_module(f"{MODULE}.blender.lighting.local_light")
     rec: dict = {"blender": bpy.app.version_string, "times": {}}
     times = rec["times"]
     steps = ARGS["steps"]

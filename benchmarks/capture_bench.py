@@ -20,7 +20,7 @@ checkout. Each zip is installed by Blender's own installer into a fresh user dir
   more than --stage-limit (300 s) is stopped and recorded as skipped, with the stages after it.
 - the bpy 5.3 module headless (the trixie root; benchmarks/capture_headless.py): Blender's own PLY importer, our
   import as a mesh and as Blender's splats, bake and re-bake, in one process.
-- --thread-check (after a run): benchmarks/capture_thread_check.py, the same re-bake in bpy 5.3 inline and on a
+- --thread-check (after a run): benchmarks/trials/capture_thread_check.py, the same re-bake in bpy 5.3 inline and on a
   jobs.Runner worker, alternating (is a worker slower without any UI?), added to that run's results and outputs.
 
 Sizes and variants run interleaved (1M before, 1M after, 3M before, ...) so load drift hits both alike; every row
@@ -199,12 +199,12 @@ def run_headless(matrix, variant: str, zip_path: Path, n: int) -> dict:
 
 
 def run_thread_check(matrix, zip_path: Path, n: int, repeats: int) -> dict:
-    """benchmarks/capture_thread_check.py in bpy 5.3: the same re-bake inline and on a jobs.Runner worker."""
+    """benchmarks/trials/capture_thread_check.py in bpy 5.3: the same re-bake inline and on a jobs.Runner worker."""
     entry = matrix.Entry("capture-thread", "trixie", True, python="/opt/bpy53/bin/python")
     runner = matrix.Runner(entry, None)
     try:
         shutil.copy(zip_path, runner.host / "gs_ibl.zip")
-        shutil.copy(HERE / "capture_thread_check.py", runner.host / "capture_thread_check.py")
+        shutil.copy(HERE / "trials" / "capture_thread_check.py", runner.host / "capture_thread_check.py")
         _link(ply_path(n), runner.host / "capture.ply")
         (runner.host / "args.json").write_text(json.dumps({"ply": str(runner.inner / "capture.ply"),
                                                            "repeats": repeats}))
@@ -443,7 +443,7 @@ def write_outputs(results: dict, write: bool) -> str:
         import textwrap
         thread_md = ("\n".join(textwrap.wrap(
                      f"The same re-bake without any UI (bpy 5.3, the after zip, {tc['splats'] / 1e6:g}M splats as "
-                     "Blender's splats, `benchmarks/capture_thread_check.py`, `--thread-check`): inline "
+                     "Blender's splats, `benchmarks/trials/capture_thread_check.py`, `--thread-check`): inline "
                      "(`jobs.run_now`, what `execute()` and `blender -b` do) against a `jobs.Runner` worker ticked "
                      "every 0.1 s by a main thread that sleeps in between, alternating:", 116,
                      break_long_words=False, break_on_hyphens=False)) + "\n\n" + "\n".join(lines) + "\n\n")
@@ -460,7 +460,7 @@ Each installed by Blender's installer into a fresh user directory. GUI: Blender 
 under Xvfb, 3D View region {results.get('region', '?')}, overlay Resolution {results.get('resolution_scale', '?')};
 the operators called as the UI calls them (import: EXEC_DEFAULT with `from_ui=True` where the operator has it, as the
 file browser's Import button; bake: INVOKE_DEFAULT with the 3D View's window/area/region, as the panel's button),
-jobs waited for by polling `blender.jobs.running()`. *Longest block*: the longest gap of a 50 ms heartbeat timer
+jobs waited for by polling `blender.common.jobs.running()`. *Longest block*: the longest gap of a 50 ms heartbeat timer
 during the stage (the main thread was away that long: the UI frozen); *gaps*: how many gaps exceeded 0.2 s. Show
 Splats ends with the end of the overlay's first draw that rendered splats; orbit turns the view 2° every 0.1 s for 8
 s (at least 3 frames) and counts the overlay's draws (`overlay.draw_log`): draws per second, the draw handler's
@@ -516,8 +516,8 @@ def main() -> None:
     ap.add_argument("--tag", default="", help="results_<tag>.json instead of results.json (a repeat run)")
     ap.add_argument("--replot", metavar="RESULTS_JSON")
     ap.add_argument("--thread-check", metavar="RESULTS_JSON",
-                    help="run benchmarks/capture_thread_check.py (the after zip, bpy 5.3, the first size) and add "
-                         "it to RESULTS_JSON and the outputs")
+                    help="run benchmarks/trials/capture_thread_check.py (the after zip, bpy 5.3, the first size) and "
+                         "add it to RESULTS_JSON and the outputs")
     a = ap.parse_args()
     if a.replot:
         write_outputs(json.loads(Path(a.replot).read_text()), not a.no_write)

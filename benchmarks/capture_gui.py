@@ -81,7 +81,7 @@ def gaps(t0: float, t1: float) -> list[float]:
 
 def jobs_running(pkg: str) -> list:
     try:
-        jobs = mod(pkg, "blender.jobs")
+        jobs = mod(pkg, "blender.common.jobs")
     except ImportError:  # before the jobs work: everything ran inside the operator's call
         return []
     return jobs.running()
@@ -92,7 +92,7 @@ def collect_draws(pkg: str) -> None:
     _w, _a, _s, region = view3d()
     slot = region.as_pointer()
     last = state["draws"][-1][0] if state["draws"] else -1.0
-    for t, sl, scale, ms, dms in list(mod(pkg, "blender.overlay").draw_log):
+    for t, sl, scale, ms, dms in list(mod(pkg, "blender.viewport.overlay").draw_log):
         if sl == slot and t > last:
             state["draws"].append((t, scale, ms, dms))
 
@@ -129,7 +129,7 @@ def setup(pkg: str) -> None:
 
 def _has_jobs(pkg: str) -> bool:
     try:
-        mod(pkg, "blender.jobs")
+        mod(pkg, "blender.common.jobs")
         return True
     except ImportError:
         return False
@@ -208,12 +208,12 @@ def show_done(pkg: str):
     t0 = state["stages"]["show"]["t0"]
     for t, scale, ms, dms in state["draws"]:
         if t >= t0 and ms > 0.0 and not jobs_running(pkg):
-            overlay = mod(pkg, "blender.overlay")
+            overlay = mod(pkg, "blender.viewport.overlay")
             state["stages"]["show"].update(first_draw_ms=dms, first_render_ms=ms, scale=scale,
                                            draws_before=sum(1 for x in state["draws"] if t0 <= x[0] < t),
                                            draws_during=[(x[0] - t0, x[2], x[3]) for x in state["draws"]
                                                          if t0 <= x[0] <= t],
-                                           overlay_error=overlay.last_error)
+                                           overlay_error=overlay.error_text())
             return t + dms / 1e3
     return None
 

@@ -65,8 +65,8 @@ def _in_blender(args: dict) -> dict:
     from mathutils import Matrix, Vector
 
     bs.enable_extension()
-    gb = importlib.import_module(f"{MODULE}.blender.bake")
-    so = importlib.import_module(f"{MODULE}.blender.splat_object")
+    gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
+    so = importlib.import_module(f"{MODULE}.blender.splats.object")
     bs.clear("objects")
     scene = bpy.context.scene
     bs.black_world()

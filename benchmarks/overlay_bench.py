@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from bench_common import append_csv, bench_scene, gpu_clock, hold_gpu_clock, warm_up  # noqa: E402
 
-from gs_ibl_addon.blender.overlay_math import look_at_view_matrix, overlay_view, perspective_matrix  # noqa: E402
+from gs_ibl_addon.blender.viewport.overlay_math import look_at_view_matrix, overlay_view, perspective_matrix  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.vk import get_context  # noqa: E402
@@ -50,7 +50,7 @@ def redraw(renderer: SplatRenderer, view, window, width: int, height: int, scale
     t = time.perf_counter()
     ov = overlay_view(view, window, width, height, scale)
     res = renderer.render(ov.batch, timestamps=True, depth=True)
-    np.ascontiguousarray(res.images[0][::-1])  # read back, in the rows the GPU texture takes (overlay._float_texture)
+    np.ascontiguousarray(res.images[0][::-1])  # read back, in the rows the GPU texture takes (overlay_gpu._float_texture)
     np.ascontiguousarray(res.depths[0][::-1])
     return (time.perf_counter() - t) * 1e3, res.timings_ms.get("total", float("nan"))
 

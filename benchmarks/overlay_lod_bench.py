@@ -39,7 +39,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
 from bench_common import append_csv, bench_scene, gpu_clock, hold_gpu_clock  # noqa: E402
 
-from gs_ibl_addon.blender import overlay_math as om  # noqa: E402
+from gs_ibl_addon.blender.viewport import overlay_math as om  # noqa: E402
 from gs_ibl_addon.core.colour import linear_to_srgb  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.vk import get_context  # noqa: E402
@@ -62,7 +62,7 @@ def draw(ov: om.SplatOverlay, view, window, w: int, h: int, scale: float, moving
     """One redraw as the handler makes it: (image, wall ms)."""
     t = time.perf_counter()
     img = ov.image(view, window, w, h, scale, slot=slot, moving=moving)
-    np.ascontiguousarray(img.rgba[::-1])  # the rows the GPU texture takes (overlay._float_texture)
+    np.ascontiguousarray(img.rgba[::-1])  # the rows the GPU texture takes (overlay_gpu._float_texture)
     np.ascontiguousarray(img.depth[::-1])
     return img, (time.perf_counter() - t) * 1e3
 

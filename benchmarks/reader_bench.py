@@ -51,7 +51,7 @@ def in_blender(args: dict) -> dict:
     import bpy
     import numpy as np
 
-    from gs_ibl_addon.blender.splat_object import create_splat_object
+    from gs_ibl_addon.blender.splats.object import create_splat_object
     from gs_ibl_addon.core.formats import read_scene
 
     def clear() -> None:

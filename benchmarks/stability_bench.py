@@ -435,8 +435,8 @@ def cmd_shadow(a) -> None:
     import bpy
 
     import gs_ibl_addon
-    from gs_ibl_addon.blender.bake import bake_into_world
-    from gs_ibl_addon.blender.splat_object import create_splat_object
+    from gs_ibl_addon.blender.lighting.bake import bake_into_world
+    from gs_ibl_addon.blender.splats.object import create_splat_object
     sun = synthetic.BrightPatch(intensity=120.0, colour=(1.0, 1.0, 1.0))
     shell = synthetic.shell_scene(sun, 20000)
     images = []

@@ -182,7 +182,8 @@ def cmd_render(a) -> int:
     renderer = SplatRenderer(s)
     try:
         res = _advise_on_memory(lambda: renderer.render(batch, timestamps=True, depth=bool(a.depth)),
-                                f"rendering {w}x{h} pixels of {s.count:,} splats", "use a smaller --size, or fewer splats")
+                                f"rendering {w}x{h} pixels of {s.count:,} splats",
+                                "use a smaller --size, or fewer splats")
         image, depth_image = res.images[0], (res.depths[0] if a.depth else None)  # read back before the close
     finally:
         renderer.close()
@@ -371,8 +372,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     q = sub.add_parser("render", help="render one pinhole view of the splats to an EXR (RGBA, alpha = coverage)")
     q.add_argument("scene", help=SCENE_HELP)
-    q.add_argument("--camera", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"), help="camera position")
-    q.add_argument("--look-at", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"), help="point looked at")
+    q.add_argument("--camera", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"),
+                   help="camera position")
+    q.add_argument("--look-at", nargs=3, type=finite_float, required=True, metavar=("X", "Y", "Z"),
+                   help="point looked at")
     q.add_argument("--up", nargs=3, type=finite_float, default=(0.0, 0.0, 1.0), metavar=("X", "Y", "Z"),
                    help="up direction (default +Z, Blender's; most 3DGS captures are -Y up: use 0 -1 0)")
     q.add_argument("--fov", type=field_of_view, default=60.0, help="horizontal field of view in degrees (default 60)")
@@ -431,7 +434,8 @@ def build_parser() -> argparse.ArgumentParser:
     _colour_space_option(q)
     q.set_defaults(fn=cmd_bake)
 
-    q = sub.add_parser("convert", help="convert between splat formats (writes .ply, .spz, .splat, .sog, .glb or .ksplat)")
+    q = sub.add_parser("convert",
+                       help="convert between splat formats (writes .ply, .spz, .splat, .sog, .glb or .ksplat)")
     q.add_argument("input", help=SCENE_HELP)
     q.add_argument("output", help="output file; the format follows its extension")
     q.set_defaults(fn=cmd_convert)

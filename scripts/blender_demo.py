@@ -59,7 +59,7 @@ def _ensure_extension() -> None:
 
 
 def _material(name: str, colour, metallic: float = 0.0, roughness: float = 0.5) -> bpy.types.Material:
-    from gs_ibl_addon.blender.compat import node_tree
+    from gs_ibl_addon.blender.common.compat import node_tree
     mat = bpy.data.materials.new(name)
     bsdf = next(n for n in node_tree(mat).nodes if n.bl_idname == "ShaderNodeBsdfPrincipled")
     bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
@@ -139,7 +139,7 @@ def setup_render(args) -> None:
 def write_splat_view(splats: bpy.types.Object, path: str, width: int, height: int) -> float:
     """The splats from the scene camera, rendered as the viewport overlay renders them (overlay_math), as a PNG."""
     import numpy as np
-    from gs_ibl_addon.blender.overlay import overlay_for
+    from gs_ibl_addon.blender.viewport.overlay_images import overlay_for
     from gs_ibl_addon.core.image_io import write_png_preview
     cam = bpy.context.scene.camera
     window = np.array(cam.calc_matrix_camera(bpy.context.evaluated_depsgraph_get(), x=width, y=height))

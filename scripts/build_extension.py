@@ -12,7 +12,8 @@ only a wheel missing there is fetched, with `pip download` for that wheel's exac
 build downloads nothing. A compiled package (cffi) ships as one wheel per platform tagged py3-none that holds the
 extension module of every Python Blender runs on (FAT_WHEELS): Blender 4.2.0 ignores a wheel's Python tag and
 installs the lexicographically last of several (cp314 on a cp311 Blender), so one wheel per platform is the only
-layout every Blender installs right. The default output is one zip for every platform (Blender installs only the wheels for its
+layout every Blender installs right. The default output is one zip for every platform (Blender installs only the wheels
+for its
 own platform and Python); --split-platforms makes one zip per platform instead (for extensions.blender.org).
 Compiled shaders (gs_ibl_addon/shaders/*.spv) travel with the package; the GLSL in the repo's shaders/ does not.
 """

@@ -39,11 +39,12 @@ def test_register_unregister_leaves_nothing_behind():
                        if isinstance(getattr(bpy.app.handlers, k), list)}
     menus = (bpy.types.TOPBAR_MT_file_import, bpy.types.VIEW3D_MT_add)
     menus_before = [_draw_funcs(m) for m in menus]
-    from gs_ibl_addon.blender import bake, overlay
+    from gs_ibl_addon.blender.lighting import auto_update
+    from gs_ibl_addon.blender.viewport import overlay
     for _ in range(2):  # twice: a second register after unregister must work too
         gs_ibl_addon.register()
         assert all(cls.is_registered for cls in registration._CLASSES)
-        assert bake.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
+        assert auto_update.on_depsgraph_update in bpy.app.handlers.depsgraph_update_post
         assert overlay._handle is not None and hasattr(bpy.types.Scene, "gs_ibl_overlay")
         assert _op_exists("gs_ibl.import_splats") and _op_exists("gs_ibl.bake_probe")
         assert hasattr(bpy.types.Object, "gs_ibl_probe")
@@ -55,8 +56,8 @@ def test_register_unregister_leaves_nothing_behind():
     for name in ("GSIBL_FH_splats", "GSIBL_PT_panel", "GSIBL_ProbeSettings", "GSIBL_OverlaySettings"):
         assert not hasattr(bpy.types, name), name
     assert not hasattr(bpy.types.Object, "gs_ibl_probe") and not hasattr(bpy.types.Scene, "gs_ibl_overlay")
-    assert bake.on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post
-    assert not bpy.app.timers.is_registered(bake.run_pending)
+    assert auto_update.on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post
+    assert not bpy.app.timers.is_registered(auto_update.run_pending)
     assert overlay._handle is None  # draw_handler_remove was called with the handle draw_handler_add gave
     for m in menus:  # Blender may keep its own draw wrapper; none of ours may remain
         assert not [f for f in _draw_funcs(m) if f.__module__.startswith("gs_ibl_addon")]
@@ -98,7 +99,7 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
     bpy.context.scene.gs_ibl_overlay.show = False
     ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
     assert len(ev.evaluated_geometry().pointcloud.points) == 500
-    from gs_ibl_addon.blender.splat_object import scene_from_mesh
+    from gs_ibl_addon.blender.splats.object import scene_from_mesh
     back = scene_from_mesh(obj.data)
     np.testing.assert_allclose(back.positions, src.positions, atol=1e-6)
     np.testing.assert_allclose(back.scales, src.scales, rtol=1e-5)
@@ -111,7 +112,7 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
 
 
 def test_scene_from_object_applies_world_transform(blender):
-    from gs_ibl_addon.blender.splat_object import create_splat_object, scene_from_object
+    from gs_ibl_addon.blender.splats.object import create_splat_object, scene_from_object
     src = random_scene(50, sh_degree=1)
     obj = create_splat_object(bpy.context, src, "S")
     obj.location = (1.0, 2.0, 3.0)
@@ -142,7 +143,7 @@ def test_custom_axes_and_scale(blender, tmp_path, write_3dgs_ply):
 def test_default_orientation_brings_the_sample_upright(blender, tmp_path, write_3dgs_ply):
     """The default preset (Auto) takes the axes a file declares, as the bundled sample (made Z up) does, and treats
     a file that declares none as 3DGS training output (OpenCV: y down, z forward)."""
-    from gs_ibl_addon.blender.importer import import_matrix
+    from gs_ibl_addon.blender.splats.importer import import_matrix
     from gs_ibl_addon.core.formats.axes import declared_axes
     sample = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "samples", "room.ply")
     assert declared_axes(sample) == ("Y", "Z")
@@ -192,7 +193,7 @@ def test_file_handler_registered_for_splat_extensions(blender):
 # ---------------------------------------------------------------------------------------------- World
 
 def test_world_never_overwrites_user_world_and_restores(blender):
-    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.lighting import world as gw
     scene = bpy.context.scene
     user = bpy.data.worlds.new("GS-IBL World")  # a user's World that happens to carry our name
     user.color = (0.2, 0.3, 0.4)
@@ -223,8 +224,8 @@ def test_world_never_overwrites_user_world_and_restores(blender):
 
 
 def test_apply_probe_images_and_strength_update(blender):
-    from gs_ibl_addon.blender import world as gw
-    from gs_ibl_addon.blender.bake import apply_probe_images
+    from gs_ibl_addon.blender.lighting import world as gw
+    from gs_ibl_addon.blender.lighting.bake import apply_probe_images
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
     assert probe.name == "GS-IBL Probe" and probe.gs_ibl_probe.is_probe
@@ -239,7 +240,7 @@ def test_apply_probe_images_and_strength_update(blender):
 
 
 def test_images_saved_next_to_blend_survive_reload(blender, tmp_path):
-    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.lighting import world as gw
     blend = str(tmp_path / "scene.blend")
     bpy.ops.wm.save_as_mainfile(filepath=blend)
     rad = np.linspace(0, 4, 8 * 16 * 3, dtype=np.float32).reshape(8, 16, 3)  # > 1: must stay float
@@ -255,8 +256,8 @@ def test_images_saved_next_to_blend_survive_reload(blender, tmp_path):
 def test_unpacked_images_never_overwrite_a_file_not_ours(blender, tmp_path):
     """Pack Images off: the EXRs get names of ours (gs_ibl_<probe>_<role>.exr); a file of that name we did not
     write is left as it is and ours takes a suffix; a re-bake rewrites our own files in place."""
-    from gs_ibl_addon.blender import world as gw
-    from gs_ibl_addon.blender.bake import apply_probe_images
+    from gs_ibl_addon.blender.lighting import world as gw
+    from gs_ibl_addon.blender.lighting.bake import apply_probe_images
     bpy.ops.wm.save_as_mainfile(filepath=str(tmp_path / "scene.blend"))
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
@@ -292,7 +293,7 @@ def test_unpacked_images_never_overwrite_a_file_not_ours(blender, tmp_path):
 
 def test_proxy_material_and_tree_found_by_marker_not_name(blender):
     """A user's material and node group named like the proxy's are left alone, and every import shares one of ours."""
-    from gs_ibl_addon.blender.splat_object import PROXY_MATERIAL, PROXY_MODIFIER, PROXY_TREE, create_splat_object
+    from gs_ibl_addon.blender.splats.object import PROXY_MATERIAL, PROXY_MODIFIER, PROXY_TREE, create_splat_object
     user_mat = bpy.data.materials.new(PROXY_MATERIAL)
     user_mat.diffuse_color = (1.0, 0.0, 0.0, 1.0)
     user_tree = bpy.data.node_groups.new(PROXY_TREE, "GeometryNodeTree")
@@ -311,8 +312,8 @@ def test_proxy_material_and_tree_found_by_marker_not_name(blender):
 def test_each_probe_has_its_world_and_strength(blender):
     """Probes in two scenes bake into two Worlds; a probe's Strength changes its own World only; a re-bake
     rebuilds the probe's World in place; a duplicated probe gets a World of its own."""
-    from gs_ibl_addon.blender import world as gw
-    from gs_ibl_addon.blender.bake import apply_probe_images
+    from gs_ibl_addon.blender.lighting import world as gw
+    from gs_ibl_addon.blender.lighting.bake import apply_probe_images
 
     def strength(world):
         return world.node_tree.nodes["GS-IBL Strength"].inputs["Strength"].default_value
@@ -368,8 +369,8 @@ def test_bake_reports_clear_error_without_splats(blender):
 
 def test_probe_result_cubes_become_latlong_images(blender):
     """The bake writes a core ProbeResult (cubes) as lat-long images in Blender's mapping."""
-    from gs_ibl_addon.blender import world as gw
-    from gs_ibl_addon.blender.bake import apply_probe_images, result_latlong
+    from gs_ibl_addon.blender.lighting import world as gw
+    from gs_ibl_addon.blender.lighting.bake import apply_probe_images, result_latlong
     from gs_ibl_addon.core.cubemap import latlong_directions
     from gs_ibl_addon.core.probe import ProbeResult
     from gs_ibl_addon.core.probe.reference import cube_from_function

@@ -1,4 +1,4 @@
-"""Lighting Auto (blender/auto_light.py, core/probe/auto_light.py): in the sample room, a small mesh by the World
+"""Lighting Auto (blender/lighting/auto_light.py, core/probe/auto_light.py): in the sample room, a small mesh by the World
 probe keeps the World's light, one far from it gets a probe of its own, a large one spanning the room's light a
 grid; each mesh's numbers are the batched probes' minus the World's; moving a lit mesh chooses its light again.
 The choices print their offsets and variations (pytest -s)."""
@@ -42,10 +42,10 @@ def room(blender):
 
 
 def test_each_mesh_gets_the_light_it_needs(room):
-    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender.lighting import local_light as ll
     from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients
-    from gs_ibl_addon.blender import splat_cache
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.splats import cache as splat_cache
+    from gs_ibl_addon.blender.lighting import auto_update as au
     splats, probe, meshes = room
     assert probe.gs_ibl_probe.lighting == "AUTO"  # the default
     probe.gs_ibl_probe.auto_update = True
@@ -66,18 +66,18 @@ def test_each_mesh_gets_the_light_it_needs(room):
     want = pack_grid((d[1] - d[0]).reshape(1, 1, 1, 9, 3).astype(np.float32))
     np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-5)
     # moving a lit mesh chooses its light again; the World is not baked again
-    bakes, relights = gb.auto_bakes, gb.auto_relights
+    bakes, relights = au.auto_bakes, au.auto_relights
     meshes["near"].location = (-2.2, -1.8, 1.0)  # to the far corner
     bpy.context.view_layer.update()
-    assert (bpy.context.scene.name, probe.name) in gb._pending_meshes
-    bpy.app.timers.unregister(gb.run_pending)  # timers run only in Blender's event loop: run it as Blender would
-    gb.run_pending()
-    assert gb.auto_bakes == bakes and gb.auto_relights == relights + 1
+    assert (bpy.context.scene.name, probe.name) in au._pending_meshes
+    bpy.app.timers.unregister(au.run_pending)  # timers run only in Blender's event loop: run it as Blender would
+    au.run_pending()
+    assert au.auto_bakes == bakes and au.auto_relights == relights + 1
     assert ll.has_local_light(meshes["near"]) is not None
     meshes["near"].location = (0.0, 0.0, 1.0)  # back by the probe: the World's light again
     bpy.context.view_layer.update()
-    bpy.app.timers.unregister(gb.run_pending)
-    gb.run_pending()
+    bpy.app.timers.unregister(au.run_pending)
+    au.run_pending()
     assert ll.has_local_light(meshes["near"]) is None
     # World Probe takes Auto's light off again (what the operators gave stays: test_blender_probes.py)
     probe.gs_ibl_probe.lighting = "WORLD"
@@ -86,7 +86,7 @@ def test_each_mesh_gets_the_light_it_needs(room):
 
 
 def test_world_probe_lighting_adds_nothing(room):
-    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender.lighting import local_light as ll
     _splats, probe, meshes = room
     probe.gs_ibl_probe.lighting = "WORLD"
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}

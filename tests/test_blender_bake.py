@@ -23,7 +23,7 @@ SHELL_N, SHELL_R = 6000, 5.0
 
 
 def _world_images():
-    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.lighting import world as gw
     rad = gw.image_latlong_pixels(bpy.context.scene.world.node_tree.nodes["GS-IBL Radiance"].image)
     irr = gw.image_latlong_pixels(bpy.data.node_groups["GS-IBL Irradiance"].nodes["GS-IBL Irradiance Image"].image)
     return rad, irr
@@ -42,7 +42,7 @@ def _import_shell(tmp_path, write_3dgs_ply, center=(0.0, 0.0, 0.0)):
 def test_bake_operator_matches_core_result(blender, tmp_path, write_3dgs_ply):
     """Import a PLY shell, add a probe, bake through the operator: the World's images are the core's result, and
     the irradiance is the shell's known one (a + 2/3 b n_z)."""
-    from gs_ibl_addon.blender.splat_object import scene_from_object
+    from gs_ibl_addon.blender.splats.object import scene_from_object
     splats = _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
@@ -98,7 +98,7 @@ def test_auto_reports_choice_and_error(blender, tmp_path, write_3dgs_ply):
     assert lines[0].endswith("64x64 faces"), lines
     assert lines[1].startswith("exact; face size by irradiance change (64: ") and lines[1].endswith(" converged"), lines
     # the splat cache's host copy (base colour only) gives the near-splat check its splats
-    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.blender.splats import cache as splat_cache
     entry = splat_cache.get(shell)
     assert entry.host.sh.shape == (entry.renderer.scene_count, 1, 3)
     assert "(change model)" in probe.gs_ibl_probe.last_report, lines
@@ -106,8 +106,8 @@ def test_auto_reports_choice_and_error(blender, tmp_path, write_3dgs_ply):
 
 def test_hole_warning(blender):
     """A room with a window and a skylight: the probe sees the openings, and the report says how much."""
-    from gs_ibl_addon.blender.bake import bake_into_world
-    from gs_ibl_addon.blender.splat_object import create_splat_object
+    from gs_ibl_addon.blender.lighting.bake import bake_into_world
+    from gs_ibl_addon.blender.splats.object import create_splat_object
     room = room_scene((3.0, 3.0, 2.5), spacing=0.15, window=((-1.0, 1.0), (0.5, 2.0)), skylight=((-1.0, 1.0), (-1.0, 1.0)))
     create_splat_object(bpy.context, room.scene, "room", proxy=False)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
@@ -152,7 +152,7 @@ def test_bake_headless_from_saved_blend(blender, tmp_path, write_3dgs_ply):
 def test_update_when_moved(blender, tmp_path, write_3dgs_ply):
     """The depsgraph handler notes a really moved probe and (re)starts one debounce timer; the timer re-bakes once;
     the bake's own updates, and updates that move nothing, schedule nothing (once, every bake scheduled the next)."""
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import auto_update as au
     splats = _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
@@ -162,24 +162,24 @@ def test_update_when_moved(blender, tmp_path, write_3dgs_ply):
     _, irr0 = _world_images()
     probe.location = (0.0, 0.0, 3.0)  # off by default: nothing is scheduled
     bpy.context.view_layer.update()
-    assert not gb._pending and not bpy.app.timers.is_registered(gb.run_pending)
+    assert not au._pending and not bpy.app.timers.is_registered(au.run_pending)
     s.auto_update = True
     s.update_interval = 2.0
     probe.location = (0.0, 0.0, 3.5)  # 0.7 of the radius up: the view of the sky gradient changes
     bpy.context.view_layer.update()
-    assert gb._pending == {(bpy.context.scene.name, probe.name)}
-    assert bpy.app.timers.is_registered(gb.run_pending)
+    assert au._pending == {(bpy.context.scene.name, probe.name)}
+    assert bpy.app.timers.is_registered(au.run_pending)
     splats.location = (0.0, 0.0, 0.01)  # moving the splats as well keeps one pending bake, one timer
     bpy.context.view_layer.update()
-    assert len(gb._pending) == 1
+    assert len(au._pending) == 1
     # Timers only run in Blender's event loop (not in the bpy module): run the timer's function as Blender would.
-    bpy.app.timers.unregister(gb.run_pending)
-    before = gb.auto_bakes
-    assert gb.run_pending() is None and not gb._pending and gb.last_auto_error is None
-    assert gb.auto_bakes == before + 1
+    bpy.app.timers.unregister(au.run_pending)
+    before = au.auto_bakes
+    assert au.run_pending() is None and not au._pending and au.last_auto_error is None
+    assert au.auto_bakes == before + 1
     _, irr1 = _world_images()
     assert not np.allclose(irr0, irr1, rtol=0.01)
-    from gs_ibl_addon.blender.splat_object import scene_from_object
+    from gs_ibl_addon.blender.splats.object import scene_from_object
     core = bake_probe(scene_from_object(splats), np.array(probe.matrix_world.translation),
                       ProbeSettings(face_size=16, irradiance_size=8))
     np.testing.assert_allclose(irr1, cube_to_latlong(core.irradiance, 64), rtol=1e-5, atol=1e-6)
@@ -189,21 +189,21 @@ def test_update_when_moved(blender, tmp_path, write_3dgs_ply):
     probe.rotation_euler = (0.3, 0.0, 0.0)  # a probe's rotation does not change its light
     s.strength = 1.5
     bpy.context.view_layer.update()
-    assert not gb._pending and not bpy.app.timers.is_registered(gb.run_pending)
+    assert not au._pending and not bpy.app.timers.is_registered(au.run_pending)
     # moved and moved back before the timer fired: the timer finds nothing to do
     probe.location = (0.0, 0.0, 3.0)
     bpy.context.view_layer.update()
-    assert gb._pending and bpy.app.timers.is_registered(gb.run_pending)
+    assert au._pending and bpy.app.timers.is_registered(au.run_pending)
     probe.location = (0.0, 0.0, 3.5)
     bpy.context.view_layer.update()
-    bpy.app.timers.unregister(gb.run_pending)
-    assert gb.run_pending() is None and gb.auto_bakes == before + 1
+    bpy.app.timers.unregister(au.run_pending)
+    assert au.run_pending() is None and au.auto_bakes == before + 1
 
 
 def test_report_gives_the_filters_gpu_time():
     """The report's filter time is the filters' GPU time (SH projection + irradiance, + GGX when baked), not every
     timing key: host wall times, per-step splits and the upload would count the same work two or three times."""
-    from gs_ibl_addon.blender.bake import summary
+    from gs_ibl_addon.blender.lighting.bake import summary
     scene = shell_scene(SKY, 2000, SHELL_R)
     for glossy in (False, True):
         result = bake_probe(scene, (0.0, 0.0, 0.0), ProbeSettings(method="exact", face_size=16, irradiance_size=8,
@@ -222,9 +222,10 @@ def test_report_gives_the_filters_gpu_time():
 def test_bakes_and_overlay_share_one_upload(blender, tmp_path, write_3dgs_ply):
     """Re-bakes of an unchanged splat object and the viewport overlay use one renderer (one upload); moving,
     scaling or editing the object uploads it again, and the bake then matches the core's for the changed object."""
-    from gs_ibl_addon.blender import overlay, splat_cache
-    from gs_ibl_addon.blender.bake import bake_into_world
-    from gs_ibl_addon.blender.splat_object import scene_from_object
+    from gs_ibl_addon.blender.viewport import overlay_images
+    from gs_ibl_addon.blender.splats import cache as splat_cache
+    from gs_ibl_addon.blender.lighting.bake import bake_into_world
+    from gs_ibl_addon.blender.splats.object import scene_from_object
     splats = _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
@@ -237,13 +238,13 @@ def test_bakes_and_overlay_share_one_upload(blender, tmp_path, write_3dgs_ply):
     renderer = splat_cache.get(splats).renderer
     bake_into_world(scene, probe)
     assert splat_cache.uploads == n0 + 1 and splat_cache.get(splats).renderer is renderer
-    assert overlay.overlay_for(splats).renderer is renderer and splat_cache.uploads == n0 + 1
+    assert overlay_images.overlay_for(splats).renderer is renderer and splat_cache.uploads == n0 + 1
 
     def changed(step: int) -> None:
         bpy.context.view_layer.update()
         result, _, _ = bake_into_world(scene, probe)
         assert splat_cache.uploads == n0 + step and splat_cache.get(splats).renderer is not renderer
-        assert overlay.overlay_for(splats).renderer is splat_cache.get(splats).renderer
+        assert overlay_images.overlay_for(splats).renderer is splat_cache.get(splats).renderer
         core = bake_probe(scene_from_object(splats), (0.0, 0.0, 0.0), ProbeSettings(face_size=16, irradiance_size=8))
         np.testing.assert_allclose(result.irradiance, core.irradiance, rtol=1e-5, atol=1e-6)
 
@@ -270,8 +271,8 @@ def test_bakes_and_overlay_share_one_upload(blender, tmp_path, write_3dgs_ply):
 def test_bake_names_a_splat_object_it_cannot_transform(blender, scale, words):
     """Splats cannot follow a non-uniform or mirrored object scale: the bake is cancelled with a message naming
     the object (no traceback, nothing written), and the overlay says the same."""
-    from gs_ibl_addon.blender import overlay
-    from gs_ibl_addon.blender.splat_object import create_splat_object
+    from gs_ibl_addon.blender.viewport import overlay_images
+    from gs_ibl_addon.blender.splats.object import create_splat_object
     obj = create_splat_object(bpy.context, shell_scene(SKY, 500, SHELL_R), "Stretched Room", proxy=False)
     obj.scale = scale
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
@@ -287,7 +288,7 @@ def test_bake_names_a_splat_object_it_cannot_transform(blender, scale, words):
     assert (len(bpy.data.worlds), len(bpy.data.images), len(bpy.data.node_groups)) == before
     assert probe.gs_ibl_probe.last_report == ""
     with pytest.raises(ValueError, match="^Stretched Room: "):
-        overlay.overlay_for(obj)
+        overlay_images.overlay_for(obj)
 
 
 def test_demo_script_runs(tmp_path):
@@ -310,7 +311,7 @@ def test_demo_script_runs(tmp_path):
 def test_bake_refuses_a_size_that_does_not_fit_before_uploading(blender, tmp_path, write_3dgs_ply, monkeypatch):
     """The panel's bake checks the face size against free memory before the splats are read or uploaded, and says
     which size fits (the command line's check: core/limits.py)."""
-    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.blender.splats import cache as splat_cache
     from gs_ibl_addon.core import limits
     _import_shell(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
@@ -328,7 +329,7 @@ def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch
     light is in the World), camera rays still see them, and Restore Previous World gives the bounces back exactly
     as they were. (bpy 5.0 has no native splats: an ordinary object stands in for one here; the bpy 5.3 run of
     tests/real_blender/test_native_splats.py does it with a real one.)"""
-    from gs_ibl_addon.blender import splat_object
+    from gs_ibl_addon.blender.splats import object as splat_object
     shell = _import_shell(tmp_path, write_3dgs_ply)
     bpy.context.scene.world = bpy.data.worlds.new("The user's World")
     bpy.ops.mesh.primitive_cube_add()

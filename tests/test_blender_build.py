@@ -274,12 +274,12 @@ BLENDER_PROVIDES = {"bpy", "bpy_extras", "bpy_types", "gpu", "gpu_extras", "math
 # Imported only by the command line's modules, which the extension loads but never calls there: (module, import)
 # and why Blender never gets there.
 CLI_ONLY = {("core.image_io", "OpenImageIO"): "reads and writes the command line's EXR/PNG files; in Blender, "
-                                              "images are written by Blender itself (blender/world.py)"}
+                                              "images are written by Blender itself (blender/lighting/world.py)"}
 # Imported by the extension where some Blenders have them and others not; always inside a function that handles
 # their absence (a fallback, or a message saying what to install).
 OPTIONAL = {"zstandard": "SPZ v4: official builds and the bpy module ship it; else compression.zstd",
             "compression": "SPZ v4: Python 3.14's compression.zstd (Linux distributions' builds)",
-            "OpenImageIO": "SOG's WebP outside Blender (in Blender, blender/webp_decoder.py registers Blender's own)",
+            "OpenImageIO": "SOG's WebP outside Blender (in Blender, blender/splats/webp_decoder.py registers Blender's own)",
             "PIL": "SOG's WebP outside Blender where OpenImageIO is missing"}
 
 

@@ -29,7 +29,7 @@ def _small(probe) -> None:
 
 
 def _radiance(probe) -> np.ndarray:
-    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.lighting import world as gw
     return gw.image_latlong_pixels(probe.gs_ibl_probe.radiance_image)
 
 
@@ -43,7 +43,7 @@ def _delete(obj) -> None:
 
 
 def test_a_deleted_splat_object_is_never_baked(blender, tmp_path, write_3dgs_ply):
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import auto_update as au
     splats = _import(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
@@ -55,7 +55,7 @@ def test_a_deleted_splat_object_is_never_baked(blender, tmp_path, write_3dgs_ply
     name = splats.name
     _delete(splats)
     bpy.context.view_layer.update()
-    assert not gb._pending and not bpy.app.timers.is_registered(gb.run_pending)  # the delete starts no re-bake
+    assert not au._pending and not bpy.app.timers.is_registered(au.run_pending)  # the delete starts no re-bake
     assert probe.gs_ibl_probe.splats is None  # its object left every scene: the field is cleared
     bpy.context.view_layer.objects.active = probe
     with pytest.raises(RuntimeError, match="No splat object in the scene"):
@@ -73,7 +73,7 @@ def test_a_deleted_splat_object_is_never_baked(blender, tmp_path, write_3dgs_ply
 
 
 def test_two_splat_objects_ask_which(blender, tmp_path, write_3dgs_ply):
-    from gs_ibl_addon.blender.bake import enclosing_splats
+    from gs_ibl_addon.blender.lighting.sources import enclosing_splats
     room = _import(tmp_path, write_3dgs_ply, name="room", radius=5.0)
     small = _import(tmp_path, write_3dgs_ply, name="small", n=500, radius=0.5, center=(2.0, 0.0, 0.0))
     # a probe inside the room (and inside the small capture's bounds too) takes the room: the one it stands in
@@ -102,12 +102,12 @@ def test_splats_are_shown_after_import(blender, tmp_path, write_3dgs_ply):
 
 def test_import_button_label_fits():
     # the file browser's button shows the label; "Import Gaussian Splatting" was cut to "Import Gaussian Spl..."
-    from gs_ibl_addon.blender.importer import GSIBL_OT_import_splats
+    from gs_ibl_addon.blender.splats.importer import GSIBL_OT_import_splats
     assert len(GSIBL_OT_import_splats.bl_label) <= 14
 
 
 def test_probe_follows_the_mesh_it_was_placed_at(blender, tmp_path, write_3dgs_ply):
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import auto_update as au
     _import(tmp_path, write_3dgs_ply)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(1.0, -0.5, 0.2))
     sphere = bpy.context.active_object
@@ -121,11 +121,11 @@ def test_probe_follows_the_mesh_it_was_placed_at(blender, tmp_path, write_3dgs_p
     sphere.location = (0.0, 1.5, 1.0)  # moving the lit mesh moves its probe, and Update When Moved re-bakes
     bpy.context.view_layer.update()
     np.testing.assert_allclose(probe.matrix_world.translation, (0.0, 1.5, 1.0), atol=1e-6)
-    assert gb._pending == {(bpy.context.scene.name, probe.name)}
-    bpy.app.timers.unregister(gb.run_pending)  # timers run only in Blender's event loop: run it as Blender would
-    before = gb.auto_bakes
-    gb.run_pending()
-    assert gb.auto_bakes == before + 1 and gb.last_auto_error is None
+    assert au._pending == {(bpy.context.scene.name, probe.name)}
+    bpy.app.timers.unregister(au.run_pending)  # timers run only in Blender's event loop: run it as Blender would
+    before = au.auto_bakes
+    au.run_pending()
+    assert au.auto_bakes == before + 1 and au.last_auto_error is None
     # placed at the cursor, or with Follow Mesh off, a probe has no parent
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     assert bpy.context.active_object.parent is None
@@ -136,7 +136,7 @@ def test_probe_follows_the_mesh_it_was_placed_at(blender, tmp_path, write_3dgs_p
 
 
 def test_undo_and_redo_bring_back_the_light_with_its_report_and_bake_nothing(blender, tmp_path, write_3dgs_ply):
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import auto_update as au
     _import(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe_name = bpy.context.active_object.name
@@ -148,18 +148,18 @@ def test_undo_and_redo_bring_back_the_light_with_its_report_and_bake_nothing(ble
     bpy.ops.ed.undo_push(message="bake 1")
     probe.location = (0.0, 0.0, 3.5)  # moved (the view of the sky gradient changes) and baked again
     bpy.context.view_layer.update()
-    bpy.app.timers.unregister(gb.run_pending)
-    gb.run_pending()
+    bpy.app.timers.unregister(au.run_pending)
+    au.run_pending()
     probe = bpy.data.objects[probe_name]
     second = (_radiance(probe), probe.gs_ibl_probe.last_report)
     assert not np.allclose(first[0], second[0], rtol=0.01)
     bpy.ops.ed.undo_push(message="bake 2")
-    before = gb.auto_bakes
+    before = au.auto_bakes
     for step, want in ((bpy.ops.ed.undo, first), (bpy.ops.ed.redo, second), (bpy.ops.ed.undo, first)):
         assert step() == {"FINISHED"}
         bpy.context.view_layer.update()  # the depsgraph update that once scheduled a re-bake
         probe = bpy.data.objects[probe_name]
-        assert not gb._pending and not bpy.app.timers.is_registered(gb.run_pending)
+        assert not au._pending and not bpy.app.timers.is_registered(au.run_pending)
         np.testing.assert_array_equal(_radiance(probe), want[0])  # the World shows the light its report describes
         assert probe.gs_ibl_probe.last_report == want[1]
-    assert gb.auto_bakes == before
+    assert au.auto_bakes == before

@@ -13,7 +13,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from gs_ibl_addon.blender.importer import import_matrix  # noqa: E402
+from gs_ibl_addon.blender.splats.importer import import_matrix  # noqa: E402
 from gs_ibl_addon.core.formats import SplatFormatError, read_scene  # noqa: E402
 from gs_ibl_addon.core.formats.compressed_ply import CHUNK_SIZE, write_compressed_ply  # noqa: E402
 from gs_ibl_addon.core.formats.ply import write_ply  # noqa: E402
@@ -228,7 +228,7 @@ def test_spz_axes_is_ignored_for_other_formats(blender, tmp_path):
 def test_sog_imports_with_blenders_own_webp_decoder(blender, tmp_path, monkeypatch):
     """SOG's WebP images decode through Blender's image loader where neither OpenImageIO nor Pillow is importable
     (the bpy module from PyPI, distributions' builds): same bytes, same splats as the libraries give."""
-    from gs_ibl_addon.blender.webp_decoder import decode_webp
+    from gs_ibl_addon.blender.splats.webp_decoder import decode_webp
     from gs_ibl_addon.core.formats import webp
     from gs_ibl_addon.core.formats.sog import read_sog, write_sog
     rng = np.random.default_rng(3)

@@ -1,4 +1,4 @@
-"""Long work beside Blender's UI (blender/jobs.py): a job's Work runs on a worker thread while the main thread
+"""Long work beside Blender's UI (blender/common/jobs.py): a job's Work runs on a worker thread while the main thread
 keeps ticking, progress comes back, errors reach the job, Esc (cancel) stops the worker at its next progress call
 and leaves the scene as it was; the bake as a job writes exactly what the bake run now writes."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from gs_ibl_addon.blender import jobs  # noqa: E402
+from gs_ibl_addon.blender.common import jobs  # noqa: E402
 from gs_ibl_addon.core.synthetic import SkyGradient, shell_scene  # noqa: E402
 
 
@@ -142,12 +142,12 @@ def shell_probe(blender, tmp_path, write_3dgs_ply):
 
 
 def _world_pixels():
-    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.lighting import world as gw
     return gw.image_latlong_pixels(bpy.context.scene.world.node_tree.nodes["GS-IBL Radiance"].image)
 
 
 def test_the_bake_as_a_job_beside_the_ui_writes_what_the_bake_run_now_writes(shell_probe):
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import bake as gb
     probe, splats = shell_probe
     scene = bpy.context.scene
     runner = jobs.Runner(gb.bake_job(scene, probe, splats), "baking")
@@ -163,7 +163,7 @@ def test_the_bake_as_a_job_beside_the_ui_writes_what_the_bake_run_now_writes(she
 
 
 def test_a_cancelled_bake_leaves_the_world_and_images_as_they_were(shell_probe):
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import bake as gb
     probe, splats = shell_probe
     scene = bpy.context.scene
     before_world = scene.world
@@ -178,7 +178,7 @@ def test_a_cancelled_bake_leaves_the_world_and_images_as_they_were(shell_probe):
 
 
 def test_a_probe_deleted_while_its_bake_runs_is_not_written(shell_probe):
-    from gs_ibl_addon.blender import bake as gb
+    from gs_ibl_addon.blender.lighting import bake as gb
     probe, splats = shell_probe
     scene = bpy.context.scene
     runner = jobs.Runner(gb.bake_job(scene, probe, splats), "baking")
@@ -205,7 +205,7 @@ def test_start_without_a_window_runs_now():
 
 def test_an_import_cancelled_while_it_makes_its_objects_leaves_no_datablock(blender, tmp_path, write_3dgs_ply):
     """Two files: the first object made, the second cancelled between two of its attributes: neither stays."""
-    from gs_ibl_addon.blender.importer import _import_steps
+    from gs_ibl_addon.blender.splats.importer import _import_steps
     paths = []
     for i in range(2):
         paths.append(str(tmp_path / f"shell{i}.ply"))
@@ -231,8 +231,8 @@ def test_a_bake_run_now_advances_the_upload_it_waits_for(shell_probe):
     job: the bake advances that job itself (its timer cannot run meanwhile) instead of waiting forever, and the
     splats are read and uploaded once. (A reload in Blender 5.2's GUI once hung here: the redraw after loading
     started the upload, the scenario's next step baked.)"""
-    from gs_ibl_addon.blender import bake as gb
-    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.blender.lighting import bake as gb
+    from gs_ibl_addon.blender.splats import cache as splat_cache
     probe, splats = shell_probe
     key = splat_cache.upload_key(splats)
     uploads = splat_cache.uploads

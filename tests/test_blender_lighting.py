@@ -1,4 +1,4 @@
-"""Proof that the World and the irradiance node group written by blender/world.py light meshes correctly.
+"""Proof that the World and the irradiance node group written by blender/lighting/world.py light meshes correctly.
 
 An analytic, linear-in-direction radiance L(w) = a + B w (per channel c: a_c + B_c . w) has the closed-form
 irradiance E(n)/pi = a + (2/3) B n. B has x, y and z terms, so a mirrored or rotated mapping fails. A unit sphere is rendered (orthographic camera on +X looking along -X, so the pixel at
@@ -16,8 +16,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
-from gs_ibl_addon.blender import world as gw  # noqa: E402
-from gs_ibl_addon.blender.compat import node_tree  # noqa: E402
+from gs_ibl_addon.blender.lighting import world as gw  # noqa: E402
+from gs_ibl_addon.blender.common.compat import node_tree  # noqa: E402
 from gs_ibl_addon.core.cubemap import latlong_directions  # noqa: E402
 
 RES = 48
@@ -215,8 +215,8 @@ def _engines():
 
 def _baked_scene(engine: str, radiance_fn, albedo, res=RES):
     import gs_ibl_addon
-    from gs_ibl_addon.blender.bake import bake_into_world
-    from gs_ibl_addon.blender.splat_object import create_splat_object
+    from gs_ibl_addon.blender.lighting.bake import bake_into_world
+    from gs_ibl_addon.blender.splats.object import create_splat_object
     from gs_ibl_addon.core.synthetic import shell_scene
     scene, sphere = _scene(engine)
     scene.render.resolution_x = scene.render.resolution_y = res

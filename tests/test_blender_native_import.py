@@ -24,8 +24,8 @@ class _Layout:
 
 
 def test_below_5_3_our_import_makes_our_mesh(blender, tmp_path, write_3dgs_ply):
-    from gs_ibl_addon.blender import splat_object
-    from gs_ibl_addon.blender.panel import GSIBL_PT_panel
+    from gs_ibl_addon.blender.splats import object as splat_object
+    from gs_ibl_addon.blender.ui.panel import GSIBL_PT_panel
     if splat_object.native_splats_supported():
         pytest.skip("this Blender has native splats: the matrix's bpy-5.3 entry checks that path")
     path = tmp_path / "s.ply"

@@ -13,7 +13,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from gs_ibl_addon.blender.overlay_math import (SplatOverlay, ViewMotion, linear_to_srgb, look_at_view_matrix,
+from gs_ibl_addon.blender.viewport.overlay_math import (SplatOverlay, ViewMotion, linear_to_srgb, look_at_view_matrix,
                                                overlay_view, perspective_matrix, to_display, view_key, window_depth)
 from gs_ibl_addon.core.render.reference import render_reference
 from gs_ibl_addon.core.render.renderer import SplatRenderer
@@ -229,25 +229,25 @@ def test_handler_image_follows_the_splat_object(blender):
     """splat_image (what draw_callback draws) renders the object in world space, caches its upload, and uploads
     again when the object moves; the overlay toggle hides the point proxy."""
     bpy = blender
-    from gs_ibl_addon.blender import overlay
-    from gs_ibl_addon.blender.splat_object import PROXY_MODIFIER, create_splat_object, scene_from_object
+    from gs_ibl_addon.blender.viewport import overlay_images
+    from gs_ibl_addon.blender.splats.object import create_splat_object, scene_from_object
     from mathutils import Matrix
     obj = create_splat_object(bpy.context, small_scene(), "S")
     rv3d = SimpleNamespace(view_matrix=Matrix(look_at_view_matrix(POS, TARGET).tolist()),
                            window_matrix=Matrix(perspective_matrix(60.0, 40, 30).tolist()))
-    img = overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+    img = overlay_images.splat_image(obj, rv3d, 40, 30, 1.0)
     ref = render_reference(scene_from_object(obj), img.view.batch)[0]
     assert np.abs(img.rgba - ref).max() < TOL and img.rgba[..., 3].max() > 0.5
-    first = overlay.overlay_for(obj)
-    assert overlay.overlay_for(obj) is first
+    first = overlay_images.overlay_for(obj)
+    assert overlay_images.overlay_for(obj) is first
     obj.location = (0.5, 0.0, 0.0)
     bpy.context.view_layer.update()
-    img2 = overlay.splat_image(obj, rv3d, 40, 30, 1.0)
-    assert overlay.overlay_for(obj) is not first
+    img2 = overlay_images.splat_image(obj, rv3d, 40, 30, 1.0)
+    assert overlay_images.overlay_for(obj) is not first
     assert np.abs(img2.rgba - render_reference(scene_from_object(obj), img2.view.batch)[0]).max() < TOL
     settings = bpy.context.scene.gs_ibl_overlay
     settings.show = False
-    assert not overlay._overlays  # images freed when off
+    assert not overlay_images._overlays  # images freed when off
 
 
 @bpy_only
@@ -256,9 +256,10 @@ def test_display_settings_never_upload_again_and_helpers_hide(blender):
     evaluated in between, as in the GUI), the splats are not read or uploaded again; while the overlay shows, the
     point proxy draws nothing (fraction 0), and its fraction comes back after. An edit of the mesh still uploads."""
     bpy = blender
-    from gs_ibl_addon.blender import overlay, splat_cache
-    from gs_ibl_addon.blender.compat import get_modifier_input, modifier_input_identifiers
-    from gs_ibl_addon.blender.splat_object import PROXY_MODIFIER, create_splat_object
+    from gs_ibl_addon.blender.viewport import overlay, overlay_images
+    from gs_ibl_addon.blender.splats import cache as splat_cache
+    from gs_ibl_addon.blender.common.compat import get_modifier_input, modifier_input_identifiers
+    from gs_ibl_addon.blender.splats.object import PROXY_MODIFIER, create_splat_object
     from mathutils import Matrix
     obj = create_splat_object(bpy.context, small_scene(), "S")
     mod = obj.modifiers[PROXY_MODIFIER]
@@ -267,7 +268,7 @@ def test_display_settings_never_upload_again_and_helpers_hide(blender):
     rv3d = SimpleNamespace(view_matrix=Matrix(look_at_view_matrix(POS, TARGET).tolist()),
                            window_matrix=Matrix(perspective_matrix(60.0, 40, 30).tolist()))
     bpy.context.view_layer.update()
-    overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+    overlay_images.splat_image(obj, rv3d, 40, 30, 1.0)
     n0 = splat_cache.uploads
     settings = bpy.context.scene.gs_ibl_overlay
     for step in range(3):
@@ -277,22 +278,22 @@ def test_display_settings_never_upload_again_and_helpers_hide(blender):
         settings.exposure = 1.5 - step
         settings.resolution_scale = 0.3 + 0.2 * step
         bpy.context.view_layer.update()
-        overlay.splat_image(obj, rv3d, 40, 30, settings.resolution_scale)
+        overlay_images.splat_image(obj, rv3d, 40, 30, settings.resolution_scale)
         settings.show = False
         bpy.context.view_layer.update()
         assert get_modifier_input(mod, frac) == pytest.approx(f0) and overlay.HIDDEN_KEY not in obj.keys()
-        overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+        overlay_images.splat_image(obj, rv3d, 40, 30, 1.0)
     assert splat_cache.uploads == n0
     obj.data.vertices[0].co.x += 0.25  # a real edit
     obj.data.update()
     bpy.context.view_layer.update()
-    overlay.splat_image(obj, rv3d, 40, 30, 1.0)
+    overlay_images.splat_image(obj, rv3d, 40, 30, 1.0)
     assert splat_cache.uploads == n0 + 1
 
 
 @bpy_only
 def test_panel_wraps_long_lines(blender):
-    from gs_ibl_addon.blender.panel import wrapped_lines
+    from gs_ibl_addon.blender.ui.panel import wrapped_lines
     report = ("Baked 21,939 splats, 512x512 faces\nexact; face size by irradiance change (64: 7.45%, 128: 3.32%, "
               "256: 1.50%, 512: 0.61%) converged")
     lines = wrapped_lines(report, 30)
@@ -302,7 +303,7 @@ def test_panel_wraps_long_lines(blender):
 
 # ------------------------------------------------------------------------- the composite and what the mouse hits
 
-from gs_ibl_addon.blender import overlay_math as om  # noqa: E402
+from gs_ibl_addon.blender.viewport import overlay_math as om  # noqa: E402
 
 
 def _bytes(rgb_lin, alpha) -> np.ndarray:
@@ -456,7 +457,7 @@ def test_click_selection_rules(blender):
     """picking.select_object selects as view3d.select does (click, Shift toggles, extend, deselect), and
     _picked tells which object view3d.select acted on from the selection before and after it."""
     bpy = blender
-    from gs_ibl_addon.blender import picking
+    from gs_ibl_addon.blender.viewport import picking
     objs = []
     for name in ("A", "B", "C"):
         o = bpy.data.objects.new(name, None)

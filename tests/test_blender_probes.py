@@ -18,7 +18,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 OpenImageIO = pytest.importorskip("OpenImageIO")
 
-from gs_ibl_addon.blender.compat import node_tree  # noqa: E402
+from gs_ibl_addon.blender.common.compat import node_tree  # noqa: E402
 from gs_ibl_addon.core import synthetic  # noqa: E402
 from gs_ibl_addon.core.probe import grid as pg  # noqa: E402
 
@@ -81,7 +81,7 @@ def test_group_renders_the_numpy_grid(blender, engine, tmp_path):
     """A 3 x 2 x 2 grid over the sphere (the last tile of the grid atlas, after a wider grid and a per-object probe):
     every pixel within 2% (Cycles) / 4% (EEVEE, half-float textures and its film filter) of the numpy answer, and
     the user's material intact."""
-    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender.lighting import local_light as ll
     if engine == "BLENDER_EEVEE_NEXT" and "BLENDER_EEVEE_NEXT" not in \
             bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items.keys():
         engine = "BLENDER_EEVEE"
@@ -177,7 +177,7 @@ def test_group_darkens_and_corrects_the_world(blender, engine, tmp_path):
     H = W + D (the numpy twin core/probe/local_mix.py) within 3% median, 6% at the 95th percentile, in both engines. Before, EEVEE clamped
     the negative part (the sphere stayed as bright as the World), and EEVEE's order-1 World light kept its error
     (the poles 27% off here)."""
-    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender.lighting import local_light as ll
     from gs_ibl_addon.core.probe import local_mix
     scene, sphere, mat = _camera_scene("CYCLES" if engine == "CYCLES" else _eevee_engine())
     if engine == "CYCLES":
@@ -213,8 +213,8 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     Variation names the sphere; Per-Object Probes sets each mesh's coefficients (its centre's SH minus the World
     probe's, as the core computes them) and inserts the group into its material without losing the user's shader; the
     grid lights them after a save and reload; Remove Local Light gives back the material as it was."""
-    from gs_ibl_addon.blender import local_light as ll
-    from gs_ibl_addon.blender import splat_cache
+    from gs_ibl_addon.blender.lighting import local_light as ll
+    from gs_ibl_addon.blender.splats import cache as splat_cache
     from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients
     assert bpy.ops.gs_ibl.import_splats(native=False, filepath=ROOM, axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
     room = bpy.context.active_object
@@ -251,7 +251,7 @@ def test_operators_bake_save_reload_and_remove(blender, tmp_path):
     assert "Cube:" in report
     from types import SimpleNamespace
 
-    from gs_ibl_addon.blender.local_light_ui import GSIBL_PT_local_light
+    from gs_ibl_addon.blender.ui.local_light_ui import GSIBL_PT_local_light
     from test_blender_native_import import _Layout  # records the labels a panel draws
     labels: list[str] = []
     GSIBL_PT_local_light.draw(SimpleNamespace(layout=_Layout(labels)), bpy.context)
@@ -296,7 +296,7 @@ def test_eevee_output_is_ours_to_add_and_remove(blender):
     """Lighting a material adds one EEVEE Material Output of ours fed by the group (the user's displacement copied
     to it) and removing the light deletes only our nodes; a material with an EEVEE output of its own keeps it and
     gets none of ours."""
-    from gs_ibl_addon.blender import local_light as ll
+    from gs_ibl_addon.blender.lighting import local_light as ll
     bpy.ops.mesh.primitive_uv_sphere_add()
     obj = bpy.context.active_object
     mat = bpy.data.materials.new("user")

@@ -9,7 +9,7 @@ from gs_ibl_addon.core.synthetic import random_scene
 
 
 def test_view_dependent_colour_turns_with_the_object(blender):
-    from gs_ibl_addon.blender.splat_object import create_splat_object, scene_from_object
+    from gs_ibl_addon.blender.splats.object import create_splat_object, scene_from_object
     src = random_scene(40, seed=3, sh_degree=3)
     obj = create_splat_object(blender.context, src, "S", proxy=False)
     obj.rotation_euler = (0.4, -0.7, 2.0)

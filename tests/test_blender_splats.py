@@ -9,7 +9,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from gs_ibl_addon.blender.splat_object import PROXY_POINTS, create_splat_object, scene_from_object  # noqa: E402
+from gs_ibl_addon.blender.splats.object import PROXY_POINTS, create_splat_object, scene_from_object  # noqa: E402
 
 from gs_ibl_addon.core.synthetic import random_scene  # noqa: E402
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from gs_ibl_addon.blender.overlay_math import (SplatOverlay, ViewMotion, look_at_view_matrix, overlay_view,
+from gs_ibl_addon.blender.viewport.overlay_math import (SplatOverlay, ViewMotion, look_at_view_matrix, overlay_view,
                                                perspective_matrix, view_key)
 from gs_ibl_addon.core.render.coarse import coarse_scene
 from gs_ibl_addon.core.render.lod import _grid, mean_footprint

@@ -370,7 +370,7 @@ def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_
                                                                     write_3dgs_ply):
     """In a real bpy: a probe with Lights 1 over the sun shell gets one sun (the core's direction, irradiance and
     angle; shadows on) in "GS-IBL Lights"; a re-bake replaces it, Lights 0 removes it."""
-    from gs_ibl_addon.blender.lights_from_probe import COLLECTION, lights_of
+    from gs_ibl_addon.blender.lighting.lights_from_probe import COLLECTION, lights_of
     path = tmp_path / "sun.ply"
     write_3dgs_ply(path, sun_shells["float"])
     assert blender.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
@@ -398,7 +398,7 @@ def test_blender_makes_sun_lights_from_the_probe_and_replaces_them(blender, sun_
 
 def test_blender_highlight_gain_lights_the_clipped_capture_like_the_float_one(blender, sun_shells, sun_float,
                                                                              tmp_path, write_3dgs_ply):
-    from gs_ibl_addon.blender import world as gw
+    from gs_ibl_addon.blender.lighting import world as gw
     path = tmp_path / "clipped.ply"
     write_3dgs_ply(path, sun_shells["clipped"])
     assert blender.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", show_proxy=False) == {"FINISHED"}
@@ -422,8 +422,8 @@ def test_cycles_sun_from_the_probe_lights_like_the_light_it_replaces(sun_shells,
     import gs_ibl_addon
     from test_blender_lighting import _cycles, _diffuse_material, _render, _scene, _sphere_pixels
 
-    from gs_ibl_addon.blender.bake import bake_into_world
-    from gs_ibl_addon.blender.splat_object import create_splat_object
+    from gs_ibl_addon.blender.lighting.bake import bake_into_world
+    from gs_ibl_addon.blender.splats.object import create_splat_object
     renders = {}
     for lights in (0, 1):
         scene, sphere = _scene("CYCLES")

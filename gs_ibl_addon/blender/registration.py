@@ -5,7 +5,11 @@ from __future__ import annotations
 import bpy
 
 from ..core.vk import pipeline_cache
-from . import bake, bake_undo, importer, local_light_ui, overlay, panel, properties, splat_cache, webp_decoder
+from .lighting import auto_update, undo
+from .splats import cache as splat_cache
+from .splats import importer, webp_decoder
+from .ui import local_light_ui, panel, properties
+from .viewport import overlay, picking
 
 _CLASSES = (*properties.CLASSES, *importer.CLASSES, *panel.CLASSES, *local_light_ui.CLASSES)
 _MENUS = (*importer.MENUS, *panel.MENUS)
@@ -20,17 +24,19 @@ def register() -> None:
     for menu, fn in _MENUS:
         menu.append(fn)
     splat_cache.register_handlers()
-    bake.register_handlers()
-    bake_undo.register_handlers()
+    auto_update.register_handlers()
+    undo.register_handlers()
     overlay.register_overlay()
+    picking.register_picking()
     webp_decoder.register()
 
 
 def unregister() -> None:
     webp_decoder.unregister()
+    picking.unregister_picking()
     overlay.unregister_overlay()
-    bake_undo.unregister_handlers()
-    bake.unregister_handlers()
+    undo.unregister_handlers()
+    auto_update.unregister_handlers()
     splat_cache.unregister_handlers()  # after the overlay: frees the renderers it drew with
     for menu, fn in reversed(_MENUS):
         menu.remove(fn)

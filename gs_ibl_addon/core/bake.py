@@ -144,7 +144,7 @@ def check_fits_device(s: ProbeSettings, ctx=None, splats: int = 0, sh_coeffs: in
     check_fits("face_size" if s.face_size else "max_face_size", face,
                cube_bytes(face, s.irradiance_size, splats, sh_coeffs, s.glossy),
                lambda v: cube_bytes(v, s.irradiance_size, splats, sh_coeffs, s.glossy), ctx,
-               f"^2 faces" + (f" with {splats:,} splats" if splats else ""))
+               "^2 faces" + (f" with {splats:,} splats" if splats else ""))
     check_fits("irradiance_size", s.irradiance_size, cube_bytes(face, s.irradiance_size, splats, sh_coeffs, s.glossy),
                lambda v: cube_bytes(face, v, splats, sh_coeffs, s.glossy), ctx, "^2 irradiance faces")
 

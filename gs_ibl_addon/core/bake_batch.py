@@ -26,7 +26,6 @@ from .probe import ProbeResult, filter_probe
 from .probe.highlights import gain_clipped_splats
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import BATCH_METHODS, filter_probes, gpu_ggx_prefilter
-from .probe.holes import fill_holes
 from .render.renderer import SplatRenderer, largest_probe_face
 from .scene import SplatScene
 from .settings import AUTO_FIRST_FACE

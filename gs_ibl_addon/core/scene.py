@@ -74,8 +74,8 @@ class SplatScene:
         sh = np.zeros((self.count, k, 3), np.float32)
         m = min(k, self.sh.shape[1])
         sh[:, :m] = self.sh[:, :m]
-        return SplatScene(self.positions, self.scales, self.rotations, self.opacities, sh, self.source, dict(self.repairs),
-                          self.colour_space)
+        return SplatScene(self.positions, self.scales, self.rotations, self.opacities, sh, self.source,
+                          dict(self.repairs), self.colour_space)
 
     def subset(self, index: np.ndarray) -> "SplatScene":
         return SplatScene(self.positions[index], self.scales[index], self.rotations[index], self.opacities[index],

@@ -267,7 +267,8 @@ def random_scene(n: int, seed: int = 0, sh_degree: int = 3, extent: float = 1.0)
 
     Log-scales ~ N(log(0.02 extent), 0.7) per axis (so splats are anisotropic, some needle-like), uniform random
     rotations, opacities = sigmoid(N(1, 2.5)) (many near 0 and 1, as trained scenes have), DC colours rendering as
-    RGB in [0.02, 0.98], higher SH bands of standard deviation 0.15 / l (uniformly drawn). Vectorised float32 throughout (6M splats: a few seconds).
+    RGB in [0.02, 0.98], higher SH bands of standard deviation 0.15 / l (uniformly drawn). Vectorised float32 throughout
+    (6M splats: a few seconds).
     """
     rng = np.random.default_rng(seed)
     f32 = np.float32

@@ -9,7 +9,8 @@ usually faster (the sample room's: 0.86% at 32^2, 0.10% at 64^2).
 The estimate. The error at the finer of two sizes rendered is the geometric tail of the change between them,
 change x r^k / (1 - r^k) after k doublings, with r the error's fall per doubling: 0.5 (first order, the slowest)
 until two changes measure it (per face, once a face has changed twice), then their ratio clamped to
-TAIL_RATIO_RANGE. Sizes not yet rendered are predicted by the same fall. Against a 1024^2 truth the estimate at 64^2 from 32^2 was 2.6-10x the true error on the sample
+TAIL_RATIO_RANGE. Sizes not yet rendered are predicted by the same fall. Against a 1024^2 truth the estimate at 64^2
+from 32^2 was 2.6-10x the true error on the sample
 room, the guitar capture and the synthetic scenes (docs/accuracy.md), 2.6x on a starfield of splats far below a
 texel.
 

@@ -55,8 +55,8 @@ def _render(name: str, samples: int, size) -> tuple[np.ndarray, float]:
 
 def main() -> dict:
     bs.enable_extension()
-    gb = importlib.import_module(f"{MODULE}.blender.bake")
-    so = importlib.import_module(f"{MODULE}.blender.splat_object")
+    gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
+    so = importlib.import_module(f"{MODULE}.blender.splats.object")
     out = {"blender": bpy.app.version_string, "cases": {}}
     for case in ARGS["cases"]:
         key = case["key"]

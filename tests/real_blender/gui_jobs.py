@@ -61,7 +61,7 @@ def longest_gaps(pkg: str, t0: float, n: int = 4) -> list[dict]:
     """The ``n`` longest gaps since ``t0`` (seconds after t0), with the overlay draws that ended inside each (their
     draw ms): what held the main thread."""
     beats = [t for t in state["beats"] if t >= t0]
-    draws = list(mod(pkg, "blender.overlay").draw_log)  # (time.monotonic(), region, scale, render ms, draw ms)
+    draws = list(mod(pkg, "blender.viewport.overlay").draw_log)  # (time.monotonic(), region, scale, render ms, draw ms)
     shift = time.perf_counter() - time.monotonic()
     gaps = sorted(zip(beats, beats[1:]), key=lambda ab: ab[0] - ab[1])[:n]
     return [{"at": round(a - t0, 2), "gap": round(b - a, 3),
@@ -105,7 +105,7 @@ def invoke(op: str, **kwargs) -> None:
 
 def look(pkg: str, name: str) -> None:
     """What a user sees now: a screenshot, and the running jobs' status lines (the status bar's text)."""
-    jobs = mod(pkg, "blender.jobs")
+    jobs = mod(pkg, "blender.common.jobs")
     running = jobs.running()
     state["steps"][name] = {"png": screenshot(name), "status": [r.status() for r in running],
                             "fractions": [r.fraction for r in running], "time": time.perf_counter()}
@@ -130,7 +130,7 @@ def escape() -> None:
 
 def wait_for_jobs(pkg: str, name: str, timeout: float = 240.0):
     """Steps that wait (a second at a time) until no job runs, then record ``name``."""
-    jobs = mod(pkg, "blender.jobs")
+    jobs = mod(pkg, "blender.common.jobs")
     end = time.perf_counter() + timeout
     while jobs.running() and time.perf_counter() < end:
         yield 1.0, lambda: None
@@ -138,7 +138,7 @@ def wait_for_jobs(pkg: str, name: str, timeout: float = 240.0):
 
 
 def record_end(pkg: str, name: str) -> None:
-    jobs = mod(pkg, "blender.jobs")
+    jobs = mod(pkg, "blender.common.jobs")
     scene = bpy.context.scene
     probe = bpy.data.objects.get(state["probe"])
     s = probe.gs_ibl_probe if probe is not None else None
@@ -169,13 +169,13 @@ def import_big(pkg: str) -> None:
 
 
 def import_record(pkg: str) -> None:
-    overlay = mod(pkg, "blender.overlay")
+    overlay = mod(pkg, "blender.viewport.overlay")
     _w, _a, _s, region = view3d()
     new = sorted(set(o.name for o in bpy.data.objects) - set(state["objects_before_import"]))
     record_end(pkg, "import_done")
     state["steps"]["import_done"].update(new=new, show=bpy.context.scene.gs_ibl_overlay.show,
                                          drawn=overlay.last_draw.get(region.as_pointer(), {}).get("objects_drawn"),
-                                         overlay_error=overlay.last_error)
+                                         overlay_error=overlay.error_text())
 
 
 def drop_import(pkg: str) -> None:
@@ -192,7 +192,7 @@ def confirm() -> None:
 def drop_record(pkg: str) -> None:
     new = sorted(set(o.name for o in bpy.data.objects) - set(state["objects_before_drop"]))
     state["steps"]["drop_done"] = {"new": new, "png": screenshot("drop_done"),
-                                   "running": [r.status() for r in mod(pkg, "blender.jobs").running()]}
+                                   "running": [r.status() for r in mod(pkg, "blender.common.jobs").running()]}
     log(f"drop: {state['steps']['drop_done']}")
 
 

@@ -91,7 +91,7 @@ def cube(name: str, location, size: float) -> bpy.types.Object:
 
 
 def build(pkg: str) -> None:
-    splat_object, formats = mod(pkg, "blender.splat_object"), mod(pkg, "core.formats")
+    splat_object, formats = mod(pkg, "blender.splats.object"), mod(pkg, "core.formats")
     for obj in list(bpy.data.objects):  # the startup file's cube, camera and light
         bpy.data.objects.remove(obj)
     bpy.context.view_layer.update()
@@ -157,7 +157,7 @@ def nudge(k: int) -> None:
 def record_motion(pkg: str) -> None:
     _w, _a, _s, region = view3d()
     slot = region.as_pointer()
-    log_ = [(t, s, ms, dms) for t, sl, s, ms, dms in mod(pkg, "blender.overlay").draw_log if sl == slot]
+    log_ = [(t, s, ms, dms) for t, sl, s, ms, dms in mod(pkg, "blender.viewport.overlay").draw_log if sl == slot]
     state["motion"] = {"draws": log_, "last_nudge": state["last_nudge"],
                        "resolution": bpy.context.scene.gs_ibl_overlay.resolution_scale}
     log(f"motion: last nudge {state['last_nudge']:.2f}, draws {[(round(t, 2), s) for t, s, _m, _d in log_[-8:]]}")
@@ -168,7 +168,7 @@ def record(shot: str, pkg: str) -> None:
     r3d = space.region_3d
     path = os.path.join(OUT, f"{shot}.png")
     subprocess.run(["import", "-window", "root", path], check=True)
-    overlay = mod(pkg, "blender.overlay")
+    overlay = mod(pkg, "blender.viewport.overlay")
     room = state["room"]
     corners = [list(room.matrix_world @ Vector(c)) for c in room.bound_box]
     info = {"png": os.path.basename(path), "window": [window.width, window.height],
@@ -178,10 +178,10 @@ def record(shot: str, pkg: str) -> None:
             "points": {k: project(r3d, region, p) for k, p in
                        (("occluder", OCCLUDER), ("blob", BLOB), ("backdrop", BACKDROP))},
             "room_bounds": corners, "room_display": room.display_type,
-            "last_draw": {str(k): v for k, v in overlay.last_draw.items()}, "error": overlay.last_error}
+            "last_draw": {str(k): v for k, v in overlay.last_draw.items()}, "error": overlay.error_text()}
     if bpy.context.scene.gs_ibl_overlay.show:
         scale = bpy.context.scene.gs_ibl_overlay.resolution_scale
-        img = overlay.splat_image(room, r3d, region.width, region.height, scale, slot="gui-check")
+        img = mod(pkg, "blender.viewport.overlay_images").splat_image(room, r3d, region.width, region.height, scale, slot="gui-check")
         cov = os.path.join(OUT, f"{shot}_coverage.npy")
         np.save(cov, img.rgba[..., 3])
         info["coverage"], info["coverage_rect"] = os.path.basename(cov), list(img.view.ndc_rect)
@@ -194,7 +194,7 @@ def _fill(fb_size, rgba_lin: np.ndarray) -> None:
     overlay layer, for the offscreen composite check."""
     import gpu
     from gpu_extras.batch import batch_for_shader
-    overlay = state["overlay_mod"]
+    overlay_gpu = state["overlay_gpu"]
     info = gpu.types.GPUShaderCreateInfo()
     iface = gpu.types.GPUStageInterfaceInfo("gui_fill_iface")
     iface.smooth("VEC2", "uv")
@@ -206,7 +206,7 @@ def _fill(fb_size, rgba_lin: np.ndarray) -> None:
     info.vertex_source("void main() { uv = texCoord; gl_Position = vec4(pos, 0.0, 1.0); }")
     info.fragment_source("void main() { fragColor = texelFetch(image, ivec2(gl_FragCoord.xy), 0); }")
     sh = gpu.shader.create_from_info(info)
-    tex = overlay._float_texture(rgba_lin.astype(np.float32), "RGBA32F")
+    tex = overlay_gpu._float_texture(rgba_lin.astype(np.float32), "RGBA32F")
     batch = batch_for_shader(sh, "TRI_FAN", {"pos": ((-1, -1), (1, -1), (1, 1), (-1, 1)),
                                              "texCoord": ((0, 0), (1, 0), (1, 1), (0, 1))})
     gpu.state.blend_set("NONE")
@@ -220,8 +220,9 @@ def shader_check(pkg: str) -> None:
     handler draws and read back: the plain quads (overlay_math.layer_colour, window_depth) and the composite
     (overlay_math.composite: every branch, on synthetic inputs; the layer given as Blender leaves it)."""
     import gpu
-    overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
-    state["overlay_mod"], state["om"] = overlay, om
+    overlay, om = mod(pkg, "blender.viewport.overlay"), mod(pkg, "blender.viewport.overlay_math")
+    overlay_gpu = mod(pkg, "blender.viewport.overlay_gpu")
+    state["overlay_mod"], state["om"], state["overlay_gpu"] = overlay, om, overlay_gpu
     w, h = 96, 64
     rng = np.random.default_rng(7)
     rgba = rng.random((h, w, 4)).astype(np.float32) * np.float32(1.5)
@@ -237,16 +238,16 @@ def shader_check(pkg: str) -> None:
     with off.bind():
         fb = gpu.state.active_framebuffer_get()
         fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-        colour_tex, depth_tex = overlay.textures(rgba, depth)
-        overlay.draw_quads([(colour_tex, depth_tex, (-1.0, -1.0, 1.0, 1.0),
-                             overlay.shader_params(view, exposure))])
+        colour_tex, depth_tex = overlay_gpu.textures(rgba, depth)
+        overlay_gpu.draw_quads([(colour_tex, depth_tex, (-1.0, -1.0, 1.0, 1.0),
+                             overlay_gpu.shader_params(view, exposure))])
         got = np.array(fb.read_color(0, 0, w, h, 4, 0, "FLOAT").to_list(), np.float32).reshape(h, w, 4)[::-1]
         got_depth = np.array(fb.read_depth(0, 0, w, h).to_list(), np.float32).reshape(h, w)[::-1]
     off.free()
     a = rgba[..., 3]
     lc, la = om.layer_colour(rgba, exposure)
-    want = np.where((a >= overlay.ALPHA_CUT)[..., None], np.concatenate([lc, la[..., None]], -1), 0.0)
-    want_depth = np.where(a >= overlay.OPAQUE_CUT, om.window_depth(depth, view, om.DEPTH_PULL), 1.0)
+    want = np.where((a >= overlay_gpu.ALPHA_CUT)[..., None], np.concatenate([lc, la[..., None]], -1), 0.0)
+    want_depth = np.where(a >= overlay_gpu.OPAQUE_CUT, om.window_depth(depth, view, om.DEPTH_PULL), 1.0)
     state["shader_check"] = {"colour_max_error": float(np.abs(got - want).max()),
                              "depth_max_error": float(np.abs(got_depth - want_depth).max()),
                              "pixels": w * h}
@@ -257,7 +258,8 @@ def shader_check(pkg: str) -> None:
 
 def composite_offscreen_check(pkg: str, w: int = 80, h: int = 56, n_layers: int = 2) -> dict:
     import gpu
-    overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
+    overlay_gpu = mod(pkg, "blender.viewport.overlay_gpu")
+    om = mod(pkg, "blender.viewport.overlay_math")
     srgb = mod(pkg, "core.colour").linear_to_srgb
     rng = np.random.default_rng(11)
     view_m = om.look_at_view_matrix((0.3, -4.0, 2.0), (0.0, 0.0, 0.0))
@@ -304,27 +306,27 @@ def composite_offscreen_check(pkg: str, w: int = 80, h: int = 56, n_layers: int 
         dist = rng.choice([0.6, 1.5, 3.0, 8.0], (h, w)).astype(np.float32) + np.float32(0.01 * k)
         wd = om.window_depth(dist, ov_view, om.DEPTH_PULL)
         rgb, al = om.layer_colour(rgba, 0.0)
-        layers_px.append(overlay.textures(rgba, dist))
+        layers_px.append(overlay_gpu.textures(rgba, dist))
         layers_ref.append((rgb, al, wd))
     discs = [(20.5, 30.5, 9.0), (60.0, 12.0, 5.0)]
     ref, written = om.composite(o8, depth, layers_ref, bg, use_coverage=True, grid=(view_m, win_m, (0, 0, 1)),
                                 discs=discs)
     want = np.where(written[..., None], ref, o_dec)
-    params = overlay.composite_params(win_m, view_m, w, h, {"kind": "SINGLE_COLOR", "high": tuple(bg),
+    params = overlay_gpu.composite_params(win_m, view_m, w, h, {"kind": "SINGLE_COLOR", "high": tuple(bg),
                                                             "low": tuple(bg), "use_coverage": True},
                                       (0.0, 0.0, 1.0), discs)
     snap = []
     for lo, hi in ((0, 1), (2, 3)):  # as the draw handler packs them: r + 256 g, b + 256 a (rows bottom first)
         v = np.ascontiguousarray((o8[::-1, :, lo].astype(np.float32) + 256.0 * o8[::-1, :, hi]).ravel(), np.float32)
         snap.append(gpu.types.GPUTexture((w, h), format="R32F", data=gpu.types.Buffer("FLOAT", v.size, v)))
-    dtex = overlay._float_texture(depth.astype(np.float32), "R32F")
+    dtex = overlay_gpu._float_texture(depth.astype(np.float32), "R32F")
     off = gpu.types.GPUOffScreen(w, h, format="RGBA32F")
     with off.bind():
         fb = gpu.state.active_framebuffer_get()
         fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         _fill((w, h), o_dec)
-        overlay.draw_composite(tuple(snap), dtex, layers_px, (-1.0, -1.0, 1.0, 1.0),
-                               overlay.shader_params(ov_view, 0.0), params)
+        overlay_gpu.draw_composite(tuple(snap), dtex, layers_px, (-1.0, -1.0, 1.0, 1.0),
+                               overlay_gpu.shader_params(ov_view, 0.0), params)
         got = np.array(fb.read_color(0, 0, w, h, 4, 0, "FLOAT").to_list(), np.float32).reshape(h, w, 4)[::-1]
     off.free()
     err = np.abs(got - want).max(-1)
@@ -376,7 +378,7 @@ def cursor_record(tag: str, pkg: str) -> None:
     c = state["clicks"][tag]
     c["cursor"] = list(map(float, bpy.context.scene.cursor.location))
     c["error_m"] = float(np.linalg.norm(np.array(c["cursor"]) - np.array(c["truth"])))
-    c["pick"] = dict(mod(pkg, "blender.picking").last_pick)
+    c["pick"] = dict(mod(pkg, "blender.viewport.picking").last_pick)
     log(f"cursor {tag}: {c}")
 
 
@@ -390,7 +392,7 @@ def select_record(tag: str, pkg: str) -> None:
     active = bpy.context.view_layer.objects.active
     rec = state["selects"][tag]
     rec.update(selected=sorted(o.name for o in bpy.context.selected_objects),
-               active=active.name if active else None, pick=dict(mod(pkg, "blender.picking").last_pick))
+               active=active.name if active else None, pick=dict(mod(pkg, "blender.viewport.picking").last_pick))
     log(f"select {tag}: {rec}")
 
 
@@ -442,11 +444,11 @@ def edge_record(shot: str, pkg: str) -> None:
     corners = [plane.matrix_world @ Vector((sx * EDGE_SIZE / 2, sy * EDGE_SIZE / 2, 0.0))
                for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
     state["shots"][shot]["edge_corners"] = [project(space.region_3d, region, c)[:2] for c in corners]
-    state["shots"][shot]["draw"] = {str(k): v for k, v in mod(pkg, "blender.overlay").last_draw.items()}
+    state["shots"][shot]["draw"] = {str(k): v for k, v in mod(pkg, "blender.viewport.overlay").last_draw.items()}
 
 
 def composite_capture(pkg: str) -> None:
-    overlay = mod(pkg, "blender.overlay")
+    overlay = mod(pkg, "blender.viewport.overlay")
     overlay.capture.clear()
     overlay.capture["next"] = True
     view3d()[1].tag_redraw()
@@ -455,7 +457,7 @@ def composite_capture(pkg: str) -> None:
 def composite_real_check(pkg: str) -> None:
     """The composite as drawn in the viewport against overlay_math.composite on the same overlay layer, depth and
     splat image (Resolution 1: the image's pixels are the region's)."""
-    overlay, om = mod(pkg, "blender.overlay"), mod(pkg, "blender.overlay_math")
+    overlay, om = mod(pkg, "blender.viewport.overlay"), mod(pkg, "blender.viewport.overlay_math")
     srgb = mod(pkg, "core.colour").linear_to_srgb
     cap = overlay.capture
     if "out" not in cap:
@@ -467,7 +469,7 @@ def composite_real_check(pkg: str) -> None:
     p = cap["params"]
     layers = []
     for name in cap["objects"]:
-        img = overlay.splat_image(bpy.data.objects[name], r3d, w, h, 1.0, region.as_pointer())
+        img = mod(pkg, "blender.viewport.overlay_images").splat_image(bpy.data.objects[name], r3d, w, h, 1.0, region.as_pointer())
         rgb, a = om.layer_colour(img.rgba, bpy.context.scene.gs_ibl_overlay.exposure)
         layers.append((rgb, a, om.window_depth(img.depth, img.view, om.DEPTH_PULL)))
     view_m, win_m = np.array(r3d.view_matrix), np.array(r3d.window_matrix)
@@ -502,7 +504,7 @@ def import_check(pkg: str):
         view3d()[1].tag_redraw()
 
     def drawn():
-        overlay = mod(pkg, "blender.overlay")
+        overlay = mod(pkg, "blender.viewport.overlay")
         _w, _a, _s, region = view3d()
         d = overlay.last_draw.get(region.as_pointer(), {})
         state["import"]["drawn"] = d.get("objects_drawn", [])
@@ -520,7 +522,7 @@ def _pixels(img) -> np.ndarray:
 def auto_update_check(pkg: str):
     """Update When Moved: a probe added at a selected mesh follows it; moving the mesh in the GUI (G, mouse, click)
     re-bakes once, and Ctrl+Z after it re-bakes nothing and leaves the report of the World in use."""
-    bake = mod(pkg, "blender.bake")
+    bake = mod(pkg, "blender.lighting.auto_update")  # its count of automatic bakes
     rec = state.setdefault("auto", {})
     settings = bpy.context.scene.gs_ibl_overlay
 
@@ -612,7 +614,7 @@ def auto_update_check(pkg: str):
 
 
 def set_composite(on: bool, pkg: str) -> None:
-    mod(pkg, "blender.overlay").use_composite = on
+    mod(pkg, "blender.viewport.overlay").use_composite = on
     view3d()[1].tag_redraw()
 
 
@@ -633,9 +635,9 @@ def keep_draw_log(pkg: str, tag: str) -> None:
     """The overlay's recent draws (time, scale, render ms, draw ms) of the 3D region, under a tag."""
     _w, _a, _s, region = view3d()
     slot = region.as_pointer()
-    entries = [(t, s, ms, dms) for t, sl, s, ms, dms in mod(pkg, "blender.overlay").draw_log if sl == slot]
+    entries = [(t, s, ms, dms) for t, sl, s, ms, dms in mod(pkg, "blender.viewport.overlay").draw_log if sl == slot]
     state.setdefault("draw_log", {})[tag] = entries
-    mod(pkg, "blender.overlay").draw_log.clear()
+    mod(pkg, "blender.viewport.overlay").draw_log.clear()
 
 
 def steps(pkg: str):
@@ -761,7 +763,7 @@ def _picture_scene(pkg: str) -> None:
     bpy.ops.object.shade_smooth()
     for obj, grey in ((sphere, 0.8), (monkey, 0.5)):
         mat = bpy.data.materials.new(obj.name)
-        bsdf = mod(pkg, "blender.compat").node_tree(mat).nodes.get("Principled BSDF")
+        bsdf = mod(pkg, "blender.common.compat").node_tree(mat).nodes.get("Principled BSDF")
         bsdf.inputs["Base Color"].default_value = (grey, grey, grey, 1.0)
         bsdf.inputs["Roughness"].default_value = 0.6
         obj.data.materials.append(mat)

@@ -53,10 +53,10 @@ def _render_spheres(spheres: dict, tag: str, samples: int, rec: dict) -> None:
 
 def main() -> dict:
     bs.enable_extension()
-    gb = importlib.import_module(f"{MODULE}.blender.bake")
-    so = importlib.import_module(f"{MODULE}.blender.splat_object")
-    op = importlib.import_module(f"{MODULE}.blender.object_probes")
-    pgrid = importlib.import_module(f"{MODULE}.blender.probe_grid")
+    gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
+    so = importlib.import_module(f"{MODULE}.blender.splats.object")
+    op = importlib.import_module(f"{MODULE}.blender.lighting.object_probes")
+    pgrid = importlib.import_module(f"{MODULE}.blender.lighting.probe_grid")
     rec: dict = {"blender": bpy.app.version_string}
     try:
         bs.clear()

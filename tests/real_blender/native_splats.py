@@ -27,8 +27,9 @@ ARGS = json.load(open(sys.argv[1]))
 
 def main() -> dict:
     bs.enable_extension()
-    so = importlib.import_module(f"{MODULE}.blender.splat_object")
-    gb = importlib.import_module(f"{MODULE}.blender.bake")
+    so = importlib.import_module(f"{MODULE}.blender.splats.object")
+    gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
+    au = importlib.import_module(f"{MODULE}.blender.lighting.auto_update")
     core_bake = importlib.import_module(f"{MODULE}.core.bake")
     out = {"blender": bpy.app.version_string, "files": {}}
     for key, path, kind in ARGS["files"]:
@@ -63,17 +64,17 @@ def main() -> dict:
             rec["linear_over_srgb"] = float(np.mean(linear.irradiance) / np.mean(result.irradiance))
             # no double light: Cycles' bounces stop seeing the splats while our World carries their light
             rec["muted"] = [obj.visible_camera, obj.visible_diffuse, obj.visible_glossy]
-            gw = importlib.import_module(f"{MODULE}.blender.world")
+            gw = importlib.import_module(f"{MODULE}.blender.lighting.world")
             rec["restored"] = [gw.restore_world(bpy.context.scene), obj.visible_diffuse, obj.visible_glossy]
             # Update When Moved with a native object: moving it notes one re-bake (timers do not run in the bpy
             # module, so the timer's function is called here as Blender's event loop would)
             s.auto_update = True
-            n0 = gb.auto_bakes
+            n0 = au.auto_bakes
             obj.location.x += 0.1
             bpy.context.view_layer.update()
-            noted = len(gb._pending)
-            gb.run_pending()
-            rec["auto"] = [noted, gb.auto_bakes - n0]
+            noted = len(au._pending)
+            au.run_pending()
+            rec["auto"] = [noted, au.auto_bakes - n0]
             rec["ok"] = True
         except Exception:  # noqa: BLE001 (reported to the test, which fails on it)
             rec.update(ok=False, error=traceback.format_exc())

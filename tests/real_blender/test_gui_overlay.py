@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from gs_ibl_addon.blender.overlay_math import MOVING_SCALE
+from gs_ibl_addon.blender.viewport.overlay_math import MOVING_SCALE
 from test_matrix import REPO, Entry, run_gui_script
 
 ENTRY = Entry("gui-overlay", "sid", True, gui=True)

@@ -25,7 +25,7 @@ import numpy as np
 from plyfile import PlyData, PlyElement, PlyParseError
 
 from ..scene import SplatScene, rgb_to_sh_dc, sh_dc_to_rgb
-from . import check_input, fail
+from .checks import check_input, fail
 from .ply import parse_header
 
 CHUNK_SIZE = 256
@@ -247,7 +247,8 @@ def write_compressed_ply(path: str | os.PathLike, scene: SplatScene, sort: bool 
     vertex["packed_position"] = pack111011(_normalise_in_range(pos, p_lo, p_hi))
     vertex["packed_rotation"] = _pack_rotation(scene.rotations[order])
     vertex["packed_scale"] = pack111011(_normalise_in_range(log_scale, s_lo, s_hi))
-    vertex["packed_color"] = ((_pack_unorm(t_col[:, 0], 8) << np.uint32(24)) | (_pack_unorm(t_col[:, 1], 8) << np.uint32(16))
+    vertex["packed_color"] = ((_pack_unorm(t_col[:, 0], 8) << np.uint32(24)) | (_pack_unorm(t_col[:, 1], 8) <<
+    np.uint32(16))
                               | (_pack_unorm(t_col[:, 2], 8) << np.uint32(8)) | _pack_unorm(alpha, 8))
 
     chunks = np.empty(n_chunks, [(name, "<f4") for name in _CHUNK_BASE + _CHUNK_COLOUR])

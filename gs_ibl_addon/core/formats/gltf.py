@@ -27,7 +27,7 @@ from functools import partial
 import numpy as np
 
 from ..scene import SH_C0, SplatScene, quat_multiply
-from . import check_input, fail
+from .checks import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 EXT = "KHR_gaussian_splatting"

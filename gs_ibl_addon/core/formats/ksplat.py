@@ -23,7 +23,7 @@ from functools import partial
 import numpy as np
 
 from ..scene import SplatScene, rgb_to_sh_dc
-from . import check_input, fail
+from .checks import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 MAIN_HEADER = 4096

@@ -45,7 +45,7 @@ import numpy as np
 from plyfile import PlyData, PlyElement, PlyListProperty, PlyParseError
 
 from ..scene import SplatScene
-from . import check_input, fail
+from .checks import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 CHUNK_ROWS = 1 << 14  # splats converted per step: a few MB, so a chunk's temporaries stay in the CPU's cache
@@ -154,7 +154,8 @@ def check_counts(path: str, ply: PlyData, offset: int) -> None:
         if need > have:
             rows = f"{element.count} splats" if element.name == "vertex" else f"{element.count} '{element.name}' rows"
             raise fail(path, f"the header promises {rows}, at least {need:,} bytes, but only {have:,} bytes follow "
-                             "it: the file is truncated or its header is damaged", "get the file again or export it again")
+                             "it: the file is truncated or its header is damaged",
+                       "get the file again or export it again")
 
 
 def _uniform_dtype(vertex: PlyElement, byte_order: str) -> np.dtype | None:

@@ -31,7 +31,7 @@ from functools import partial
 import numpy as np
 
 from ..scene import SplatScene
-from . import check_input, fail
+from .checks import check_input, fail
 from . import webp
 from .repair import clamp_scales, new_counts, reported
 

@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 
 from ..scene import SplatScene, rgb_to_sh_dc, sh_dc_to_rgb
-from . import check_input, fail
+from .checks import check_input, fail
 from .repair import clamp_scales, new_counts, normalise_quaternions, reported
 
 RECORD = np.dtype([("position", "<f4", 3), ("scale", "<f4", 3), ("rgba", "u1", 4), ("rotation", "u1", 4)])

@@ -35,7 +35,7 @@ import numpy as np
 from ..scene import SplatScene
 from ..sh import degree_of, sh_basis
 from . import zstd
-from . import check_input, fail
+from .checks import check_input, fail
 
 MAGIC = 0x5053474E
 COLOR_SCALE = 0.15  # SPZ stores f_dc * 0.15 (not SH_C0) so DC colours a little outside [0, 1] survive

@@ -78,7 +78,8 @@ def omega_table(ctx, n: int) -> Buffer:
 def texel_table(ctx, k: int) -> Buffer:
     """(direction, dOmega / pi) per texel of a k^2 cube: probe_integrate's input."""
     return _table(ctx, ("texels", k), lambda: np.concatenate(
-        [cubemap.face_directions(k).reshape(-1, 3), np.tile(cubemap.texel_solid_angles(k).reshape(-1) / math.pi, 6)[:, None]], 1))
+        [cubemap.face_directions(k).reshape(-1, 3),
+         np.tile(cubemap.texel_solid_angles(k).reshape(-1) / math.pi, 6)[:, None]], 1))
 
 
 def _reduction_groups(n: int) -> int:

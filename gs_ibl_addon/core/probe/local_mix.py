@@ -1,4 +1,4 @@
-"""How the local-light group turns a mesh's own light into a shader: the numpy twin of blender/local_light.py.
+"""How the local-light group turns a mesh's own light into a shader: the numpy twin of blender/lighting/local_light.py.
 
 The user's shader already sees the World's diffuse light B(n); the mesh should see H(n) = E(n) + D(n): the World
 probe's irradiance (its irradiance image, E/pi: what Cycles integrates from that World) plus the mesh's difference D
@@ -27,7 +27,7 @@ Cycles, 1.4% with this (2026-12-03).
 
 B differs by engine. Cycles integrates the World image: B = E, and H = E + D. EEVEE lights from an order-1 SH of
 the World (eevee_spherical_harmonics_lib.glsl, spherical_harmonics_evaluate_lambert: L0 + 2/3 L1, clamped at 0)
-once the World's sun extraction is off (World.sun_threshold = 0, blender/world.py), and H = W + D, our order-2
+once the World's sun extraction is off (World.sun_threshold = 0, blender/lighting/world.py), and H = W + D, our order-2
 light. Before storing the World's order-1 SH, EEVEE "derings" it (spherical_harmonics_dering, applied to the
 World's volume-probe brick): where any channel's largest L1 component exceeds what keeps that channel's lobe
 non-negative, every channel's L1 band is scaled by one factor, f = min over channels of L0 Y00 / (max_i |L1_i|

@@ -38,7 +38,7 @@ def sh_basis_any(dirs: np.ndarray, order: int) -> np.ndarray:
     # (x + i y)^m gives cos(m phi) sin^m(theta) and sin(m phi) sin^m(theta) without trigonometry.
     cm = [np.ones_like(x)]
     sm = [np.zeros_like(x)]
-    for m in range(1, order + 1):
+    for _ in range(order):
         cm.append(cm[-1] * x - sm[-1] * y)
         sm.append(cm[-2] * y + sm[-1] * x)
     for m in range(order + 1):

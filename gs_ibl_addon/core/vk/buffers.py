@@ -39,7 +39,8 @@ class Buffer:
         host = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
         # Host-visible device-local memory (lavapipe, resizable BAR) avoids staging copies; big buffers on a
         # discrete GPU live in plain device-local memory and go through a staging buffer.
-        choices = [local | host, local, host] if self.nbytes <= (256 << 20) or ctx.is_cpu else [local, local | host, host]
+        small = self.nbytes <= (256 << 20) or ctx.is_cpu
+        choices = [local | host, local, host] if small else [local, local | host, host]
         for flags in choices:
             try:
                 mtype = ctx.memory_type(req.memoryTypeBits, flags)
@@ -114,7 +115,8 @@ class Buffer:
         req = vk.vkGetBufferMemoryRequirements(ctx.device, b.handle)
         flags = vk.VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | vk.VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
         try:
-            mtype = ctx.memory_type(req.memoryTypeBits, flags | (vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT if cached else 0))
+            cached_bit = vk.VK_MEMORY_PROPERTY_HOST_CACHED_BIT if cached else 0
+            mtype = ctx.memory_type(req.memoryTypeBits, flags | cached_bit)
         except RuntimeError:
             mtype = ctx.memory_type(req.memoryTypeBits, flags)
         mai = vk.VkMemoryAllocateInfo(allocationSize=req.size, memoryTypeIndex=mtype)

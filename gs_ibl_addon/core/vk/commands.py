@@ -48,7 +48,8 @@ def _submit(ctx: VulkanContext, cmd):
     """Submit ``cmd`` and return its fence (from the context's pool) without waiting."""
     vk = ctx.vk
     with ctx.lock:
-        fence = ctx._free_fences.pop() if ctx._free_fences else vk.vkCreateFence(ctx.device, vk.VkFenceCreateInfo(), None)
+        fence = (ctx._free_fences.pop() if ctx._free_fences
+                 else vk.vkCreateFence(ctx.device, vk.VkFenceCreateInfo(), None))
         cmds = [cmd]
         si = vk.VkSubmitInfo(commandBufferCount=1, pCommandBuffers=cmds)
         sis = [si]

@@ -64,7 +64,8 @@ class VulkanContext:
             raise VulkanUnavailable(f"the Vulkan loader found no device; {INSTALL_HINT}")
         self.physical_device = self._choose(phys, device if device is not None else os.environ.get("GS_IBL_DEVICE"))
         props = vk.vkGetPhysicalDeviceProperties(self.physical_device)
-        self.device_name: str = props.deviceName if isinstance(props.deviceName, str) else vk.ffi.string(props.deviceName).decode()
+        name = props.deviceName
+        self.device_name: str = name if isinstance(name, str) else vk.ffi.string(name).decode()
         self.device_type: int = props.deviceType
         self.is_cpu = props.deviceType == vk.VK_PHYSICAL_DEVICE_TYPE_CPU
         self.timestamp_period_ns: float = props.limits.timestampPeriod

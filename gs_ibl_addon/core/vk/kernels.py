@@ -45,7 +45,8 @@ def _k(name: str, buffers: str, push: str = "", local: tuple[int, ...] = (256,))
 
 
 _SORT_PUSH = "n_blocks shift count_index drop drop_key"
-_EMIT = ("Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners", "n capacity n_views n_tiles")
+_EMIT = ("Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared Rects Owners",
+         "n capacity n_views n_tiles")
 _RASTER = ("Views Ranges InstVal Prepared Image Depth Count",
            "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
 KERNELS: dict[str, Kernel] = {k.name: k for k in (

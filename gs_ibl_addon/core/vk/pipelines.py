@@ -39,7 +39,8 @@ class Pipeline:
         smci = vk.VkShaderModuleCreateInfo(codeSize=len(code), pCode=code)
         self.module = vk.vkCreateShaderModule(ctx.device, smci, None)
         entry = "main"
-        stage = vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_COMPUTE_BIT, module=self.module, pName=entry)
+        stage = vk.VkPipelineShaderStageCreateInfo(stage=vk.VK_SHADER_STAGE_COMPUTE_BIT, module=self.module,
+                                                   pName=entry)
         cpci = vk.VkComputePipelineCreateInfo(stage=stage, layout=self.layout)
         cpcis = [cpci]
         self.handle = vk.vkCreateComputePipelines(ctx.device, ctx.pipeline_cache.handle, 1, cpcis, None)[0]

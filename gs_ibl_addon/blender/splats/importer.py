@@ -8,11 +8,11 @@ import numpy as np
 from bpy.props import BoolProperty, CollectionProperty, EnumProperty, FloatProperty, StringProperty
 from bpy_extras.io_utils import ImportHelper, axis_conversion
 
-from ..core.formats import EXTENSIONS, read_scene
-from ..core.formats.axes import declared_axes
-from ..core.formats.spz import read_spz
-from .jobs import JobOperator, Step, Work
-from .splat_object import create_steps, native_splats_supported
+from ...core.formats import EXTENSIONS, read_scene
+from ...core.formats.axes import declared_axes
+from ...core.formats.spz import read_spz
+from ..common.jobs import JobOperator, Step, Work
+from .object import create_steps, native_splats_supported
 
 _AXES = [(a, a, "") for a in ("X", "Y", "Z", "-X", "-Y", "-Z")]
 

@@ -3,17 +3,18 @@
 After the World probe's bake, probes at each lit mesh's centre and box corners are baked in one batch with one at
 the World probe's place (the measurement); a mesh whose light differs from the World's gets its centre's probe, and
 one whose light varies across it a grid (a second batch of the grid nodes not measured already), through the
-local-light group (blender/local_light.py), which adds the difference to the World's light. A mesh the World lights well enough costs its nine probes. Re-decided when a lit mesh moves (Update When Moved) and at every bake.
+local-light group (blender/local_light.py), which adds the difference to the World's light. A mesh the World lights well
+enough costs its nine probes. Re-decided when a lit mesh moves (Update When Moved) and at every bake.
 """
 from __future__ import annotations
 
 import bpy
 import numpy as np
 
-from ..core.probe.auto_light import (MEASURE_FACE, LightChoice, choose_light, measure_points, measured_nodes,
+from ...core.probe.auto_light import (MEASURE_FACE, LightChoice, choose_light, measure_points, measured_nodes,
                                      mesh_grid)
 from . import local_light as ll
-from .jobs import Job, Progress, Work, run_now
+from ..common.jobs import Job, Progress, Work, run_now
 from .object_probes import lit_meshes, point_coefficients, probe_renderer_steps, world_box
 
 REPORT_PREFIX = "Auto lighting: "

@@ -30,12 +30,12 @@ import bpy
 import numpy as np
 from mathutils import Matrix
 
-from ..core.colour import linear_sh_for_srgb_rule
-from ..core.scene import SplatScene, sh_dc_to_rgb
-from ..core.sh import degree_of
-from .compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
-from .datablocks import MARKER, find_ours
-from .jobs import Step, run_now
+from ...core.colour import linear_sh_for_srgb_rule
+from ...core.scene import SplatScene, sh_dc_to_rgb
+from ...core.sh import degree_of
+from ..common.compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
+from ..common.datablocks import MARKER, find_ours
+from ..common.jobs import Step, run_now
 
 # The splat object's MARKER is a dict {"source": path, "sh_degree": d, "version": 1}; the proxy's material and
 # node tree carry these roles (found by them, never by name: datablocks.py).

@@ -28,7 +28,7 @@ from bpy.props import BoolProperty, EnumProperty
 
 from . import overlay
 from .overlay_math import mouse_ray, splats_win
-from .splat_object import is_splat_object
+from ..splats.object import is_splat_object
 
 KEYMAPS = ("3D View", "3D View Tool: Tweak", "3D View Tool: Select Box", "3D View Tool: Select Circle",
            "3D View Tool: Select Lasso", "3D View Tool: Cursor")
@@ -246,3 +246,18 @@ def unregister_keymaps() -> None:
 
 
 CLASSES = (GSIBL_OT_cursor3d, GSIBL_OT_select)
+
+
+def register_picking() -> None:
+    """The click operators and their keymap items."""
+    for cls in CLASSES:
+        if not getattr(cls, "is_registered", False):
+            bpy.utils.register_class(cls)
+    register_keymaps()
+
+
+def unregister_picking() -> None:
+    unregister_keymaps()
+    for cls in reversed(CLASSES):
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)

@@ -13,14 +13,14 @@ import bpy
 import numpy as np
 from mathutils import Vector
 
-from ..core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coefficients
-from ..core.probe.variation import Variation, box_points, variation_from_sh
+from ...core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coefficients
+from ...core.probe.variation import Variation, box_points, variation_from_sh
 from . import local_light as ll
-from . import splat_cache
-from .bake import find_splats, require_splats
-from .jobs import Job, gpu, run_now
-from .properties import is_probe
-from .splat_object import is_splat_object
+from ..splats import cache as splat_cache
+from .sources import find_splats, require_splats
+from ..common.jobs import Job, gpu, run_now
+from ..common.datablocks import is_probe
+from ..splats.object import is_splat_object
 
 Progress = Callable[[int, int], None]
 

@@ -1,4 +1,4 @@
-"""Undo and redo of bakes: the World's light, the probe and its report come back together, and nothing re-bakes.
+"""Bake stamps: which bake's pixels each of our images holds, so that undo and redo (undo.py) show the right light.
 
 Blender's undo restores datablocks (the probe's settings and report, the World, the images' packed EXR data) but
 not an image's pixels already in memory: after Ctrl+Z the World kept showing the undone bake's light under the
@@ -6,7 +6,7 @@ report of the one before. Each bake stamps its World and images with a bake id; 
 restored stamp differs from the bake its pixels came from drops its buffers, so Blender decodes the restored packed
 data (Image.buffers_free: no file access; Image.reload would also try to re-read a file and print an error).
 Images saved as files (Pack Images off) cannot be brought back: the file holds the newest bake, and the panel says
-so (stale_images). Undo and redo also must not start Update When Moved (bake.rebaseline_after_undo).
+so (stale_images).
 """
 from __future__ import annotations
 
@@ -14,7 +14,6 @@ import itertools
 import time
 
 import bpy
-from bpy.app.handlers import persistent
 
 BAKE_KEY = "gs_ibl_bake"  # on a probe's World and images: the id of the bake that wrote them
 ROLES = ("world", "radiance_image", "irradiance_image")
@@ -74,33 +73,6 @@ def stale_images(probe: bpy.types.Object) -> list[str]:
     return out
 
 
-@persistent
-def on_undo_redo(*_args) -> None:
-    from . import splat_cache
-    from .bake import rebaseline_after_undo
-    splat_cache.undo_restored()
-    restore_pixels()
-    rebaseline_after_undo()
-
-
-@persistent
-def on_load_pre(*_args) -> None:
-    _in_memory.clear()  # another file's images
-
-
-_HANDLERS = (("undo_post", on_undo_redo), ("redo_post", on_undo_redo), ("load_pre", on_load_pre))
-
-
-def register_handlers() -> None:
-    for name, fn in _HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if fn not in handlers:
-            handlers.append(fn)
-
-
-def unregister_handlers() -> None:
-    for name, fn in _HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        while fn in handlers:
-            handlers.remove(fn)
+def forget() -> None:
+    """Another file is loaded (or the extension unregistered): its images' names mean nothing now."""
     _in_memory.clear()

@@ -37,10 +37,10 @@ import json
 import bpy
 import numpy as np
 
-from ..core.probe.grid import COEFFS, GridSpec
-from ..core.probe.local_mix import EPS, eevee_world_order1
-from .compat import node_tree
-from .datablocks import MARKER, find_ours, is_ours
+from ...core.probe.grid import COEFFS, GridSpec
+from ...core.probe.local_mix import EPS, eevee_world_order1
+from ..common.compat import node_tree
+from ..common.datablocks import MARKER, find_ours, is_ours
 from .world import albedo_strength_inputs, latlong_lookup
 
 GROUP_NAME = "GS-IBL Local Light"
@@ -105,7 +105,7 @@ def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray
     its numbers, and the group is rebuilt for the atlas's size. ``world``: the (9, 3) coefficients of the World
     probe's light the tiles are differences to, and ``irradiance`` its irradiance image (each kept from the last
     call when None; at first a black World and no image)."""
-    from ..core.probe.grid import pack_grid
+    from ...core.probe.grid import pack_grid
     img, tiles = _atlas()
     used = {o.get(GRID_KEY) for o in bpy.data.objects}
     keep = {k: (t, _tile_pixels(img, t)) for k, t in tiles.items() if k in used and k not in grids}

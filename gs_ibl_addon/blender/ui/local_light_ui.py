@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import bpy
 
-from . import object_probes as op
-from . import probe_grid as pgrid
+from ..lighting import object_probes as op
+from ..lighting import probe_grid as pgrid
 from .panel import _label_block, find_probe
 
 

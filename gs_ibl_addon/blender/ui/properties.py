@@ -5,17 +5,10 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, IntVectorProperty, PointerProperty,
                        StringProperty)
 
-from ..core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
+from ...core.settings import (DEFAULT_IRRADIANCE_SIZE, DEFAULT_METHOD, DEFAULT_TOLERANCE, MAX_FACE_SIZE,
                              MAX_IRRADIANCE_SIZE, MAX_TOLERANCE, MIN_TOLERANCE, blender_colour_space_items,
                              blender_method_items)
-from .splat_object import is_splat_object
-
-PROBE_NAME = "GS-IBL Probe"
-
-
-def is_probe(obj: bpy.types.Object | None) -> bool:
-    return obj is not None and obj.type == "EMPTY" and obj.gs_ibl_probe.is_probe
-
+from ..splats.object import is_splat_object
 
 def _poll_splats(_self, obj) -> bool:
     return is_splat_object(obj)
@@ -24,8 +17,8 @@ def _poll_splats(_self, obj) -> bool:
 def _strength_changed(self, context) -> None:
     # Live: the strength node of the World this probe baked follows the slider without a re-bake; other
     # probes' Worlds (in this scene or others) keep theirs.
-    from .datablocks import is_ours
-    from .world import set_world_strength
+    from ..common.datablocks import is_ours
+    from ..lighting.world import set_world_strength
     if is_ours(self.world, "world"):
         set_world_strength(self.world, self.strength)
 
@@ -102,13 +95,13 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
 
 
 def _overlay_shown(self, context) -> None:
-    from . import overlay
+    from ..viewport import overlay
     overlay.show_changed(self, context)
 
 
 def _overlay_display(self, context) -> None:
     # Display-only: a redraw, never a re-read or re-upload of the splats.
-    from . import overlay
+    from ..viewport import overlay
     overlay.display_changed(self, context)
 
 

@@ -12,7 +12,7 @@ import tempfile
 import bpy
 import numpy as np
 
-from ..core.formats import webp
+from ...core.formats import webp
 
 
 def decode_webp(data: bytes) -> np.ndarray:

@@ -370,7 +370,7 @@ class JobOperator:
         wm.progress_end()
         _modal.pop(type(self).__name__, None)
         _status_now()
-        from .overlay import tag_redraw  # the overlay drew its last images while the worker held the GPU
+        from .redraw import tag_redraw  # the overlay drew its last images while the worker held the GPU
         tag_redraw()
         if r.cancelled:
             self.report({"WARNING"}, f"GS-IBL {self.job_title}: cancelled, nothing was changed")

@@ -1,7 +1,8 @@
 """One GPU copy of each splat object, shared by the viewport overlay and probe bakes.
 
 Reading a splat object (``read_steps`` on the main thread, ``to_world`` and ``SplatRenderer`` on a worker: a job,
-blender/jobs.py) costs about as much as a small bake, and a scene on the GPU twice costs twice the memory, so both are done once per object and reused until the
+blender/jobs.py) costs about as much as a small bake, and a scene on the GPU twice costs twice the memory, so both are
+done once per object and reused until the
 object changes: the entry's key is the object's geometry, our mesh or a native splat Point Cloud alike (identity,
 point count, a generation bumped by every geometry edit of it, seen by a depsgraph handler) and its world matrix.
 The object's colour space is not part of the key: it is a push constant of the renderer, set on every get().
@@ -23,8 +24,8 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
-from .jobs import Job, Progress, Step, Work, busy, cancel_all, gpu, run_now
-from .splat_object import colour_space_of, read_steps, splat_count, to_world
+from ..common.jobs import Job, Progress, Step, Work, busy, cancel_all, gpu, run_now
+from .object import colour_space_of, read_steps, splat_count, to_world
 
 # What a splat object's data can be: a change to one of these is a geometry edit (PointCloud: Blender 5.3 splats).
 _GEOMETRY = tuple(t for t in (bpy.types.Mesh, getattr(bpy.types, "PointCloud", None)) if t is not None)
@@ -104,7 +105,7 @@ def get_steps(obj: bpy.types.Object, wait_for_upload: bool = True) -> Job:
 
 def _build(key: tuple, local, matrix: np.ndarray, name: str, progress: Progress) -> CachedSplats:
     """The worker's part of get_steps: SH turned with the object, the splats uploaded."""
-    from ..core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
+    from ...core.render.renderer import SplatRenderer  # Vulkan is loaded only when splats are first drawn or baked
     progress(f"turning {local.count:,} splats of {name!r} into world space", 0.0)
     t0 = time.perf_counter()
     scene = to_world(local, matrix, name)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ..core.probe.grid import POINT_FACE_SIZE, GridSpec
+from ...core.probe.grid import POINT_FACE_SIZE, GridSpec
 from . import local_light as ll
 from .object_probes import Progress, coefficients_with_world, probe_renderer, world_box
 

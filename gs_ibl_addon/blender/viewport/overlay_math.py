@@ -24,9 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.colour import linear_to_srgb, srgb_to_linear
-from ..core.render.views import View, ViewBatch
-from ..core.scene import SplatScene
+from ...core.colour import linear_to_srgb, srgb_to_linear
+from ...core.render.views import View, ViewBatch
+from ...core.scene import SplatScene
 
 ORTHO_DISTANCE = 100.0
 MOVING_SCALE = 0.25  # resolution while the view moves: ~1/16 of the pixels
@@ -235,7 +235,7 @@ class SplatOverlay:
             raise ValueError("SplatOverlay needs splats: a scene to upload or a renderer holding them")
         self._owns_renderer = renderer is None
         if renderer is None:
-            from ..core.render.renderer import SplatRenderer
+            from ...core.render.renderer import SplatRenderer
             renderer = SplatRenderer(scene)
         self.renderer = renderer
         self.renders = 0
@@ -327,8 +327,8 @@ class MotionCopy:
 
     def _build(self, scene: SplatScene) -> None:
         import time
-        from ..core.render.coarse import coarse_scene
-        from ..core.render.lod import build_lod
+        from ...core.render.coarse import coarse_scene
+        from ...core.render.lod import build_lod
         try:
             t = time.perf_counter()
             coarse = coarse_scene(scene, self.budget)
@@ -350,7 +350,7 @@ class MotionCopy:
     def renderer(self, like):
         """The copy's renderer, made on first use on ``like``'s Vulkan context with its colour rule."""
         if self._renderer is None:
-            from ..core.render.renderer import SplatRenderer
+            from ...core.render.renderer import SplatRenderer
             self._renderer = SplatRenderer(self.coarse.scene, like.ctx, near=like.near, lod=self.tree)
         self._renderer.colour_space = like.colour_space  # a push constant: follows the object's setting
         return self._renderer
@@ -531,13 +531,15 @@ def composite(overlay8: np.ndarray, scene_depth: np.ndarray, layers, background,
     Per pixel: the grid's depth does not hide splats (the grid stays under them): Blender writes its plane's depth
     at its lines and where they fade out, so a pixel whose depth is on that plane counts as grid if it has lines or
     no render coverage (a mesh on the floor plane still hides splats). Where the layer holds only the
-    background, the render covers c = 1 - o / background of the pixel (blue channel) (a mesh edge: its anti-aliased coverage);
+    background, the render covers c = 1 - o / background of the pixel (blue channel) (a mesh edge: its anti-aliased
+    coverage);
     splats nearer than that mesh are drawn over it, and those behind it replace the background in the uncovered
     part, so the mesh edge keeps its anti-aliasing against the splats (out = front + (1 - A_front) (1 - c)
     (behind + (1 - A_behind) background), alpha A_front: the render's c M shows through as before). A partly covered
     pixel whose own depth missed the mesh takes the nearest depth of its 3x3 neighbours (EDGE_REACH). Where Blender
     drew lines (alpha > 0), splats nearer than the lines' depth (or the nearest within LINE_REACH, for lines that
-    write none, as outlines; none if a grid pixel is that near: a grid line's faint edge) are drawn over them; inside the cursor and origin discs those lines stay on top of the splats instead.
+    write none, as outlines; none if a grid pixel is that near: a grid line's faint edge) are drawn over them; inside
+    the cursor and origin discs those lines stay on top of the splats instead.
     """
     o8 = np.asarray(overlay8)
     h, w = o8.shape[:2]

@@ -17,3 +17,11 @@ def is_ours(idb, role: str) -> bool:
 def find_ours(collection, role: str):
     """The first local datablock of ``collection`` (e.g. bpy.data.worlds) marked with ``role``, or None."""
     return next((idb for idb in collection if is_ours(idb, role)), None)
+
+
+PROBE_NAME = "GS-IBL Probe"  # the name Add Probe gives; probes are recognised by is_probe
+
+
+def is_probe(obj) -> bool:
+    """Whether ``obj`` (an Object or None) is a GS-IBL probe: an Empty whose settings say so."""
+    return obj is not None and obj.type == "EMPTY" and obj.gs_ibl_probe.is_probe

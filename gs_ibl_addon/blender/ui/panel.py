@@ -8,12 +8,13 @@ import bpy
 from bpy.props import BoolProperty, EnumProperty
 from mathutils import Vector
 
-from . import bake as gb
-from . import world as gw
-from .bake_undo import stale_images
-from .jobs import JobOperator, running
-from .properties import PROBE_NAME, is_probe
-from .splat_object import is_native_splats, is_splat_object, splat_count
+from ..lighting import bake as gb
+from ..lighting import sources
+from ..lighting import world as gw
+from ..lighting.stamps import stale_images
+from ..common.jobs import JobOperator, running
+from ..common.datablocks import PROBE_NAME, is_probe
+from ..splats.object import is_native_splats, is_splat_object, splat_count
 
 
 def find_probe(context) -> bpy.types.Object | None:
@@ -58,7 +59,7 @@ class GSIBL_OT_add_probe(bpy.types.Operator):
         probe.location = location
         probe.gs_ibl_probe.is_probe = True
         # the splats the probe stands in (of several, the largest holding it); none: the bake asks for one
-        probe.gs_ibl_probe.splats = gb.enclosing_splats(context.scene, location)
+        probe.gs_ibl_probe.splats = sources.enclosing_splats(context.scene, location)
         context.collection.objects.link(probe)
         for o in context.view_layer.objects.selected:
             o.select_set(False)
@@ -82,7 +83,7 @@ class GSIBL_OT_bake_probe(JobOperator, bpy.types.Operator):
     def make_job(self, context):
         probe = find_probe(context)
         # a deleted, unlinked, missing or ambiguous splat object is refused before any work
-        splats = gb.require_splats(context.scene, probe, context.active_object)
+        splats = sources.require_splats(context.scene, probe, context.active_object)
         return gb.bake_job(context.scene, probe, splats)
 
     def finished(self, context, result):
@@ -163,9 +164,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if ov.show:
             row.prop(ov, "resolution_scale", text="")
             layout.prop(ov, "exposure")
-            from . import overlay
-            if overlay.last_error:
-                _label_block(layout.box(), context, f"Splats not drawn: {overlay.last_error}", icon="ERROR")
+            from ..viewport import overlay
+            if overlay.error_text():
+                _label_block(layout.box(), context, f"Splats not drawn: {overlay.error_text()}", icon="ERROR")
         probe = find_probe(context)
         layout.operator(GSIBL_OT_add_probe.bl_idname, icon="LIGHTPROBE_SPHERE")
         if probe is None:
@@ -179,7 +180,7 @@ class GSIBL_PT_panel(bpy.types.Panel):
             col.label(text=f"Follows {probe.parent.name} (its parent)", icon="LINKED")
         col.prop(s, "splats")
         col.prop(s, "lighting")
-        if s.splats is not None and not gb.in_scene(context.scene, s.splats):
+        if s.splats is not None and not sources.in_scene(context.scene, s.splats):
             _label_block(col, context, f"{s.splats.name} is not in this scene: pick another", icon="ERROR")
         col.prop(s, "method")
         col.prop(s, "face_size")

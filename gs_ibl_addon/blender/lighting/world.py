@@ -18,8 +18,8 @@ import os
 import bpy
 import numpy as np
 
-from .compat import node_tree
-from .datablocks import MARKER, find_ours, is_ours
+from ..common.compat import node_tree
+from ..common.datablocks import MARKER, find_ours, is_ours
 
 WORLD_NAME = "GS-IBL World"
 IRRADIANCE_GROUP = "GS-IBL Irradiance"
@@ -207,7 +207,8 @@ def build_world(radiance: bpy.types.Image, strength: float = 1.0, keep_backgroun
         nt.links.new(bg.outputs["Background"], mix.inputs[1])
         nt.links.new(prev_shader, mix.inputs[2])
         nt.links.new(mix.outputs["Shader"], out.inputs["Surface"])
-        path.location, mix.location = (out.location.x - 350, out.location.y + 250), (out.location.x - 150, out.location.y)
+        path.location, mix.location = (out.location.x - 350, out.location.y + 250), (out.location.x - 150,
+        out.location.y)
     else:
         nt.links.new(bg.outputs["Background"], out.inputs["Surface"])
     if old is not None and old != world:
@@ -246,7 +247,7 @@ def restore_world(scene: bpy.types.Scene) -> bool:
 # ---------------------------------------------------------------------------------------------- no double light
 
 def native_splats_in(scene: bpy.types.Scene) -> list[bpy.types.Object]:
-    from .splat_object import is_native_splats
+    from ..splats.object import is_native_splats
     return [o for o in scene.objects if is_native_splats(o)]
 
 

@@ -1,0 +1,192 @@
+"""Update When Moved: a probe re-baked once after it or its splat object moved and then stayed still for its
+``update_interval`` seconds (a depsgraph_update_post handler notes what moved; a timer does the bake), and a Lighting
+Auto probe's meshes given their light again when only they moved."""
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from ..common.datablocks import is_probe
+from ..common.jobs import Job, busy, cancel_all
+from ..common.jobs import start as start_job
+from ..common.redraw import tag_redraw
+from .bake import WARNING_PREFIX, bake_job, bake_state, baked_states, lit_places, place_key, relight_steps
+from .object_probes import is_lit_mesh
+from .sources import auto_splats, clear_lost_splats
+
+_pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
+_pending_meshes: dict[tuple[str, str], set[str]] = {}  # (scene, probe) -> lit meshes that moved (Lighting Auto)
+auto_relights = 0  # automatic re-choices of moved meshes' light (tests see how often a move re-lit)
+last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
+auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
+_rebaseline_next = False  # an undo or redo happened: the next depsgraph update is not a move
+
+
+def _moved_lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, moved: set[str]) -> set[str]:
+    """The meshes among ``moved`` whose light a Lighting Auto probe should choose again."""
+    if probe.gs_ibl_probe.lighting != "AUTO":
+        return set()
+    places = lit_places.get((scene.name, probe.name), {})
+    out = set()
+    for name in moved:
+        obj = scene.objects.get(name)
+        if obj is None or not is_lit_mesh(obj) or places.get(name) == place_key(obj):
+            continue
+        out.add(name)
+    return out
+
+
+def rebaseline_after_undo() -> None:
+    """After an undo or redo, which brings back the probe, its World and their report together, nothing has moved
+    since their bake: waiting re-bakes are dropped, and the next depsgraph update (when the restored objects'
+    world matrices are evaluated; in undo_post they are not yet) takes every state as baked."""
+    global _rebaseline_next
+    _pending.clear()
+    if bpy.app.timers.is_registered(run_pending):
+        bpy.app.timers.unregister(run_pending)
+    _rebaseline_next = True
+
+
+def _rebaseline() -> None:
+    _pending_meshes.clear()
+    for scene in bpy.data.scenes:
+        for obj in scene.objects:
+            if is_probe(obj) and obj.gs_ibl_probe.auto_update:
+                baked_states[(scene.name, obj.name)] = bake_state(obj, auto_splats(scene, obj))
+                places = lit_places.get((scene.name, obj.name), {})
+                for name in places:
+                    mesh = scene.objects.get(name)
+                    if mesh is not None:
+                        places[name] = place_key(mesh)
+
+
+def _moved_names(depsgraph) -> set[str]:
+    return {u.id.original.name for u in depsgraph.updates
+            if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
+
+
+@persistent
+def on_depsgraph_update(scene, depsgraph) -> None:
+    """Notes auto-updating probes whose probe or splat object really moved and (re)starts one debounce timer: the
+    re-bake runs once the objects have stayed still for the probe's Update Delay, so a drag bakes once."""
+    global _rebaseline_next
+    clear_lost_splats(scene)
+    if _rebaseline_next:
+        _rebaseline_next = False
+        _rebaseline()
+        return
+    moved = _moved_names(depsgraph)
+    if not moved:
+        return
+    delay = None
+    for obj in scene.objects:
+        if not is_probe(obj) or not obj.gs_ibl_probe.auto_update:
+            continue
+        splats = auto_splats(scene, obj)
+        if splats is None:
+            continue
+        key = (scene.name, obj.name)
+        meshes = _moved_lit_meshes(scene, obj, moved)
+        if meshes:
+            _pending_meshes.setdefault(key, set()).update(meshes)
+        # a probe parented to a mesh ("follows" it) is reported moved with it
+        if (obj.name not in moved and splats.name not in moved) or bake_state(obj, splats) == baked_states.get(key):
+            if not meshes:
+                continue
+        else:
+            _pending.add(key)
+        d = obj.gs_ibl_probe.update_interval
+        delay = d if delay is None else min(delay, d)
+    if delay is not None:
+        if bpy.app.timers.is_registered(run_pending):
+            bpy.app.timers.unregister(run_pending)  # still moving: start the wait again
+        bpy.app.timers.register(run_pending, first_interval=delay)
+
+
+UPDATE_JOB = "update when moved"  # the background job (blender/jobs.py) of automatic re-bakes
+
+
+def run_pending() -> float | None:
+    """Timer: re-bake every probe noted by on_depsgraph_update whose state still differs from its last bake, as a
+    background job (the window stays responsive; without one, as in ``blender -b``, now). While an earlier one
+    runs it waits for it (returns the timer's next interval). Errors go to the console and the probe's report."""
+    if busy(UPDATE_JOB):
+        return 0.25
+    keys = sorted(_pending | set(_pending_meshes))
+    relight = {k: _pending_meshes.pop(k) for k in list(_pending_meshes)}
+    _pending.clear()
+    if keys:
+        start_job(UPDATE_JOB, _pending_job(keys, relight), "re-baking moved probes", done=_update_done)
+    return None  # one-shot; the handler registers it again when something moves
+
+
+def _update_done(runner) -> None:
+    global last_auto_error
+    if runner.error is not None:  # the job catches the users' errors itself: this is a bug, said once
+        last_auto_error = f"{type(runner.error).__name__}: {runner.error}"
+        print(f"GS-IBL (update when moved): {last_auto_error}")
+    tag_redraw()
+
+
+def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set[str]]) -> Job:
+    global last_auto_error, auto_bakes, auto_relights
+    for scene_name, probe_name in keys:
+        scene = bpy.data.scenes.get(scene_name)
+        probe = scene.objects.get(probe_name) if scene is not None else None
+        if probe is None or not is_probe(probe):
+            continue
+        splats = auto_splats(scene, probe)
+        if splats is None:
+            continue
+        if bake_state(probe, splats) == baked_states.get((scene_name, probe_name)):
+            meshes = [scene.objects[n] for n in sorted(relight.get((scene_name, probe_name), ()))
+                      if n in scene.objects and probe.gs_ibl_probe.world is not None]
+            if meshes:  # only lit meshes moved: their light is chosen again, the World stays
+                try:
+                    auto_relights += 1
+                    text = yield from relight_steps(scene, probe, meshes)
+                    print(f"GS-IBL (update when moved): {text}")
+                except (ValueError, RuntimeError, OSError, MemoryError) as e:
+                    last_auto_error = f"{probe_name}: {e}"
+                    print(f"GS-IBL (update when moved): {last_auto_error}")
+            continue  # the probe moved back to where it was baked, or only meshes moved
+        try:
+            auto_bakes += 1
+            _, text, warning = yield from bake_job(scene, probe, splats)
+            last_auto_error = None
+            print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
+        except (ValueError, RuntimeError, OSError, MemoryError) as e:
+            last_auto_error = f"{probe_name}: {e}"
+            scene = bpy.data.scenes.get(scene_name)
+            probe = scene.objects.get(probe_name) if scene is not None else None
+            if probe is not None and is_probe(probe):
+                probe.gs_ibl_probe.last_report = f"{WARNING_PREFIX}automatic re-bake failed:\n{e}"
+            print(f"GS-IBL (update when moved): {last_auto_error}")
+
+
+@persistent
+def on_load_pre(*_args) -> None:
+    global _rebaseline_next
+    cancel_all()  # their results would land in the file being closed
+    _rebaseline_next = False
+    _pending.clear()
+    _pending_meshes.clear()
+    lit_places.clear()
+    baked_states.clear()  # names of another file's probes
+
+
+def register_handlers() -> None:
+    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
+    if on_load_pre not in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.append(on_load_pre)
+
+
+def unregister_handlers() -> None:
+    while on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
+        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
+    while on_load_pre in bpy.app.handlers.load_pre:
+        bpy.app.handlers.load_pre.remove(on_load_pre)
+    if bpy.app.timers.is_registered(run_pending):
+        bpy.app.timers.unregister(run_pending)
+    on_load_pre()

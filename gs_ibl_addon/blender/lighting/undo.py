@@ -1,0 +1,44 @@
+"""Undo and redo of bakes: the World's light, the probe and its report come back together, and nothing re-bakes.
+
+Blender's undo restores the datablocks; the stamps (stamps.py) bring back the pixels they name, the splats' GPU
+copy is checked against the restored objects, and Update When Moved takes the restored places as baked
+(auto_update.rebaseline_after_undo).
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from ..splats import cache as splat_cache
+from . import stamps
+from .auto_update import rebaseline_after_undo
+
+
+@persistent
+def on_undo_redo(*_args) -> None:
+    splat_cache.undo_restored()
+    stamps.restore_pixels()
+    rebaseline_after_undo()
+
+
+@persistent
+def on_load_pre(*_args) -> None:
+    stamps.forget()  # another file's images
+
+
+_HANDLERS = (("undo_post", on_undo_redo), ("redo_post", on_undo_redo), ("load_pre", on_load_pre))
+
+
+def register_handlers() -> None:
+    for name, fn in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        if fn not in handlers:
+            handlers.append(fn)
+
+
+def unregister_handlers() -> None:
+    for name, fn in _HANDLERS:
+        handlers = getattr(bpy.app.handlers, name)
+        while fn in handlers:
+            handlers.remove(fn)
+    stamps.forget()

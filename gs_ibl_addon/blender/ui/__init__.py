@@ -1,0 +1,1 @@
+"""What the user sees and sets: the properties, the sidebar panels and their operators."""
