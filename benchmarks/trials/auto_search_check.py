@@ -1,6 +1,6 @@
 """Check bake.py's face-size search against the ground truth: what the search sees, what the error is, what it costs.
 
-Run: python benchmarks/auto_search_check.py [--quick] [--max-face 512] [--out CSV]
+Run: python benchmarks/trials/auto_search_check.py [--quick] [--max-face 512] [--out CSV]
 
 For each scene of benchmarks/accuracy_bench.py's sweep (its full sweep's scenes, or --quick's 20k-splat shells), one
 probe is baked at every face size 32, 64, ... --max-face exactly as bake_probe's search bakes its steps
@@ -40,7 +40,7 @@ import time
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
+HERE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # benchmarks/ (this file is in its trials/)
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, ".."))
 

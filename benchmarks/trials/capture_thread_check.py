@@ -1,5 +1,6 @@
 """Run by the bpy 5.3 module (trixie root) with the "after" zip installed (benchmarks/capture_bench.py --thread-check):
-is a bake slower on a jobs.Runner's worker thread than run inline, without any UI?
+is a bake slower on a jobs.Runner's worker thread than run inline, without any UI? (A trial: its answer, no, is in
+docs/benchmarks.md's "Capture-sized scenes".)
 
     python capture_thread_check.py ARGS.JSON        (ARGS: {"ply": path, "repeats": 3})
 
