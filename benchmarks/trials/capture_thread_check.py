@@ -32,8 +32,8 @@ def main() -> None:
         import addon_utils
         if not addon_utils.check(MODULE)[1]:
             bpy.ops.preferences.addon_enable(module=MODULE)
-        jobs = importlib.import_module(f"{MODULE}.blender.jobs")
-        gb = importlib.import_module(f"{MODULE}.blender.bake")
+        jobs = importlib.import_module(f"{MODULE}.blender.common.jobs")
+        gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
         for obj in list(bpy.data.objects):
             bpy.data.objects.remove(obj)
         assert bpy.ops.gs_ibl.import_splats(filepath=ARGS["ply"], axis_preset="BLENDER", native=True) == {"FINISHED"}
