@@ -8,6 +8,16 @@
 #   bash benchmarks/gpu_run.sh grid      there: the whole peer grid (100k-6M, 64²-1024², both scenes) with the
 #                                        strip kernels as A/B rows, docs/performance.png's chart, and the LOD probe
 #                                        (lod_bench, 1M at 32²); CSVs and PNGs into $OUT
+#   bash benchmarks/gpu_run.sh full      there, one call of under 9 minutes (issue 38): the peer grid (both scenes,
+#                                        100k-6M, 32²-1024² faces) and camera frames (1920x1080, 3840x2160) against
+#                                        gsplat with the committed kernel table, each cell also with the raster and
+#                                        emit kernels as A/B rows (plain, strips, emit-slot, emit-splat) and the
+#                                        camera frames with gsplat's kernels by stage; the kernel table rewritten
+#                                        from those A/B rows (kernel_table.json: copy it to gs_ibl_addon/core/render/
+#                                        and commit it with peer.csv); the chart; the LOD probe. Into $OUT: peer.csv,
+#                                        camera.csv, kernel_table.json, performance.png, lod.csv, full.log
+#                                        (and gsplat_cuda.so.xz). Steps end at deadlines, so the call ends in time
+#                                        with what they measured; carry .gl and .whl (prepare makes them)
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -27,7 +37,8 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid)
+trials|grid|full)
+  t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .whl/*.whl
@@ -38,7 +49,28 @@ trials|grid)
   fi
   out=${OUT:-out/bench}
   nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv,noheader
-  if [ "$1" = trials ]; then
+  export PYTHONUNBUFFERED=1
+  mkdir -p "$out"
+  if [ "$1" = full ]; then
+    # Deadlines (seconds): the peer run takes no new configuration after 330 s of its own (gsplat's ~55 s compile
+    # included) and is stopped at 390; the LOD probe gets 90; set-up ~30: the call ends within ~9 minutes.
+    log="$out/full.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 390 python3 benchmarks/peer_bench.py bench --scenes shell,random \
+        --counts 6000000,1000000,100000 --faces 32,64,128,256,512,1024 --cameras 1920x1080,3840x2160 \
+        --ab plain,strips,emit-slot,emit-splat --gsplat-stages cameras --warmup 0.3 --rounds 3 --block 5 \
+        --deadline 330 --csv "$out/peer.csv" --camera-csv "$out/camera.csv" || echo "[gpu_run] peer_bench: exit $?"
+      python3 benchmarks/raster_ab_bench.py table "$out/peer.csv" "$out/camera.csv" \
+        --merge gs_ibl_addon/core/render/kernel_table.json --out "$out/kernel_table.json" \
+        || echo "[gpu_run] kernel table: exit $?"
+      python3 benchmarks/peer_bench.py plot --csv "$out/peer.csv" --png "$out/performance.png" \
+        || echo "[gpu_run] plot: exit $?"
+      timeout --signal=INT --kill-after=10 90 python3 benchmarks/lod_bench.py --counts 1000000 --faces 32 --ks 4 \
+        --hold-clock --skip-accuracy --csv "$out/lod.csv" || echo "[gpu_run] lod_bench: exit $?"
+      echo "[gpu_run] full: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
+  elif [ "$1" = trials ]; then
     python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic,gs_raster_strips,gs_raster_conic_strips \
       --trials out/trials --csv "$out/trial_stats.csv" | grep -E "Register|Shared Memory|Spill" || true
     python3 benchmarks/peer_bench.py bench --scenes random,shell --counts 1000000,6000000 --faces 1024 \
@@ -56,7 +88,7 @@ trials|grid)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full" >&2
   exit 2
   ;;
 esac

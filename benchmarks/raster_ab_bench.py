@@ -103,6 +103,9 @@ def table_cells(paths: list[str]) -> tuple[list, dict[str, list[str]]]:
     labels = {VARIANTS[v][0]: v for v in TABLE_VARIANTS}  # older peer_bench CSVs name the variant by its label
     cells, sources = [], {}
     for path in paths:
+        if not os.path.exists(path):
+            log(f"{path}: no such file, left out")
+            continue
         seen: dict[str, set] = {}
         with open(path) as f:
             for row in csv.DictReader(f):
