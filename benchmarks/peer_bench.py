@@ -383,8 +383,11 @@ def run_bench(args) -> None:
                 ref, im = ours.images(), peer.images()
                 diff = float(np.abs(ref[..., :3] - im[..., :3]).mean() / max(float(ref[..., :3].mean()), 1e-12))
                 drawn = ours.drawn_pairs()
-                peer_stages = (gsplat_stages(peer.kernel_ms()) if args.gsplat_stages == "all" or
-                               (args.gsplat_stages == "cameras" and vkind == "camera") else None)
+                peer_stages = None
+                if args.gsplat_stages == "all" or (args.gsplat_stages == "cameras" and vkind == "camera"):
+                    peer_kernels = peer.kernel_ms()
+                    peer_stages = gsplat_stages(peer_kernels)
+                    log("  gsplat kernels (ms per call): " + ", ".join(f"{k} {v:.3f}" for k, v in peer_kernels[:10]))
                 rows = []
                 for r in (ours, *variants, peer):
                     reps, clk = got[r.name]
