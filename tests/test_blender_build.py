@@ -33,6 +33,12 @@ def _check_layout(path):
     return names
 
 
+def test_manifest_names_no_website_that_does_not_exist():
+    # Blender shows `website` as the extension's Website button; it led to a repository that does not exist (issue
+    # 35). The field is optional: none until the project has a page.
+    assert "website" not in be.read_manifest()
+
+
 @pytest.mark.parametrize("method", ["bpy", "zipfile"])
 def test_build_zip(tmp_path, method):
     if method == "bpy" and be.bpy_builder() is None:
