@@ -41,6 +41,11 @@ trials|grid|full)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
+  icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json  # device/README: where the loader may not look
+  if [ -z "${VK_DRIVER_FILES:-}" ] && [ -e "$icd" ] && ! ls /etc/vulkan/icd.d/*.json /usr/share/vulkan/icd.d/*.json \
+      >/dev/null 2>&1; then
+    export VK_DRIVER_FILES=$icd __EGL_VENDOR_LIBRARY_FILENAMES=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+  fi
   python3 -m pip install -q --no-index --no-deps --target /tmp/site .whl/*.whl
   export PYTHONPATH=/tmp/site:$PWD GS_IBL_DEVICE=gpu TORCH_CUDA_ARCH_LIST=9.0 MAX_JOBS=16 \
     TORCH_EXTENSIONS_DIR=/tmp/torch_extensions
