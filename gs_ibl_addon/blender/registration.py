@@ -8,6 +8,7 @@ from ..core.vk import pipeline_cache
 from .lighting import auto_update, undo
 from .splats import cache as splat_cache
 from .splats import importer, webp_decoder
+from .splats import object as splat_object
 from .ui import local_light_ui, panel, properties
 from .viewport import overlay, picking
 
@@ -24,6 +25,7 @@ def register() -> None:
     for menu, fn in _MENUS:
         menu.append(fn)
     splat_cache.register_handlers()
+    splat_object.register_handlers()
     auto_update.register_handlers()
     undo.register_handlers()
     overlay.register_overlay()
@@ -37,6 +39,7 @@ def unregister() -> None:
     overlay.unregister_overlay()
     undo.unregister_handlers()
     auto_update.unregister_handlers()
+    splat_object.unregister_handlers()
     splat_cache.unregister_handlers()  # after the overlay: frees the renderers it drew with
     for menu, fn in reversed(_MENUS):
         menu.remove(fn)

@@ -19,7 +19,10 @@ The object's matrix_world is the splats' transform (import axis conversion inclu
 moves the light. Deleting vertices in Edit Mode crops the splats: every attribute stays per vertex.
 
 Loose vertices are not drawn in Object Mode, so a Geometry Nodes modifier shows a random subset of them as
-points (at most PROXY_POINTS) with their colour; very large scenes also switch to bounds display.
+points (at most PROXY_POINTS) with their colour; very large scenes also switch to bounds display. The modifier also
+puts out two points of radius 0 at the corners of every splat's bounds: Blender frames (View Selected, Numpad .)
+and culls the evaluated geometry, which with the subset alone, or with none while the overlay shows (Fraction 0),
+was a part of the capture or nothing at all (View Selected then framed the object's origin: a person's legs).
 The object never renders (hide_render): its light reaches meshes through the baked probe, not as geometry.
 """
 from __future__ import annotations
@@ -28,6 +31,7 @@ from typing import Generator
 
 import bpy
 import numpy as np
+from bpy.app.handlers import persistent
 from mathutils import Matrix
 
 from ...core.colour import linear_sh_for_srgb_rule
@@ -127,6 +131,7 @@ def _proxy_tree() -> bpy.types.NodeTree:
     """Geometry Nodes: a random fraction of the vertices as coloured points (display only)."""
     tree = find_ours(bpy.data.node_groups, PROXY_TREE_ROLE)
     if tree is not None:
+        add_proxy_bounds(tree)  # one a file saved before the bounds points
         return tree
     tree = bpy.data.node_groups.new(PROXY_TREE, "GeometryNodeTree")
     tree[MARKER] = PROXY_TREE_ROLE
@@ -151,7 +156,60 @@ def _proxy_tree() -> bpy.types.NodeTree:
     L.new(gin.outputs["Radius"], pts.inputs["Radius"])
     L.new(pts.outputs["Points"], setmat.inputs["Geometry"])
     L.new(setmat.outputs["Geometry"], gout.inputs[0])
+    add_proxy_bounds(tree)
     return tree
+
+
+BOUNDS_NODE = "GS-IBL Splat Bounds"  # the proxy tree's Bounding Box node (its presence: the tree is up to date)
+
+
+def add_proxy_bounds(tree: bpy.types.NodeTree) -> bool:
+    """Two points of radius 0 (nothing drawn) at the min and max corners of the input's bounds, joined to the
+    tree's output, so the evaluated object's bounds hold every splat whatever the Fraction. A proxy tree made
+    before they existed (a saved .blend) gets them here; True if added now."""
+    n = tree.nodes
+    if n.get(BOUNDS_NODE) is not None:
+        return False
+    gin = next((x for x in n if x.bl_idname == "NodeGroupInput"), None)
+    gout = next((x for x in n if x.bl_idname == "NodeGroupOutput"), None)
+    if gin is None or gout is None or not gout.inputs[0].links:
+        return False  # not the tree this module made: left alone
+    shown = gout.inputs[0].links[0].from_socket
+    box = n.new("GeometryNodeBoundBox")
+    box.name = box.label = BOUNDS_NODE
+    join = n.new("GeometryNodeJoinGeometry")
+    L = tree.links
+    L.new(gin.outputs["Geometry"], box.inputs["Geometry"])
+    L.new(shown, join.inputs["Geometry"])
+    for corner in ("Min", "Max"):
+        point = n.new("GeometryNodePoints")
+        point.inputs["Count"].default_value = 1
+        point.inputs["Radius"].default_value = 0.0
+        L.new(box.outputs[corner], point.inputs["Position"])
+        L.new(point.outputs["Points"], join.inputs["Geometry"])
+    L.new(join.outputs["Geometry"], gout.inputs[0])
+    return True
+
+
+def upgrade_proxy_trees() -> int:
+    """Give every proxy tree of the open file its bounds points (add_proxy_bounds); returns how many changed."""
+    return sum(add_proxy_bounds(t) for t in bpy.data.node_groups
+               if t.get(MARKER) == PROXY_TREE_ROLE and t.library is None)
+
+
+@persistent
+def on_load_post(*_args) -> None:
+    upgrade_proxy_trees()  # a file saved before the bounds points frames its splats whole too
+
+
+def register_handlers() -> None:
+    if on_load_post not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(on_load_post)
+
+
+def unregister_handlers() -> None:
+    while on_load_post in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(on_load_post)
 
 
 def _add_proxy(obj: bpy.types.Object, scene: SplatScene) -> None:

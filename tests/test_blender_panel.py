@@ -1,0 +1,127 @@
+"""The panel's defects found by the GUI hour of issue 35, in the bpy module: the resolution slider's label, the bake
+summary with its details a click away, the stale mark, Strength without a re-bake, a probe inside opaque splats,
+Keep Background at once, View Selected framing the whole capture, and progress that reaches 100% only at the end."""
+from __future__ import annotations
+
+import os
+import shutil
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from gs_ibl_addon.core.synthetic import SkyGradient, random_scene, shell_scene  # noqa: E402
+
+SKY = SkyGradient()
+BEFORE_ROOMS = os.path.join(os.path.dirname(__file__), "data", "before_rooms.blend")
+
+
+def _import(tmp_path, write_3dgs_ply, scene=None, name="shell", **kw):
+    path = tmp_path / f"{name}.ply"
+    write_3dgs_ply(path, scene if scene is not None else shell_scene(SKY, 3000, 5.0))
+    kw = {"show_proxy": False, **kw}
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(path), axis_preset="BLENDER", **kw) \
+        == {"FINISHED"}
+    obj = bpy.context.active_object
+    obj.gs_ibl_splats.colour_space = "LINEAR"
+    return obj
+
+
+def _probe(place="CURSOR", **settings):
+    bpy.ops.gs_ibl.add_probe(place=place)
+    probe = bpy.context.active_object
+    s = probe.gs_ibl_probe
+    s.face_size, s.irradiance_size = 16, 8
+    for k, v in settings.items():
+        setattr(s, k, v)
+    return probe
+
+
+class _Layout:
+    """Records what a panel draws: labels (text, icon) and props (property name, the text shown)."""
+
+    def __init__(self, rec: dict):
+        self.rec = rec
+
+    def label(self, text="", icon="NONE", **_kw):
+        self.rec.setdefault("labels", []).append((text, icon))
+
+    def prop(self, data, name, text=None, **_kw):
+        self.rec.setdefault("props", []).append((name, text))
+
+    def __getattr__(self, _name):
+        return lambda *a, **kw: _Layout(self.rec)
+
+
+def _draw(context=None) -> dict:
+    from gs_ibl_addon.blender.ui.panel import GSIBL_PT_panel
+    rec: dict = {}
+    GSIBL_PT_panel.draw(SimpleNamespace(layout=_Layout(rec)), context or bpy.context)
+    return rec
+
+
+def _evaluated_points(obj) -> np.ndarray:
+    """The positions of the evaluated object's geometry (what Blender frames and culls by), in its local space."""
+    geometry = obj.evaluated_get(bpy.context.evaluated_depsgraph_get()).evaluated_geometry()
+    parts = []
+    for data, items in ((geometry.pointcloud, "points"), (geometry.mesh, "vertices")):
+        if data is not None and len(getattr(data, items)):
+            co = np.empty(3 * len(getattr(data, items)), np.float32)
+            data.attributes["position"].data.foreach_get("vector", co)
+            parts.append(co.reshape(-1, 3))
+    return np.concatenate(parts) if parts else np.empty((0, 3), np.float32)
+
+
+# ---- 7. View Selected frames the whole capture
+
+def test_the_evaluated_bounds_hold_every_splat(blender, tmp_path, write_3dgs_ply):
+    """View Selected (Numpad .) frames the evaluated geometry's bounds. They were the proxy's random subset, or
+    nothing at all while Show Splats hides the proxy (Fraction 0): an imported person was framed at its origin, its
+    legs. The proxy now puts out the corners of every splat's bounds too, whatever the Fraction."""
+    from gs_ibl_addon.blender.splats import object as splat_object
+    scene = random_scene(4000, sh_degree=0)
+    scene.positions[:, 2] += 3.0  # the capture away from its origin, as a person standing on the floor
+    obj = _import(tmp_path, write_3dgs_ply, scene, name="person", show_proxy=True, show_splats=True)
+    mod = obj.modifiers[splat_object.PROXY_MODIFIER]
+    ids = splat_object.modifier_input_identifiers(mod.node_group)
+    lo, hi = scene.positions.min(0), scene.positions.max(0)
+    for fraction in (None, 0.05):  # None: as Show Splats left it (hidden: 0)
+        if fraction is not None:
+            bpy.context.scene.gs_ibl_overlay.show = False
+            splat_object.set_modifier_input(mod, ids["Fraction"], fraction)
+        bpy.context.view_layer.update()
+        points = _evaluated_points(obj)
+        assert len(points) >= 2, fraction
+        np.testing.assert_allclose(points.min(0), lo, atol=1e-5, err_msg=str(fraction))
+        np.testing.assert_allclose(points.max(0), hi, atol=1e-5, err_msg=str(fraction))
+    # the corner points draw nothing: radius 0
+    tree = mod.node_group
+    assert [n.inputs["Radius"].default_value for n in tree.nodes if n.bl_idname == "GeometryNodePoints"] == [0, 0]
+
+
+def test_a_saved_proxy_tree_gets_the_bounds_points_on_load(blender, tmp_path, write_3dgs_ply):
+    """A file saved before the bounds points: its proxy tree is brought up to date when it is opened (the tree's
+    name kept)."""
+    from gs_ibl_addon.blender.splats import object as splat_object
+    obj = _import(tmp_path, write_3dgs_ply, random_scene(500, sh_degree=0), name="old", show_proxy=True,
+                  show_splats=False)
+    tree = obj.modifiers[splat_object.PROXY_MODIFIER].node_group
+    for node in [n for n in tree.nodes if n.bl_idname in ("GeometryNodeBoundBox", "GeometryNodeJoinGeometry",
+                                                         "GeometryNodePoints")]:
+        tree.nodes.remove(node)  # as the tree was made before
+    tree.links.new(tree.nodes["Set Material"].outputs["Geometry"], tree.nodes["Group Output"].inputs[0])
+    assert splat_object.BOUNDS_NODE not in tree.nodes
+    path = str(tmp_path / "old.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    tree = bpy.data.node_groups[splat_object.PROXY_TREE]
+    assert splat_object.BOUNDS_NODE in tree.nodes
+    if os.path.exists(BEFORE_ROOMS):  # and a file of an earlier version, where its splats have a proxy
+        copy = tmp_path / "before_rooms.blend"
+        shutil.copy(BEFORE_ROOMS, copy)
+        bpy.ops.wm.open_mainfile(filepath=str(copy))
+        for obj in bpy.data.objects:
+            if splat_object.is_mesh_splats(obj) and splat_object.PROXY_MODIFIER in obj.modifiers:
+                assert splat_object.BOUNDS_NODE in obj.modifiers[splat_object.PROXY_MODIFIER].node_group.nodes
