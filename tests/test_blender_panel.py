@@ -125,3 +125,14 @@ def test_a_saved_proxy_tree_gets_the_bounds_points_on_load(blender, tmp_path, wr
         for obj in bpy.data.objects:
             if splat_object.is_mesh_splats(obj) and splat_object.PROXY_MODIFIER in obj.modifiers:
                 assert splat_object.BOUNDS_NODE in obj.modifiers[splat_object.PROXY_MODIFIER].node_group.nodes
+
+
+# ---- 1. The slider beside Show Splats says what it is
+
+def test_the_resolution_slider_has_a_label(blender):
+    ov = bpy.context.scene.gs_ibl_overlay
+    ov.show = True
+    shown = dict(_draw()["props"])
+    assert "resolution_scale" in shown
+    text = shown["resolution_scale"]  # None: the property's own name
+    assert (text if text is not None else ov.bl_rna.properties["resolution_scale"].name) == "Resolution"

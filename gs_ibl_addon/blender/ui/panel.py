@@ -162,7 +162,7 @@ class GSIBL_PT_panel(bpy.types.Panel):
         row = layout.row(align=True)
         row.prop(ov, "show", toggle=True, icon="HIDE_OFF" if ov.show else "HIDE_ON")
         if ov.show:
-            row.prop(ov, "resolution_scale", text="")
+            row.prop(ov, "resolution_scale", text="Resolution")  # without a label it read "0.50", unexplained
             layout.prop(ov, "exposure")
             from ..viewport import overlay
             if overlay.error_text():
