@@ -13,8 +13,12 @@
 #                                        gsplat with the committed kernel table, each cell also with the raster and
 #                                        emit kernels as A/B rows (plain, strips, emit-slot, emit-splat) and the
 #                                        camera frames with gsplat's kernels by stage; the kernel table rewritten
-#                                        from those A/B rows (kernel_table.json: copy it to gs_ibl_addon/core/render/
-#                                        and commit it with peer.csv); the chart; the LOD probe. Into $OUT: peer.csv,
+#                                        from those A/B rows (kernel_table.json; to keep it, commit peer.csv and
+#                                        camera.csv under docs/bench/ and write the table from the committed CSVs:
+#                                        raster_ab_bench.py table docs/bench/raster_ab_lavapipe.csv
+#                                        docs/bench/emit_ab_lavapipe.csv docs/bench/<peer>.csv docs/bench/<camera>.csv;
+#                                        tests/test_kernel_table.py checks it is theirs); the chart; the LOD probe.
+#                                        Into $OUT: peer.csv,
 #                                        camera.csv, kernel_table.json, performance.png, lod.csv, full.log
 #                                        (and gsplat_cuda.so.xz). Steps end at deadlines, so the call ends in time
 #                                        with what they measured; carry .gl and .whl (prepare makes them)
