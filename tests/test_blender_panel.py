@@ -136,3 +136,61 @@ def test_the_resolution_slider_has_a_label(blender):
     assert "resolution_scale" in shown
     text = shown["resolution_scale"]  # None: the property's own name
     assert (text if text is not None else ov.bl_rna.properties["resolution_scale"].name) == "Resolution"
+
+
+# ---- 4. Strength applies without a re-bake
+
+def _strength_node(world) -> float:
+    return world.node_tree.nodes["GS-IBL Strength"].inputs["Strength"].default_value
+
+
+def _no_rebake_waits() -> bool:
+    from gs_ibl_addon.blender.lighting import auto_update as au
+    return not au._pending and not au._pending_meshes and not bpy.app.timers.is_registered(au.run_pending)
+
+
+def test_strength_changes_the_light_and_bakes_nothing(blender, tmp_path, write_3dgs_ply):
+    """With Update When Moved on, a Strength change said "GS-IBL re-baking moved probes" though nothing moved:
+    Blender reports a transform update for any edit of the probe's settings, and a bake state that differed from
+    the last bake's for another reason (the splats edited, the file opened again) made it a move."""
+    from gs_ibl_addon.blender.lighting import auto_update as au
+    from gs_ibl_addon.blender.lighting import local_light as ll
+    from gs_ibl_addon.blender.lighting.auto_light import AUTO_KEY
+    from gs_ibl_addon.blender.lighting.lights_from_probe import lights_of, sync_lights
+    splats = _import(tmp_path, write_3dgs_ply)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(1.0, 0.0, 0.0))
+    ball = bpy.context.active_object
+    probe = _probe(auto_update=True, lighting="WORLD")
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    # what a Lighting Auto bake and Lights 1 would have made (made here: their bakes take long)
+    ll.light_object(ball, 1.0)
+    ll.set_object_grid(ball, "probe:Sphere")
+    ball[AUTO_KEY] = probe.name
+    sync_lights(bpy.context.scene, probe, [{"irradiance": [2.0, 1.0, 0.5], "angle": 5.0,
+                                            "direction": [0.0, 0.0, 1.0]}], 1.0)
+    bpy.context.view_layer.update()
+    assert _no_rebake_waits()
+    before = au.auto_bakes
+    node = ll._our_node(ball.material_slots[0].material.node_tree)
+    for step, strength in enumerate((2.5, 0.5, 3.0)):
+        if step == 1:
+            splats.data.update_tag()  # a geometry update of the splats (an edit Blender reports), then Strength
+            bpy.context.view_layer.update()
+        if step == 2:  # the file saved and opened again: its first Strength change
+            path = str(tmp_path / "strength.blend")
+            bpy.ops.wm.save_as_mainfile(filepath=path)
+            names = probe.name, ball.name
+            bpy.ops.wm.open_mainfile(filepath=path)
+            probe, ball = (bpy.data.objects[n] for n in names)
+            node = ll._our_node(ball.material_slots[0].material.node_tree)
+        probe.gs_ibl_probe.strength = strength
+        bpy.context.view_layer.update()
+        assert _no_rebake_waits(), (step, au._pending, au._pending_meshes)
+        assert _strength_node(probe.gs_ibl_probe.world) == pytest.approx(strength)
+        assert _strength_node(bpy.context.scene.world) == pytest.approx(strength)
+        assert node.inputs["Strength"].default_value == pytest.approx(strength)
+        assert [o.data.energy for o in lights_of(probe)] == [pytest.approx(2.0 * strength)]
+    assert au.auto_bakes == before
+    probe.location = (0.0, 0.0, 1.0)  # a real move still re-bakes
+    bpy.context.view_layer.update()
+    assert au._pending == {(bpy.context.scene.name, probe.name)}

@@ -10,7 +10,8 @@ from ..common.datablocks import is_probe
 from ..common.jobs import Job, busy, cancel_all
 from ..common.jobs import start as start_job
 from ..common.redraw import tag_redraw
-from .bake import WARNING_PREFIX, bake_job, bake_state, baked_states, lit_places, place_key, relight_steps
+from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_places, place_key, relight_steps,
+                   seen_states)
 from .object_probes import is_lit_mesh
 from .sources import auto_splats, clear_lost_splats
 
@@ -52,7 +53,8 @@ def _rebaseline() -> None:
     for scene in bpy.data.scenes:
         for obj in scene.objects:
             if is_probe(obj) and obj.gs_ibl_probe.auto_update:
-                baked_states[(scene.name, obj.name)] = bake_state(obj, auto_splats(scene, obj))
+                baked_states[(scene.name, obj.name)] = seen_states[(scene.name, obj.name)] = \
+                    bake_state(obj, auto_splats(scene, obj))
                 places = lit_places.get((scene.name, obj.name), {})
                 for name in places:
                     mesh = scene.objects.get(name)
@@ -65,10 +67,24 @@ def _moved_names(depsgraph) -> set[str]:
             if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
 
 
+def _look(scene: bpy.types.Scene) -> None:
+    """Remember every probe's state as it is now (seen_states): what its next update is compared with."""
+    for obj in scene.objects:
+        if is_probe(obj):
+            splats = auto_splats(scene, obj)
+            if splats is not None:
+                seen_states[(scene.name, obj.name)] = bake_state(obj, splats)
+
+
 @persistent
 def on_depsgraph_update(scene, depsgraph) -> None:
     """Notes auto-updating probes whose probe or splat object really moved and (re)starts one debounce timer: the
-    re-bake runs once the objects have stayed still for the probe's Update Delay, so a drag bakes once."""
+    re-bake runs once the objects have stayed still for the probe's Update Delay, so a drag bakes once.
+
+    "Really moved": reported with a transform update and its bake state changed since the last update looked
+    (seen_states). Blender reports a transform update for any edit of the probe's settings too (Strength, a
+    checkbox), and a state that differed from the last bake for another reason (the splats edited, a file opened)
+    then re-baked on a Strength change ("re-baking moved probes" though nothing moved)."""
     global _rebaseline_next
     clear_lost_splats(scene)
     if _rebaseline_next:
@@ -76,21 +92,25 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         _rebaseline()
         return
     moved = _moved_names(depsgraph)
-    if not moved:
-        return
     delay = None
     for obj in scene.objects:
-        if not is_probe(obj) or not obj.gs_ibl_probe.auto_update:
+        if not is_probe(obj):
             continue
         splats = auto_splats(scene, obj)
         if splats is None:
             continue
         key = (scene.name, obj.name)
+        state = bake_state(obj, splats)
+        before = seen_states.get(key, baked_states.get(key, state))  # never looked at: nothing to compare with
+        seen_states[key] = state
+        if not moved or not obj.gs_ibl_probe.auto_update:
+            continue
         meshes = _moved_lit_meshes(scene, obj, moved)
         if meshes:
             _pending_meshes.setdefault(key, set()).update(meshes)
         # a probe parented to a mesh ("follows" it) is reported moved with it
-        if (obj.name not in moved and splats.name not in moved) or bake_state(obj, splats) == baked_states.get(key):
+        really = (obj.name in moved or splats.name in moved) and state != before
+        if not really or state == baked_states.get(key):
             if not meshes:
                 continue
         else:
@@ -173,6 +193,13 @@ def on_load_pre(*_args) -> None:
     _pending_meshes.clear()
     lit_places.clear()
     baked_states.clear()  # names of another file's probes
+    seen_states.clear()
+
+
+@persistent
+def on_load_post(*_args) -> None:
+    for scene in bpy.data.scenes:  # the opened file's places: its first move is compared with them
+        _look(scene)
 
 
 def register_handlers() -> None:
@@ -180,6 +207,8 @@ def register_handlers() -> None:
         bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
     if on_load_pre not in bpy.app.handlers.load_pre:
         bpy.app.handlers.load_pre.append(on_load_pre)
+    if on_load_post not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(on_load_post)
 
 
 def unregister_handlers() -> None:
@@ -187,6 +216,8 @@ def unregister_handlers() -> None:
         bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
     while on_load_pre in bpy.app.handlers.load_pre:
         bpy.app.handlers.load_pre.remove(on_load_pre)
+    while on_load_post in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(on_load_post)
     if bpy.app.timers.is_registered(run_pending):
         bpy.app.timers.unregister(run_pending)
     on_load_pre()

@@ -21,11 +21,12 @@ from ...core.probe.latlong import cube_to_latlong
 from ...core.settings import method_from_blender
 from ..splats import cache as splat_cache
 from .stamps import stamp
-from .auto_light import auto_light_steps, remove_auto_light
+from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
+from . import local_light as ll
 from .sources import in_scene, require_splats
 from . import world as gw
-from .lights_from_probe import sync_lights
-from ..common.datablocks import is_probe
+from .lights_from_probe import set_lights_strength, sync_lights
+from ..common.datablocks import is_ours, is_probe
 from ..common.jobs import Job, Step, Work, run_now
 from ..splats.object import splat_count
 
@@ -80,6 +81,21 @@ def apply_probe_images(scene: bpy.types.Scene, probe: bpy.types.Object, radiance
         else:
             gw.unmute_native_splats(scene)
     return s.world
+
+
+def apply_strength(scene: bpy.types.Scene, probe: bpy.types.Object) -> None:
+    """The probe's Strength on everything its last bake lit, without a re-bake: its World's strength node, its
+    lights, and the local-light group of the meshes it lights (Lighting Auto's, and those the World it gave the
+    scene lights). Other probes' Worlds (in this scene or others) keep theirs."""
+    s = probe.gs_ibl_probe
+    strength = float(s.strength)
+    if is_ours(s.world, "world"):
+        gw.set_world_strength(s.world, strength)
+    set_lights_strength(probe, strength)
+    scene_world = s.world is not None and scene.world == s.world
+    for obj in scene.objects:
+        if obj.type == "MESH" and (obj.get(AUTO_KEY) == probe.name or (scene_world and ll.has_local_light(obj))):
+            ll.set_strength(obj, strength)
 
 
 FILTER_STAGES = ("sh_project", "irradiance", "ggx")  # the filters a bake runs; their other keys are details
@@ -216,7 +232,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     t = lap("writing", t)
     if probe.gs_ibl_probe.splats is None:
         probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
-    baked_states[(scene.name, probe.name)] = bake_state(probe, splats)
+    baked_states[(scene.name, probe.name)] = seen_states[(scene.name, probe.name)] = bake_state(probe, splats)
     auto = None
     if probe.gs_ibl_probe.lighting == "AUTO":
         yield Step("choosing each mesh's light", 0.96)
@@ -235,6 +251,8 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
 
 # What each bake depended on, for Update When Moved (auto_update.py) and Lighting Auto's re-choices.
 baked_states: dict[tuple[str, str], tuple] = {}  # (scene name, probe name) -> bake_state() of its last bake
+seen_states: dict[tuple[str, str], tuple] = {}  # (scene, probe) -> its bake_state() when a depsgraph update (or
+# its bake) last looked: a probe "moved" only where this changed (auto_update.py)
 lit_places: dict[tuple[str, str], dict[str, bytes]] = {}  # (scene, probe) -> {mesh: its matrix when its light
 # was chosen}
 

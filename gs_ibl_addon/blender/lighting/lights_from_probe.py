@@ -20,6 +20,7 @@ from mathutils import Vector
 
 COLLECTION = "GS-IBL Lights"
 OWNER_KEY = "gs_ibl_probe"  # custom property on each light object: the name of the probe that made it
+ENERGY_KEY = "gs_ibl_energy"  # on each light object: its Strength at the probe's Strength 1 (set_lights_strength)
 
 
 def _collection(scene: bpy.types.Scene) -> bpy.types.Collection:
@@ -56,10 +57,10 @@ def sync_lights(scene: bpy.types.Scene, probe: bpy.types.Object, lights: list[di
     coll = _collection(scene)
     made = []
     for k, light in enumerate(lights):
-        irr = [max(0.0, float(v)) * strength for v in light["irradiance"]]
+        irr = [max(0.0, float(v)) for v in light["irradiance"]]
         peak = max(irr) or 1.0
         data = bpy.data.lights.new(f"{probe.name} light {k + 1}", "SUN")
-        data.energy = peak
+        data.energy = peak * strength
         data.color = [v / peak for v in irr]
         data.angle = math.radians(min(179.0, float(light["angle"])))
         data.use_shadow = True
@@ -68,6 +69,19 @@ def sync_lights(scene: bpy.types.Scene, probe: bpy.types.Object, lights: list[di
         obj.rotation_euler = Vector((0.0, 0.0, 1.0)).rotation_difference(Vector(light["direction"])).to_euler()
         obj.location = probe.matrix_world.translation + 2.0 * Vector(light["direction"])  # only where it is drawn
         obj[OWNER_KEY] = probe.name
+        obj[ENERGY_KEY] = peak
         coll.objects.link(obj)
         made.append(obj)
     return made
+
+
+def set_lights_strength(probe: bpy.types.Object, strength: float) -> int:
+    """The probe's Strength on the lights its last bake made, without a re-bake; returns how many changed (lights
+    of a file saved before ENERGY_KEY existed keep theirs until the next bake)."""
+    n = 0
+    for obj in lights_of(probe):
+        base = obj.get(ENERGY_KEY)
+        if isinstance(base, float):
+            obj.data.energy = base * strength
+            n += 1
+    return n

@@ -485,6 +485,18 @@ def light_object(obj: bpy.types.Object, strength: float = 1.0) -> None:
             insert_into_material(slot.material, strength)
 
 
+def set_strength(obj: bpy.types.Object, strength: float) -> int:
+    """The probe's Strength on the group in ``obj``'s materials (no re-bake); returns how many changed."""
+    n = 0
+    for slot in obj.material_slots:
+        mat = slot.material
+        node = _our_node(mat.node_tree) if mat is not None and mat.library is None and mat.node_tree else None
+        if node is not None:
+            node.inputs["Strength"].default_value = strength
+            n += 1
+    return n
+
+
 def unlight_object(obj: bpy.types.Object) -> None:
     """Drop the object's coefficients; take the group out of its materials unless another lit object uses them."""
     set_object_grid(obj, None)

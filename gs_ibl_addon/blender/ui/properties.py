@@ -15,12 +15,12 @@ def _poll_splats(_self, obj) -> bool:
 
 
 def _strength_changed(self, context) -> None:
-    # Live: the strength node of the World this probe baked follows the slider without a re-bake; other
-    # probes' Worlds (in this scene or others) keep theirs.
-    from ..common.datablocks import is_ours
-    from ..lighting.world import set_world_strength
-    if is_ours(self.world, "world"):
-        set_world_strength(self.world, self.strength)
+    # Live: the World, lights and meshes this probe baked follow the slider without a re-bake (lighting/bake.py)
+    from ..lighting.bake import apply_strength
+    probe = self.id_data
+    scene = getattr(context, "scene", None)
+    if isinstance(probe, bpy.types.Object) and scene is not None:
+        apply_strength(scene, probe)
 
 
 class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
