@@ -194,3 +194,36 @@ def test_strength_changes_the_light_and_bakes_nothing(blender, tmp_path, write_3
     probe.location = (0.0, 0.0, 1.0)  # a real move still re-bakes
     bpy.context.view_layer.update()
     assert au._pending == {(bpy.context.scene.name, probe.name)}
+
+
+# ---- 6. Keep Background takes effect at once
+
+def test_keep_background_takes_effect_at_once(blender, tmp_path, write_3dgs_ply):
+    """Unticking Keep Background changed nothing until a re-bake: the World is now made again from the last bake's
+    images when it is toggled."""
+    from gs_ibl_addon.blender.lighting import world as gw
+    from gs_ibl_addon.blender.lighting.stamps import BAKE_KEY
+    scene = bpy.context.scene
+    backdrop = bpy.data.worlds.new("Backdrop")
+    backdrop.color = (0.2, 0.3, 0.4)
+    scene.world = backdrop
+    _import(tmp_path, write_3dgs_ply)
+    probe = _probe(strength=1.5)
+    s = probe.gs_ibl_probe
+    assert s.keep_background  # the default
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    report, image, bake_id = s.last_report, s.radiance_image, s.world[BAKE_KEY]
+
+    def camera_sees_backdrop() -> bool:
+        return "GS-IBL Keep Background" in scene.world.node_tree.nodes
+
+    assert camera_sees_backdrop() and scene.world == s.world
+    for keep in (False, True):
+        s.keep_background = keep
+        assert scene.world == s.world and gw.is_ours(s.world, "world") and camera_sees_backdrop() == keep
+        env = scene.world.node_tree.nodes["GS-IBL Radiance"]
+        assert env.image == image  # the same bake's light, nothing baked again
+        assert _strength_node(scene.world) == pytest.approx(1.5)
+        assert s.last_report == report and s.world[BAKE_KEY] == bake_id
+    assert scene.get(gw.PREVIOUS_WORLD) == backdrop and backdrop.users  # the user's World is untouched
+    assert len([w for w in bpy.data.worlds if gw.is_ours(w, "world")]) == 1

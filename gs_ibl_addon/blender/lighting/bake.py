@@ -20,7 +20,7 @@ from ...core.probe.near import near_warning
 from ...core.probe.latlong import cube_to_latlong
 from ...core.settings import method_from_blender
 from ..splats import cache as splat_cache
-from .stamps import stamp
+from .stamps import BAKE_KEY, stamp
 from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from . import local_light as ll
 from .sources import in_scene, require_splats
@@ -57,6 +57,33 @@ def _own(probe: bpy.types.Object, attr: str):
     return None if shared else idb
 
 
+def _background_world(scene: bpy.types.Scene) -> bpy.types.World | None:
+    """The World whose backdrop Keep Background keeps: the one before we first took over the scene's World."""
+    previous = scene.get(gw.PREVIOUS_WORLD)
+    if not isinstance(previous, bpy.types.World):
+        previous = scene.world if scene.world is not None and scene.world.get(gw.MARKER) != "world" else None
+    return previous
+
+
+def rebuild_world(scene: bpy.types.Scene, probe: bpy.types.Object) -> bpy.types.World | None:
+    """The probe's World made again from the images its last bake wrote, with its settings as they are now (Keep
+    Background takes effect at once, no re-bake); the scene keeps using it where it used the old one. None when
+    the probe has no baked World yet."""
+    s = probe.gs_ibl_probe
+    old = s.world
+    if s.radiance_image is None or not is_ours(old, "world"):
+        return None
+    bake_id = old.get(BAKE_KEY)
+    used = scene.world == old
+    s.world = gw.build_world(s.radiance_image, s.strength, s.keep_background, _background_world(scene),
+                             replace=_own(probe, "world"))
+    if bake_id is not None:
+        s.world[BAKE_KEY] = bake_id  # the same bake's light (stamps.py)
+    if used and scene.world != s.world:  # the old one is shared with a duplicated probe: not replaced
+        scene.world = s.world
+    return s.world
+
+
 def apply_probe_images(scene: bpy.types.Scene, probe: bpy.types.Object, radiance: np.ndarray,
                        irradiance: np.ndarray | None) -> bpy.types.World:
     """Write baked lat-long maps into the probe's images and World and the irradiance node group, per the probe's
@@ -69,11 +96,8 @@ def apply_probe_images(scene: bpy.types.Scene, probe: bpy.types.Object, radiance
         s.irradiance_image = gw.latlong_image("irradiance", irradiance, pack=s.pack_images,
                                               image=_own(probe, "irradiance_image"), file_stem=f"{stem}_irradiance")
         gw.irradiance_group(s.irradiance_image)
-    # The camera keeps what it saw before we first took over the World.
-    previous = scene.get(gw.PREVIOUS_WORLD)
-    if not isinstance(previous, bpy.types.World):
-        previous = scene.world if scene.world is not None and scene.world.get(gw.MARKER) != "world" else None
-    s.world = gw.build_world(s.radiance_image, s.strength, s.keep_background, previous, replace=_own(probe, "world"))
+    s.world = gw.build_world(s.radiance_image, s.strength, s.keep_background, _background_world(scene),
+                             replace=_own(probe, "world"))
     if s.assign_world:
         gw.use_world(scene, s.world)
         if s.mute_native_splats:

@@ -23,6 +23,15 @@ def _strength_changed(self, context) -> None:
         apply_strength(scene, probe)
 
 
+def _keep_background_changed(self, context) -> None:
+    # At once: the World is made again from the images of the last bake (no re-bake; lighting/bake.py)
+    from ..lighting.bake import rebuild_world
+    probe = self.id_data
+    scene = getattr(context, "scene", None)
+    if isinstance(probe, bpy.types.Object) and scene is not None:
+        rebuild_world(scene, probe)
+
+
 class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     is_probe: BoolProperty(default=False, options={"HIDDEN"})
     splats: PointerProperty(name="Splats", type=bpy.types.Object, poll=_poll_splats,
@@ -51,8 +60,10 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                               "brightness over 1.0")
     strength: FloatProperty(name="Strength", default=1.0, min=0.0, soft_max=10.0, update=_strength_changed,
                             description="Multiplier of the probe's light in the World")
-    keep_background: BoolProperty(name="Keep Background", default=True,
-                                  description="Camera rays see the previous World; only lighting comes from the probe")
+    keep_background: BoolProperty(name="Keep Background", default=True, update=_keep_background_changed,
+                                  description="Camera rays see the previous World; only lighting comes from the "
+                                              "probe. Takes effect at once (the World is made again from the last "
+                                              "bake's images)")
     assign_world: BoolProperty(name="Use as Scene World", default=True,
                                description="Make the GS-IBL World the scene's World after baking (the previous one "
                                            "is remembered and can be restored)")
