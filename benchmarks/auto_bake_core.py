@@ -7,9 +7,9 @@ The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3: blen
 defaults and Lighting Auto's work as blender/lighting/bake.py bake_into_world and blender/lighting/auto_light.py do
 it, on one uploaded renderer (Blender's splat cache keeps it between bakes): the World probe's bake and its files
 (core CLI: write_probe), the 9-point measurement in one batch with the World probe's place, and the nodes of the
-sphere's grid the measurement did not place (18 of 3 x 3 x 3, 116 of 5 x 5 x 5), when it asks for a grid. Wall time: median of --repeats after one
-warm-up; the device, driver, date and SM clock (held by a CUDA context: bench_common) on the row. Appends to --out
-(default docs/bench/auto_bake_core_<device>.csv).
+sphere's grid the measurement did not place (18 of 3 x 3 x 3, 116 of 5 x 5 x 5), when it asks for a grid. Wall
+time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA context:
+bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv).
 """
 from __future__ import annotations
 
