@@ -160,11 +160,16 @@ def raster_depth(tris_world, view, proj, w, h, ss=1):
 
 def dilate_depth(z):
     """Edge pixels whose centre misses the mesh still carry its anti-aliased (filter-spread) colour: give every
-    empty pixel the nearest depth of its 3x3 neighbours, so the split there is at the mesh too."""
+    empty pixel the depth of a covered neighbour (a 4-neighbour first, the nearest of them; else a diagonal one),
+    so the split there is at the mesh too. Pixels no mesh reaches keep FAR (there the split changes nothing)."""
     p = np.pad(z, 1, constant_values=FAR)
-    nb = np.min([p[1 + dy:p.shape[0] - 1 + dy, 1 + dx:p.shape[1] - 1 + dx]
-                 for dy in (-1, 0, 1) for dx in (-1, 0, 1)], axis=0)
-    return np.where(z < FAR, z, nb)
+    h, w = z.shape
+
+    def nb(offsets):
+        return np.min([p[1 + dy:h + 1 + dy, 1 + dx:w + 1 + dx] for dy, dx in offsets], axis=0)
+    four = nb(((-1, 0), (1, 0), (0, -1), (0, 1)))
+    diag = nb(((-1, -1), (-1, 1), (1, -1), (1, 1)))
+    return np.where(z < FAR, z, np.where(four < FAR, four, diag))
 
 
 # ---- camera model of the checker: Blender's pinhole camera rebuilt from the settings (no bpy) ----
@@ -481,10 +486,70 @@ def render(out, tag, how):
     dump()
 
 
+def gui(out, engine, esc):
+    """In Blender's window (run under Xvfb): Render Animation and Render Image as the user starts them
+    (INVOKE_DEFAULT: a render job beside the UI's event loop), then quit. With `esc`, an Escape key (xdotool) is
+    sent to the render window while frame 2 renders: render_cancel, and what was written by then."""
+    bpy = _bpy()
+    build(out, engine)
+    scene = bpy.context.scene
+    scene.render.image_settings.file_format = "OPEN_EXR"
+    scene.render.image_settings.color_depth = "32"
+    e = engine.lower()
+    steps = [(f"{e}_gui_esc", True)] if esc else [(f"{e}_gui_anim", True), (f"{e}_gui_still", False)]
+    t_start = {}
+
+    def begin():
+        if not steps:
+            dump()
+            bpy.ops.wm.quit_blender()
+            return None
+        tag, anim = steps[0]
+        STATE["tag"] = tag
+        STATE["events"], STATE["fills"] = [], []
+        tree = compositor_tree(scene)
+        fo = next(n for n in tree.nodes if n.bl_idname == "CompositorNodeOutputFile")
+        if hasattr(fo, "file_name"):
+            fo.file_name = f"layers_{tag}_"
+        else:
+            fo.base_path = os.path.join(out, f"layers_{tag}_")
+        scene.render.filepath = os.path.join(out, f"comp_{tag}_")
+        if not anim:
+            scene.frame_set(2)
+        win = bpy.context.window_manager.windows[0]
+        t_start[tag] = time.perf_counter()
+        with bpy.context.temp_override(window=win, area=win.screen.areas[0]):
+            r = bpy.ops.render.render("INVOKE_DEFAULT", animation=anim, write_still=not anim)
+        STATE["events"].append({"h": "invoke", "t": round(time.perf_counter(), 4), "result": sorted(r),
+                                "frame": scene.frame_current, "main_thread": True})
+        return None
+
+    def done(scene_, dg=None):
+        tag = steps.pop(0)[0] if steps else None
+        STATE["events"].append({"h": "wall_s", "t": round(time.perf_counter() - t_start.get(tag, 0), 3)})
+        dump()
+        bpy.app.timers.register(begin, first_interval=1.0)  # the next step, or quit
+
+    if esc:
+        def press_escape(scene_, dg=None):
+            if scene_.frame_current == 2 and not STATE.get("esc_sent"):
+                STATE["esc_sent"] = True
+                import subprocess
+                subprocess.Popen(["sh", "-c", "sleep 0.5; xdotool key Escape"])
+        bpy.app.handlers.render_pre.append(press_escape)
+        scene.eevee.taa_render_samples = 256
+        scene.cycles.samples = 4096
+    register(out, steps[0][0])
+    bpy.app.handlers.render_complete.append(done)
+    bpy.app.handlers.render_cancel.append(done)
+    bpy.app.timers.register(begin, first_interval=3.0)
+
+
 def blender_main(argv):
     import argparse
     ap = argparse.ArgumentParser()
-    ap.add_argument("--job", required=True, choices=["build", "render"])
+    ap.add_argument("--job", required=True, choices=["build", "render", "gui"])
+    ap.add_argument("--esc", action="store_true")
     ap.add_argument("--out", required=True)
     ap.add_argument("--engine", default="CYCLES", choices=["CYCLES", "EEVEE"])
     ap.add_argument("--blend")
@@ -493,7 +558,9 @@ def blender_main(argv):
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     bpy = _bpy()
-    if a.job == "build":
+    if a.job == "gui":
+        gui(a.out, a.engine, a.esc)
+    elif a.job == "build":
         build(a.out, a.engine)
         if a.blend:
             bpy.ops.wm.save_as_mainfile(filepath=a.blend)
@@ -581,9 +648,23 @@ def check_tag(out, tag, frames, still=False):
     ev_path = os.path.join(out, f"events_{tag}.json")
     ev = json.load(open(ev_path)) if os.path.exists(ev_path) else {"events": [], "fills": []}
     res["blender"] = ev.get("blender")
+    if tag.endswith("_esc"):  # Escape during an animation: the frames written before it, none of the cancelled one
+        frames = [e["frame"] for e in ev["events"] if e["h"] == "render_write"]
+        pre = [e["frame"] for e in ev["events"] if e["h"] == "render_pre"]
+        cancelled = pre[-1] if pre else None
+        res["esc"] = {"written": frames, "cancelled_frame": cancelled,
+                      "render_cancel": any(e["h"] == "render_cancel" for e in ev["events"]),
+                      "files_of_cancelled": sorted(n for n in os.listdir(out)
+                                                   if n.startswith((f"comp_{tag}_{cancelled:04d}",
+                                                                    f"layers_{tag}_{cancelled:04d}")))}
+        if not res["esc"]["render_cancel"] or res["esc"]["files_of_cancelled"] or cancelled in frames:
+            res["ok"] = False
+            res["problems"].append(f"Escape: {res['esc']}")
     refs = {}
     for f in frames:
         comp_path = os.path.join(out, f"comp_{tag}_{f:04d}.exr")
+        if not os.path.exists(comp_path) and os.path.exists(os.path.join(out, f"comp_{tag}_.exr")):
+            comp_path = os.path.join(out, f"comp_{tag}_.exr")  # the GUI's F12 with write_still: no frame number
         lay_path = os.path.join(out, f"layers_{tag}_{f:04d}.exr")
         if not os.path.exists(lay_path) and os.path.exists(os.path.join(out, f"layers_{tag}_.exr")):
             lay_path = os.path.join(out, f"layers_{tag}_.exr")  # 5.x: a still's File Output gets no frame number
