@@ -44,6 +44,7 @@ MESHES = {  # name: (kind, centre, size, z-rotation deg, emission colour)
     "Back": ("cube", (0.95, 1.2, -0.55), (0.5, 0.5), 0.0, (0.1, 0.9, 0.8)),  # behind every sheet
 }
 FAR = 1.0e10
+CROP = (0.25, 0.75, 0.5, 1.0)  # border min x, max x, min y, max y of the crop run
 TAG = "FINAL-FRAME-PROBE "
 
 
@@ -433,10 +434,20 @@ def fill(scene, dg):
     front, behind, full, zmed = split_blend(depth, rgba, split)
     t3 = time.perf_counter()
     zimg = np.concatenate([np.repeat(zmed[..., None], 3, -1), np.ones_like(zmed)[..., None]], -1)
-    for name, arr in (("gs_front", front), ("gs_behind", behind), ("gs_full", full), ("gs_depth", zimg)):
+    layers = [("gs_front", front), ("gs_behind", behind), ("gs_full", full), ("gs_depth", zimg)]
+    if r.use_border:  # Blender renders only the border's pixels (disprect = int(border * size))
+        x0, x1 = int(r.border_min_x * w), int(r.border_max_x * w)
+        y0, y1 = int(r.border_min_y * h), int(r.border_max_y * h)
+        if r.use_crop_to_border:  # the render and the compositor are the window's size: so are the images
+            layers = [(n, a[y0:y1, x0:x1]) for n, a in layers]
+        else:  # full size; splats only where Blender rendered (4.2 composites only the border's pixels anyway)
+            keep = np.zeros((h, w, 1))
+            keep[y0:y1, x0:x1] = 1
+            layers = [(n, a * keep) for n, a in layers]
+    for name, arr in layers:
         im = bpy.data.images[name]
-        if tuple(im.size) != (w, h):
-            im.scale(w, h)
+        if tuple(im.size) != (arr.shape[1], arr.shape[0]):
+            im.scale(arr.shape[1], arr.shape[0])
         im.pixels.foreach_set(arr.astype(np.float32).ravel())
         im.update()
     np.save(os.path.join(STATE["out"], f"zmesh_{STATE['tag']}_{se.frame_current}.npy"), zmesh)
@@ -474,7 +485,11 @@ def render(out, tag, how):
     scene.render.image_settings.color_depth = "32"
     scene.render.image_settings.color_mode = "RGBA"
     t0 = time.perf_counter()
-    if how == "still":  # F12: RE_RenderFrame at the current frame; the output path gets no frame number
+    if how in ("still", "crop"):  # F12: RE_RenderFrame at the current frame; the path gets no frame number
+        if how == "crop":  # a render border cropped to: the render and the compositor are the window's size
+            r = scene.render
+            r.use_border, r.use_crop_to_border = True, True
+            r.border_min_x, r.border_max_x, r.border_min_y, r.border_max_y = CROP
         scene.frame_set(2)
         scene.render.filepath = os.path.join(out, f"comp_{tag}_0002")
         bpy.ops.render.render(write_still=True)
@@ -554,7 +569,7 @@ def blender_main(argv):
     ap.add_argument("--engine", default="CYCLES", choices=["CYCLES", "EEVEE"])
     ap.add_argument("--blend")
     ap.add_argument("--tag")
-    ap.add_argument("--how", default="none", choices=["none", "f1", "anim", "still"])
+    ap.add_argument("--how", default="none", choices=["none", "f1", "anim", "still", "crop"])
     a = ap.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     bpy = _bpy()
@@ -678,6 +693,25 @@ def check_tag(out, tag, frames, still=False):
         rgba = find_layer(lay, "render")[..., :4]
         bz = find_layer(lay, "depth")[..., 0]
         h, w = comp.shape[:2]
+        if tag.endswith("_crop"):  # compare the window of the full frame's reference
+            W, H = RES[0] * PERCENT // 100, RES[1] * PERCENT // 100
+            x0, x1, y0, y1 = int(CROP[0] * W), int(CROP[1] * W), int(CROP[2] * H), int(CROP[3] * H)
+            res["crop"] = {"comp": [w, h], "window": [x1 - x0, y1 - y0], "render": list(rgba.shape[1::-1])}
+            if (w, h) != (x1 - x0, y1 - y0) or rgba.shape[:2] != (h, w):
+                res["ok"] = False
+                res["problems"].append(f"crop: sizes {res['crop']}")
+                continue
+            whole = np.zeros((H, W, 4))
+            whole[y0:y1, x0:x1] = rgba
+            ref, full = reference(f, whole, W, H)
+            ref, full = ref[y0:y1, x0:x1], full[y0:y1, x0:x1]
+            e = errors(comp, ref)
+            e["zcombine"] = errors(find_layer(lay, "zcombine")[..., :4], ref)
+            res["frames"][f] = e
+            if e["mean_rel"] > 0.01 or e["p99_rel"] > 0.03:
+                res["ok"] = False
+                res["problems"].append(f"crop: error mean {e['mean_rel']:.4f} p99 {e['p99_rel']:.4f}")
+            continue
         ref, full = reference(f, rgba, w, h)
         refs[f] = (comp, ref)
         e = errors(comp, ref)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs tests/real_blender/final_frame_probe.py in each real Blender of scripts/blender_roots.sh (those made), for
 # Cycles and EEVEE: build the scene, render `-f 1` (the binary's own flag; in the bpy module the same RE_RenderAnim
-# path with frames 1..1), `-a` over frames 1..3 and an F12 still (write_still) at frame 2, then check every
+# path with frames 1..1), `-a` over frames 1..3 and an F12 still (write_still) at frame 2 (with Cycles also one
+# cropped to a render border), then check every
 # written frame with numpy + OpenImageIO in this checkout's .venv. Results: build/final-frame/<entry>/.
 # blender-5.2-gui: Blender's window under Xvfb, Render Animation and Render Image started as a user does
 # (INVOKE_DEFAULT: the render runs as a job beside the event loop), and Escape pressed (xdotool) during an animation.
@@ -55,16 +56,21 @@ for entry in "${entries[@]}"; do
       run blender -b --python "$probe" -- --job build --engine $engine --out "$inner" --blend "$blend" > "$host/build_$e.log" 2>&1
       s=$SECONDS; run blender -b "$blend" --python "$probe" -f 1 -- --job render --blend "$blend" --out "$inner" --tag ${e}_f1 --how none > "$host/${e}_f1.log" 2>&1; echo "${e}_f1 $((SECONDS - s)) s" >> "$host/times.txt"
       s=$SECONDS; run blender -b "$blend" --python "$probe" -a -- --job render --blend "$blend" --out "$inner" --tag ${e}_anim --how none > "$host/${e}_anim.log" 2>&1; echo "${e}_anim $((SECONDS - s)) s" >> "$host/times.txt"
-      s=$SECONDS; run blender -b "$blend" --python "$probe" -- --job render --blend "$blend" --out "$inner" --tag ${e}_still --how still > "$host/${e}_still.log" 2>&1; echo "${e}_still $((SECONDS - s)) s" >> "$host/times.txt"
+      for how in still crop; do
+        [ $how = crop ] && [ $engine != CYCLES ] && continue
+        s=$SECONDS; run blender -b "$blend" --python "$probe" -- --job render --blend "$blend" --out "$inner" --tag ${e}_$how --how $how > "$host/${e}_$how.log" 2>&1; echo "${e}_$how $((SECONDS - s)) s" >> "$host/times.txt"
+      done
     else
       run $py "$probe" --job build --engine $engine --out "$inner" --blend "$blend" > "$host/build_$e.log" 2>&1
-      for how in f1 anim still; do
+      for how in f1 anim still crop; do
+        [ $how = crop ] && [ $engine != CYCLES ] && continue
         s=$SECONDS
         run $py "$probe" --job render --blend "$blend" --out "$inner" --tag ${e}_$how --how $how > "$host/${e}_$how.log" 2>&1
         echo "${e}_$how $((SECONDS - s)) s" >> "$host/times.txt"
       done
     fi
     tags+=("${e}_f1:1" "${e}_anim:1-3" "${e}_still:2")
+    [ $engine = CYCLES ] && tags+=("${e}_crop:2")
     echo "[final-frame] $entry $engine: $((SECONDS - t0)) s"
   done
   [ "$host" != "$OUT/$entry" ] && { mkdir -p "$OUT"; cp -r "$host" "$OUT/$entry"; rm -rf "$host"; }
