@@ -227,3 +227,73 @@ def test_keep_background_takes_effect_at_once(blender, tmp_path, write_3dgs_ply)
         assert s.last_report == report and s.world[BAKE_KEY] == bake_id
     assert scene.get(gw.PREVIOUS_WORLD) == backdrop and backdrop.users  # the user's World is untouched
     assert len([w for w in bpy.data.worlds if gw.is_ours(w, "world")]) == 1
+
+
+# ---- 8. Progress reaches 100% only when the work is done
+
+class _Recorder:
+    """A jobs.Runner whose every progress (the worker's calls and the job's Steps) is recorded."""
+
+    def __init__(self, job):
+        from gs_ibl_addon.blender.common import jobs
+        self.seen: list[tuple[float, str]] = []
+        self.raw: list[float] = []
+        recorder = self
+
+        class Recording(jobs.Runner):
+            def _advance(self, fraction):
+                super()._advance(fraction)
+                recorder.raw.append(float(fraction))
+                recorder.seen.append((self.fraction, self.text))
+
+        self.runner = Recording(job, "testing")
+
+    def run(self, timeout: float = 300.0):
+        import time
+        end = time.monotonic() + timeout
+        while not self.runner.tick(0.0):
+            assert not self.runner.done and self.runner.fraction < 1.0
+            assert time.monotonic() < end, self.runner.text
+            time.sleep(0.005)
+        assert self.runner.error is None, self.runner.error
+        return self.runner.result
+
+
+def _check_progress(rec: _Recorder, *texts: str) -> None:
+    fractions = [f for f, _ in rec.seen]
+    assert fractions == sorted(fractions), rec.seen  # never back
+    assert max(fractions) < 1.0 and rec.runner.fraction == 1.0  # 100% once it ended, not before
+    for text in texts:  # that part of the work has its own share, below 100%
+        shares = [f for f, t in rec.seen if text in t]
+        assert shares and max(shares) < 1.0, (text, rec.seen)
+    # the job's own parts: each within the share before its end (as the status line says, untouched)
+    assert max(rec.raw) < 1.0, rec.raw
+
+
+def test_progress_reaches_100_only_at_the_end(blender, tmp_path, write_3dgs_ply):
+    """An Update When Moved bake's status line read 100% for its last 18 s: Lighting Auto's probes for each mesh ran
+    after the bake's span had filled the job's progress (their Work had no span of its own)."""
+    from gs_ibl_addon.blender.lighting import auto_update as au
+    from gs_ibl_addon.blender.lighting import bake as gb
+    _import(tmp_path, write_3dgs_ply)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(1.0, -0.5, 0.2))
+    probe = _probe(place="AUTO", lighting="AUTO", auto_update=True, face_size=0, variation_tolerance=1.0)
+    rec = _Recorder(gb.bake_job(bpy.context.scene, probe))
+    rec.run()
+    _check_progress(rec, "light probes for each mesh's light")
+    assert "Auto lighting: 1 meshes" in probe.gs_ibl_probe.last_report
+    # the automatic re-bake after a move: two probes, one job
+    probe2 = _probe(place="CURSOR", lighting="WORLD", auto_update=True)
+    bpy.context.view_layer.update()
+    probe.location.z += 0.5
+    probe2.location.z += 0.5
+    bpy.context.view_layer.update()
+    assert au._pending == {(bpy.context.scene.name, p.name) for p in (probe, probe2)}
+    bpy.app.timers.unregister(au.run_pending)
+    keys = sorted(au._pending)
+    au._pending.clear()
+    before = au.auto_bakes
+    rec = _Recorder(au._pending_job(keys, {}))
+    rec.run()
+    assert au.auto_bakes == before + 2
+    _check_progress(rec, "light probes for each mesh's light", "writing the light")

@@ -75,6 +75,32 @@ def _scaled(progress: Progress, span: tuple[float, float] | None) -> Progress:
     return lambda text, fraction: progress(text, a + (b - a) * min(max(float(fraction), 0.0), 1.0))
 
 
+def within(job: Job, a: float, b: float) -> Job:
+    """``job`` run as the part [a, b] of its caller's progress (``x = yield from within(sub, 0.4, 0.9)``): its Step
+    fractions and Work spans are mapped into [a, b] (a Work without a span fills all of it), so a job made of parts
+    says 100% only at its end (a bake's status line once read 100% for the 18 s of Lighting Auto after its span).
+    Errors thrown in at a yield and closing go through to ``job``; returns its result."""
+    value, error = None, None
+    while True:
+        try:
+            item = job.throw(error) if error is not None else job.send(value)
+        except StopIteration as stop:
+            return stop.value
+        value = error = None
+        if isinstance(item, Step) and item.fraction is not None:
+            item = Step(item.text, a + (b - a) * min(max(float(item.fraction), 0.0), 1.0), item.wait_for)
+        elif isinstance(item, Work):
+            lo, hi = item.span or (0.0, 1.0)
+            item.span = (a + (b - a) * lo, a + (b - a) * hi)
+        try:
+            value = yield item
+        except GeneratorExit:
+            job.close()
+            raise
+        except BaseException as e:  # noqa: BLE001  handed to the sub-job, as yield from would
+            error = e
+
+
 def run_now(job: Job, progress: Progress | None = None) -> Any:
     """Run ``job`` to its end in this thread; returns its result, raises its error."""
     say = progress or (lambda _text, _fraction: None)
@@ -99,6 +125,9 @@ def run_now(job: Job, progress: Progress | None = None) -> Any:
             raise TypeError(f"a job yielded {item!r}: only Step and Work")
 
 
+MAX_RUNNING = 0.99  # the most a running job's status line says: 100% is for a job that has ended
+
+
 class Runner:
     """Runs one job a tick at a time (see the module's docstring). ``text`` and ``fraction`` say where it is;
     after ``tick()`` returned True, ``result``, ``error`` or ``cancelled`` say how it ended."""
@@ -115,11 +144,17 @@ class Runner:
         self._outcome: tuple[Any, BaseException | None] = (None, None)
         self._span: tuple[float, float] | None = None
 
+    def _advance(self, fraction: float) -> None:
+        """The status line's fraction never goes back (a part may restart its own count: the core's face-size search
+        renders a larger size after a smaller) and says 100% only once the job has ended (MAX_RUNNING below)."""
+        self.fraction = min(max(self.fraction, float(fraction)), MAX_RUNNING)
+
     # ---- called from the worker
     def _progress(self, text: str, fraction: float) -> None:
         if self._cancel.is_set():
             raise Cancelled(text)
-        self.text, self.fraction = text, float(fraction)
+        self.text = text
+        self._advance(fraction)
 
     def _work(self, item: Work) -> None:
         try:
@@ -172,7 +207,7 @@ class Runner:
             try:
                 item = self.job.throw(error) if error is not None else self.job.send(value)
             except StopIteration as stop:
-                self.result, self.done = stop.value, True
+                self.result, self.done, self.fraction = stop.value, True, 1.0
                 break
             except Exception as e:  # noqa: BLE001  the job's own error: the caller reports it
                 self.error, self.done = e, True
@@ -180,7 +215,7 @@ class Runner:
             if isinstance(item, Step):
                 self.text = item.text
                 if item.fraction is not None:
-                    self.fraction = item.fraction
+                    self._advance(item.fraction)
                 if item.wait_for is not None or time.perf_counter() >= until:
                     return False
             elif isinstance(item, Work):

@@ -61,7 +61,7 @@ def auto_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object,
     points = np.concatenate([measure_points(*box) for box in boxes])
     at = np.array(probe.matrix_world.translation, np.float64)
     # the measurement, one batch with the World probe's place (their difference carries no difference of method)
-    both = yield Work(_probes, r, np.vstack([at[None], points]))
+    both = yield Work(_probes, r, np.vstack([at[None], points]), span=(0.0, 0.4))
     d_world, d = both[0], both[1:]
     choices = [choose_light(n, d_world, d[9 * i:9 * i + 9], tol) for i, n in enumerate(names)]
     # light of their own, at the operators' size, for the meshes that need it: one more batch
@@ -77,7 +77,7 @@ def auto_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object,
         reuse = {i: measured_nodes(spec, points[9 * i:9 * i + 9]) for i, spec in grids.items()}
         fresh = {i: spec.points().reshape(-1, 3)[reuse[i] < 0] for i, spec in grids.items()}
         todo = np.concatenate(list(fresh.values()))
-        dg = (yield Work(_probes, r, todo)) if len(todo) else np.empty((0, *d.shape[1:]))
+        dg = (yield Work(_probes, r, todo, span=(0.4, 0.95))) if len(todo) else np.empty((0, *d.shape[1:]))
         start = 0
         for i, spec in grids.items():
             m = reuse[i]

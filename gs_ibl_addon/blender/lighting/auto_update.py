@@ -7,7 +7,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..common.datablocks import is_probe
-from ..common.jobs import Job, busy, cancel_all
+from ..common.jobs import Job, busy, cancel_all, within
 from ..common.jobs import start as start_job
 from ..common.redraw import tag_redraw
 from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_places, place_key, relight_steps,
@@ -150,7 +150,8 @@ def _update_done(runner) -> None:
 
 def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set[str]]) -> Job:
     global last_auto_error, auto_bakes, auto_relights
-    for scene_name, probe_name in keys:
+    for i, (scene_name, probe_name) in enumerate(keys):
+        part = (0.99 * i / len(keys), 0.99 * (i + 1) / len(keys))  # each probe's part of the job's progress
         scene = bpy.data.scenes.get(scene_name)
         probe = scene.objects.get(probe_name) if scene is not None else None
         if probe is None or not is_probe(probe):
@@ -164,7 +165,7 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
             if meshes:  # only lit meshes moved: their light is chosen again, the World stays
                 try:
                     auto_relights += 1
-                    text = yield from relight_steps(scene, probe, meshes)
+                    text = yield from within(relight_steps(scene, probe, meshes), *part)
                     print(f"GS-IBL (update when moved): {text}")
                 except (ValueError, RuntimeError, OSError, MemoryError) as e:
                     last_auto_error = f"{probe_name}: {e}"
@@ -172,7 +173,7 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
             continue  # the probe moved back to where it was baked, or only meshes moved
         try:
             auto_bakes += 1
-            _, text, warning = yield from bake_job(scene, probe, splats)
+            _, text, warning = yield from within(bake_job(scene, probe, splats), *part)
             last_auto_error = None
             print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
         except (ValueError, RuntimeError, OSError, MemoryError) as e:
