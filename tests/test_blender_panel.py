@@ -297,3 +297,27 @@ def test_progress_reaches_100_only_at_the_end(blender, tmp_path, write_3dgs_ply)
     rec.run()
     assert au.auto_bakes == before + 2
     _check_progress(rec, "light probes for each mesh's light", "writing the light")
+
+
+# ---- 5. A probe inside an object of the capture is warned about, by the splat object's name
+
+def test_a_probe_inside_opaque_splats_is_warned_by_name(blender):
+    """A probe inside a coloured armchair gave blue-green meshes and no warning (the check counted only sigmas from
+    the nearest splat, and fired only inside the table's top)."""
+    from gs_ibl_addon.blender.lighting.bake import WARNING_PREFIX, bake_into_world
+    from gs_ibl_addon.blender.splats.object import create_splat_object
+    from gs_ibl_addon.core.synthetic import concat, room_scene
+    chair_at = (1.0, 0.5, 0.5)
+    scene = concat([room_scene(spacing=0.15).scene, shell_scene(SKY, 2000, 0.35, chair_at)])
+    create_splat_object(bpy.context, scene, "Living Room", proxy=False)
+    probe = _probe()
+    for where, inside in (((0.0, 0.0, 1.5), False), (chair_at, True)):
+        probe.location = where
+        bpy.context.view_layer.update()
+        _result, _text, warning = bake_into_world(bpy.context.scene, probe)
+        report = probe.gs_ibl_probe.last_report
+        if inside:
+            assert warning is not None and "the probe is inside splats of 'Living Room'" in warning, warning
+            assert f"{WARNING_PREFIX}{warning}" in report.split("\n")
+        else:
+            assert warning is None or "inside splats" not in warning, warning

@@ -136,10 +136,12 @@ def filter_gpu_ms(timings: dict[str, float]) -> float:
     return sum(timings.get(k, 0.0) for k in FILTER_STAGES)
 
 
-def summary(result, seconds: float, stages: dict[str, float] | None = None) -> tuple[list[str], str | None]:
+def summary(result, seconds: float, stages: dict[str, float] | None = None,
+            splats_name: str | None = None) -> tuple[list[str], str | None]:
     """(lines saying what the bake did and how long each part took, hole warning or None). ``stages``: wall
     seconds of the bake's parts, in order (reading, turning SH and upload when this bake made the splats' GPU copy;
-    bake; writing; each mesh's light); with "other" (what they leave of ``seconds``) they add up to it."""
+    bake; writing; each mesh's light); with "other" (what they leave of ``seconds``) they add up to it.
+    ``splats_name``: the splat object baked, named by the warning of a probe inside its splats."""
     t = result.timings_ms
     render_ms = t.get("render_total", sum(v for k, v in t.items() if k.startswith("render_")))
     filter_ms = filter_gpu_ms(t)
@@ -166,7 +168,7 @@ def summary(result, seconds: float, stages: dict[str, float] | None = None) -> t
     if result.hole_fraction > HOLE_WARNING:
         warning = hole_warning(result.hole_fill) or (f"the probe sees holes: {100 * result.hole_fraction:.1f}% of "
                                                      "directions have no splat")
-    near = near_warning(result.near_splats)  # only where the bake had the splats on the host
+    near = near_warning(result.near_splats, splats_name)  # only where the bake had the splats on the host
     if near:
         warning = f"{warning}; {near}" if warning else near
     return lines, warning
@@ -273,7 +275,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
         t = lap("each mesh's light", t)
     else:
         remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
-    lines, warning = summary(result, time.perf_counter() - t0, stages)
+    lines, warning = summary(result, time.perf_counter() - t0, stages, splats_name)
     if auto:
         lines.append(auto)
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([WARNING_PREFIX + warning] if warning else []))
