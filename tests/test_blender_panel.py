@@ -321,3 +321,84 @@ def test_a_probe_inside_opaque_splats_is_warned_by_name(blender):
             assert f"{WARNING_PREFIX}{warning}" in report.split("\n")
         else:
             assert warning is None or "inside splats" not in warning, warning
+
+
+# ---- 2. The report in one line, the details a click away
+
+def _labels(rec: dict) -> str:
+    return "\n".join(text for text, _icon in rec.get("labels", []))
+
+
+def test_the_report_is_one_line_with_its_details_a_click_away(blender, tmp_path, write_3dgs_ply):
+    """The bake report was a 20-line wall in the panel: now its summary line (time, face size, error estimate,
+    lighting) and its warnings; the rest behind Details, a window-manager toggle (UI state: no undo step, on no
+    probe). The whole report stays in last_report for scripts."""
+    _import(tmp_path, write_3dgs_ply)
+    probe = _probe(lighting="WORLD", face_size=0)
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    s = probe.gs_ibl_probe
+    line = s.last_summary
+    assert line.startswith("Baked in ") and " s, 64x64 faces, error " in line and line.endswith("lit by the World")
+    assert len(s.last_report.split("\n")) >= 5 and "the total:" in s.last_report  # kept whole
+    wm = bpy.context.window_manager
+    assert "gs_ibl_report_details" in type(wm).bl_rna.properties and not wm.gs_ibl_report_details
+    rec = _draw()
+    shown = _labels(rec).replace("\n", " ")
+    assert line in shown or line.replace(", ", ",\n") in _labels(rec)
+    assert "the total:" not in shown and "render " not in shown
+    assert ("gs_ibl_report_details", "Details") in rec["props"]
+    wm.gs_ibl_report_details = True
+    shown = _labels(_draw())
+    assert "the total:" in shown and "face size by irradiance change" in shown
+    wm.gs_ibl_report_details = False
+    # Lighting Auto says what it chose
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(1.0, -0.5, 0.2))
+    probe = _probe(place="AUTO", lighting="AUTO", variation_tolerance=1.0)
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert probe.gs_ibl_probe.last_summary.endswith("16x16 faces, Auto: 1 mesh (1 World)")
+
+
+# ---- 3. A stale mark on the report and in the status bar
+
+def test_an_out_of_date_bake_is_marked(blender, tmp_path, write_3dgs_ply):
+    """After a mesh or the probe moved, or an undo, the report still described the old bake with no sign."""
+    from gs_ibl_addon.blender.common.jobs import notices
+    from gs_ibl_addon.blender.lighting.stale import stale_reasons
+    splats = _import(tmp_path, write_3dgs_ply)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(1.0, -0.5, 0.2))
+    ball = bpy.context.active_object
+    probe = _probe(place="CURSOR", lighting="AUTO", variation_tolerance=1.0)
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+
+    def marked() -> list[str]:
+        bpy.context.view_layer.update()  # the depsgraph update whose handler refreshes the status bar
+        reasons = stale_reasons(bpy.context.scene, probe)
+        rec = _draw()
+        out_of_date = [t for t, icon in rec["labels"] if t.startswith("Out of date") and icon == "ERROR"]
+        assert bool(out_of_date) == bool(reasons)
+        in_status_bar = [n for n in notices() if "out of date" in n and repr(probe.name) in n]
+        assert len(in_status_bar) == (1 if reasons else 0), notices()
+        return reasons
+
+    assert marked() == [] and notices() == []
+    for obj, reason in ((ball, "'Sphere' moved"), (probe, "the probe moved"), (splats, "'shell' moved")):
+        where = tuple(obj.location)
+        obj.location.x += 0.5
+        assert marked() == [reason]
+        assert reason in notices()[0]
+        obj.location = where
+        assert marked() == [] and notices() == []
+    # undo: the report of an earlier bake comes back while the probe stays where the later one was made
+    bpy.ops.ed.undo_push(message="bake 1")
+    probe.location = (0.0, 0.0, 1.0)
+    bpy.ops.ed.undo_push(message="move")
+    assert marked() == ["the probe moved"]
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="bake 2")
+    name = probe.name
+    assert marked() == []
+    for step, want in ((bpy.ops.ed.undo, ["the probe moved"]), (bpy.ops.ed.redo, []),
+                       (bpy.ops.ed.undo, ["the probe moved"])):
+        assert step() == {"FINISHED"}
+        probe = bpy.data.objects[name]
+        assert marked() == want

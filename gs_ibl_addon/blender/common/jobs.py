@@ -264,12 +264,31 @@ def show_status(text: str | None, sidebars: bool = False) -> None:
 
 
 _listed: list[str] = []  # the titles of the jobs the sidebars last listed
+_notices: dict[str, str] = {}  # key -> a line the status bar shows after the running jobs' (set_notice)
+
+
+def set_notice(key: str, text: str | None) -> None:
+    """Show ``text`` in the status bar (after any running job's line) until it is set to None; e.g. "the bake of
+    'Probe' is out of date". Redraws only when it changes (callers may call it at every depsgraph update)."""
+    if _notices.get(key) == text:
+        return
+    if text is None:
+        del _notices[key]
+    else:
+        _notices[key] = text
+    _status_now()
+
+
+def notices() -> list[str]:
+    """The status bar's notices now (tests read them)."""
+    return list(_notices.values())
 
 
 def _status_now() -> None:
     runners = running()
     titles = [r.title for r in runners]
-    show_status("    ".join(r.status() for r in runners) if runners else None, sidebars=titles != _listed)
+    lines = [r.status() for r in runners] + list(_notices.values())
+    show_status("    ".join(lines) if lines else None, sidebars=titles != _listed)
     _listed[:] = titles
 
 
@@ -321,6 +340,9 @@ def cancel_all() -> None:
         runner.cancel()
     _background.clear()
     _modal.clear()
+    if _notices:  # about the file being closed
+        _notices.clear()
+        _status_now()
 
 
 # ------------------------------------------------------------------------------------------------ modal operators

@@ -14,6 +14,7 @@ from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_place
                    seen_states)
 from .object_probes import is_lit_mesh
 from .sources import auto_splats, clear_lost_splats
+from .stale import refresh_notice
 
 _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
 _pending_meshes: dict[tuple[str, str], set[str]] = {}  # (scene, probe) -> lit meshes that moved (Lighting Auto)
@@ -87,6 +88,7 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     then re-baked on a Strength change ("re-baking moved probes" though nothing moved)."""
     global _rebaseline_next
     clear_lost_splats(scene)
+    refresh_notice(scene)  # the status bar says when a bake is out of date (stale.py)
     if _rebaseline_next:
         _rebaseline_next = False
         _rebaseline()
@@ -165,7 +167,7 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
             if meshes:  # only lit meshes moved: their light is chosen again, the World stays
                 try:
                     auto_relights += 1
-                    text = yield from within(relight_steps(scene, probe, meshes), *part)
+                    text, _choices = yield from within(relight_steps(scene, probe, meshes), *part)
                     print(f"GS-IBL (update when moved): {text}")
                 except (ValueError, RuntimeError, OSError, MemoryError) as e:
                     last_auto_error = f"{probe_name}: {e}"
@@ -182,6 +184,7 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
             probe = scene.objects.get(probe_name) if scene is not None else None
             if probe is not None and is_probe(probe):
                 probe.gs_ibl_probe.last_report = f"{WARNING_PREFIX}automatic re-bake failed:\n{e}"
+                probe.gs_ibl_probe.last_summary = "Automatic re-bake failed: the World keeps the last bake's light"
             print(f"GS-IBL (update when moved): {last_auto_error}")
 
 
@@ -201,6 +204,8 @@ def on_load_pre(*_args) -> None:
 def on_load_post(*_args) -> None:
     for scene in bpy.data.scenes:  # the opened file's places: its first move is compared with them
         _look(scene)
+    if bpy.context.scene is not None:
+        refresh_notice(bpy.context.scene)  # a file saved with an out-of-date bake says so when opened
 
 
 def register_handlers() -> None:

@@ -21,6 +21,7 @@ from ...core.probe.latlong import cube_to_latlong
 from ...core.settings import method_from_blender
 from ..splats import cache as splat_cache
 from .stamps import BAKE_KEY, stamp
+from .stale import record_bake, record_meshes, refresh_notice
 from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from .object_probes import lit_meshes
 from . import local_light as ll
@@ -267,20 +268,50 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     if probe.gs_ibl_probe.splats is None:
         probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
     baked_states[(scene.name, probe.name)] = seen_states[(scene.name, probe.name)] = bake_state(probe, splats)
-    auto = None
+    record_bake(probe, splats)
+    auto, choices = None, None
     if probe.gs_ibl_probe.lighting == "AUTO":
         yield Step("choosing each mesh's light", written)
-        auto = yield from within(relight_steps(scene, probe), written, 0.99)
+        auto, choices = yield from within(relight_steps(scene, probe), written, 0.99)
         scene, probe, splats = _named(scene_name, probe_name, splats_name)
         t = lap("each mesh's light", t)
     else:
         remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
-    lines, warning = summary(result, time.perf_counter() - t0, stages, splats_name)
+    seconds = time.perf_counter() - t0
+    lines, warning = summary(result, seconds, stages, splats_name)
     if auto:
         lines.append(auto)
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([WARNING_PREFIX + warning] if warning else []))
+    probe.gs_ibl_probe.last_summary = summary_line(result, seconds, choices)
     stamp(probe)
+    refresh_notice(scene)
     return result, ", ".join(lines), warning
+
+
+def lighting_choice(choices) -> str:
+    """How the bake lit meshes, in a few words: "World" or Lighting Auto's choices ("Auto: 3 meshes (2 World,
+    1 grid)")."""
+    if choices is None:
+        return "lit by the World"
+    if not choices:
+        return "Auto: no mesh inside the splats"
+    counts = {k: sum(c.kind == k for c in choices) for k in ("world", "probe", "grid")}
+    words = {"world": "World", "probe": "own probe", "grid": "grid"}
+    parts = ", ".join(f"{n} {words[k]}" for k, n in counts.items() if n)
+    return f"Auto: {len(choices)} mesh{'es' if len(choices) != 1 else ''} ({parts})"
+
+
+def summary_line(result, seconds: float, choices=None) -> str:
+    """The report in one line, what the panel shows with the rest one click away: time, face size, the estimated
+    error (with Face Size 0: the tolerance's estimate) and how meshes are lit."""
+    st = result.settings
+    face = st.get("face_size", np.asarray(result.radiance).shape[1])
+    parts = [f"Baked in {seconds:.1f} s", f"{face}x{face} faces"]
+    plan = st.get("tolerance_plan") or {}
+    if "estimated_error" in plan:
+        error = 100 * plan["estimated_error"]
+        parts.append("error < 0.01%" if error < 0.01 else f"error ~{error:.2g}%")
+    return ", ".join(parts + [lighting_choice(choices)])
 
 
 # What each bake depended on, for Update When Moved (auto_update.py) and Lighting Auto's re-choices.
@@ -307,7 +338,7 @@ def place_key(obj: bpy.types.Object) -> bytes:
 
 def relight_steps(scene: bpy.types.Scene, probe: bpy.types.Object, meshes: list | None = None) -> Job:
     """Lighting Auto as a job: choose the light of ``meshes`` (default: every lit mesh) and remember where they
-    were."""
+    were. Its result: (the report line, the choices)."""
     scene_name, probe_name = scene.name, probe.name
     text, choices = yield from auto_light_steps(scene, probe, meshes)
     scene = bpy.data.scenes[scene_name]  # auto_light_steps found it after its workers
@@ -316,4 +347,7 @@ def relight_steps(scene: bpy.types.Scene, probe: bpy.types.Object, meshes: list 
         obj = scene.objects.get(c.name)
         if obj is not None:
             places[c.name] = place_key(obj)
-    return text
+    probe = scene.objects.get(probe_name)
+    if probe is not None:
+        record_meshes(scene, probe, [c.name for c in choices])
+    return text, choices

@@ -11,6 +11,7 @@ from mathutils import Vector
 from ..lighting import bake as gb
 from ..lighting import sources
 from ..lighting import world as gw
+from ..lighting.stale import stale_reasons, stale_text
 from ..lighting.stamps import stale_images
 from ..common.jobs import JobOperator, running
 from ..common.datablocks import PROBE_NAME, is_probe
@@ -204,8 +205,23 @@ class GSIBL_PT_panel(bpy.types.Panel):
             _label_block(layout.box(), context, runner.status(), icon="TIME")
         if s.last_report:
             col = layout.box().column(align=True)
-            for line in s.last_report.split("\n"):
-                _label_block(col, context, line, icon="ERROR" if line.startswith(gb.WARNING_PREFIX) else "NONE")
+            reasons = stale_reasons(context.scene, probe)
+            if reasons:  # the probe, its splats or a lit mesh moved since, or an undo brought back an older report
+                _label_block(col, context, stale_text(reasons), icon="ERROR")
+            lines = s.last_report.split("\n")
+            warnings = [line for line in lines if line.startswith(gb.WARNING_PREFIX)]
+            # one line (time, face size, error, lighting) and the warnings; the whole report one click away
+            _label_block(col, context, s.last_summary or lines[0], icon="INFO")
+            for line in warnings:
+                _label_block(col, context, line, icon="ERROR")
+            wm = context.window_manager
+            details = bool(getattr(wm, "gs_ibl_report_details", False))
+            col.prop(wm, "gs_ibl_report_details", text="Details", emboss=False,
+                     icon="DISCLOSURE_TRI_DOWN" if details else "DISCLOSURE_TRI_RIGHT")
+            if details:
+                for line in lines:
+                    if not line.startswith(gb.WARNING_PREFIX):
+                        _label_block(col, context, line)
             stale = stale_images(probe)
             if stale:  # undo brought back an earlier bake's World, but its image files hold the later bake
                 _label_block(col, context, f"{gb.WARNING_PREFIX}the image files ({', '.join(stale)}) hold a later "

@@ -99,6 +99,9 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     local_report: StringProperty(name="Local Light", default="", options={"HIDDEN"})
     # Shown after a bake (read-only in the panel): what the last bake did.
     last_report: StringProperty(name="Last Bake", default="", options={"HIDDEN"})
+    # The report in one line (time, face size, estimated error, how meshes are lit): what the panel shows, with the
+    # report one click away (WindowManager.gs_ibl_report_details). Empty in files baked before it existed.
+    last_summary: StringProperty(name="Last Bake Summary", default="", options={"HIDDEN"})
     # What the last bake of this probe wrote: re-bakes update these in place, Strength edits this World only.
     world: PointerProperty(type=bpy.types.World, options={"HIDDEN"})
     radiance_image: PointerProperty(type=bpy.types.Image, options={"HIDDEN"})
@@ -146,9 +149,15 @@ def register_properties() -> None:
     bpy.types.Object.gs_ibl_probe = PointerProperty(type=GSIBL_ProbeSettings)
     bpy.types.Scene.gs_ibl_overlay = PointerProperty(type=GSIBL_OverlaySettings)
     bpy.types.Object.gs_ibl_splats = PointerProperty(type=GSIBL_SplatSettings)
+    # UI state only: on the window manager, whose edits are no undo steps and which no scene or probe carries
+    bpy.types.WindowManager.gs_ibl_report_details = BoolProperty(
+        name="Details", default=False,
+        description="Show the last bake's whole report (what it did, the face-size search, how long each part "
+                    "took), not only its summary line")
 
 
 def unregister_properties() -> None:
+    del bpy.types.WindowManager.gs_ibl_report_details
     del bpy.types.Object.gs_ibl_splats
     del bpy.types.Scene.gs_ibl_overlay
     del bpy.types.Object.gs_ibl_probe

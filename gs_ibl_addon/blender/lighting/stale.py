@@ -1,0 +1,101 @@
+"""Is a probe's bake out of date? What each bake was made from is kept on the probe (an ID property, so it is saved
+with the file and Undo brings it back together with the report it belongs to); the panel and the status bar compare
+it with the scene as it is now.
+
+Out of date: the probe moved, its splat object moved, was edited (its splat count changed) or replaced, or, for
+Lighting Auto, a mesh it chose the light of moved. After an undo that brought back an earlier bake's report while
+the probe stayed where the later bake was made, the mark shows too: the report and the World describe the probe
+where it was then.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+from ..common.jobs import set_notice
+from ..splats.object import splat_count
+
+BAKED_KEY = "gs_ibl_baked"  # on a probe: {"probe": xyz, "splats": name, "splats_matrix": 16 floats,
+# "splats_count": n, "meshes": {name: 16 floats}} of its last bake
+NOTICE = "stale"  # the status bar's line (common/jobs.py set_notice)
+_TOLERANCE = 1e-5  # metres (and matrix entries): float32 round trips and re-evaluation are far below
+_NAMED = 3  # meshes named at most in a reason
+
+
+def _matrix(obj: bpy.types.Object) -> list[float]:
+    return [float(v) for row in obj.matrix_world for v in row]
+
+
+def _differs(a, b) -> bool:
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a.shape != b.shape or not np.allclose(a, b, rtol=0.0, atol=_TOLERANCE)
+
+
+def record_bake(probe: bpy.types.Object, splats: bpy.types.Object) -> None:
+    """What the bake just written was made from (Lighting Auto's meshes are added by record_meshes)."""
+    probe[BAKED_KEY] = {"probe": [float(v) for v in probe.matrix_world.translation], "splats": splats.name,
+                        "splats_matrix": _matrix(splats), "splats_count": splat_count(splats), "meshes": {}}
+
+
+def record_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, names) -> None:
+    """Where the meshes whose light Lighting Auto just chose are."""
+    rec = probe.get(BAKED_KEY)
+    if rec is None:
+        return
+    meshes = dict(rec.get("meshes", {}))
+    for name in names:
+        obj = scene.objects.get(name)
+        if obj is not None:
+            meshes[name] = _matrix(obj)
+    rec["meshes"] = meshes
+
+
+def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
+    """Why the probe's last bake no longer describes the scene (empty: it does, or the probe has no record: never
+    baked, or baked by a version before the record)."""
+    rec = probe.get(BAKED_KEY)
+    if rec is None or not probe.gs_ibl_probe.last_report:
+        return []
+    out = []
+    if _differs(probe.matrix_world.translation, rec.get("probe", ())):
+        out.append("the probe moved")
+    name = str(rec.get("splats", ""))
+    splats = scene.objects.get(name)
+    chosen = probe.gs_ibl_probe.splats
+    if chosen is not None and chosen.name != name:
+        out.append(f"its Splats is now {chosen.name!r}")
+    elif splats is None:
+        out.append(f"its splats {name!r} are no longer in the scene")
+    elif _differs(_matrix(splats), rec.get("splats_matrix", ())):
+        out.append(f"{name!r} moved")
+    elif splat_count(splats) != rec.get("splats_count"):
+        out.append(f"{name!r} was edited")
+    moved = [m for m, place in rec.get("meshes", {}).items()
+             if m in scene.objects and _differs(_matrix(scene.objects[m]), place)]
+    if moved:
+        names = ", ".join(repr(m) for m in moved[:_NAMED]) + (f" and {len(moved) - _NAMED} more"
+                                                               if len(moved) > _NAMED else "")
+        out.append(f"{names} moved" if len(moved) == 1 else f"lit meshes {names} moved")
+    return out
+
+
+def stale_text(reasons: list[str]) -> str:
+    """The mark the panel shows over the report."""
+    return f"Out of date since this bake ({'; '.join(reasons)}): Bake / Refresh"
+
+
+def refresh_notice(scene: bpy.types.Scene) -> str | None:
+    """The status bar's line about out-of-date bakes of ``scene``'s probes (None: none); shown by common/jobs.py
+    beside the running jobs, and cleared when they are up to date again."""
+    stale = [(obj.name, reasons) for obj in scene.objects
+             if obj.type == "EMPTY" and getattr(obj.gs_ibl_probe, "is_probe", False)
+             for reasons in [stale_reasons(scene, obj)] if reasons]
+    if not stale:
+        text = None
+    elif len(stale) == 1:
+        text = f"GS-IBL: the bake of {stale[0][0]!r} is out of date ({'; '.join(stale[0][1])}): Bake / Refresh"
+    else:
+        text = (f"GS-IBL: the bakes of {len(stale)} probes are out of date "
+                f"({', '.join(repr(n) for n, _ in stale)}): Bake / Refresh")
+    set_notice(NOTICE, text)
+    return text
