@@ -381,6 +381,9 @@ def test_an_out_of_date_bake_is_marked(blender, tmp_path, write_3dgs_ply):
         return reasons
 
     assert marked() == [] and notices() == []
+    splats.name = "renamed"  # the same splats
+    assert marked() == []
+    splats.name = "shell"
     for obj, reason in ((ball, "'Sphere' moved"), (probe, "the probe moved"), (splats, "'shell' moved")):
         where = tuple(obj.location)
         obj.location.x += 0.5

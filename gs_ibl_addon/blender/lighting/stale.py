@@ -62,6 +62,9 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
     name = str(rec.get("splats", ""))
     splats = scene.objects.get(name)
     chosen = probe.gs_ibl_probe.splats
+    if chosen is not None and splats is None and not _differs(_matrix(chosen), rec.get("splats_matrix", ())) \
+            and splat_count(chosen) == rec.get("splats_count"):
+        splats, name = chosen, chosen.name  # renamed since: the same splats
     if chosen is not None and chosen.name != name:
         out.append(f"its Splats is now {chosen.name!r}")
     elif splats is None:
