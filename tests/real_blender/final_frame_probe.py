@@ -658,7 +658,7 @@ def errors(out, ref):
             "mean_rel": float(rel.mean()), "p99_rel": float(np.percentile(rel, 99))}
 
 
-def check_tag(out, tag, frames, still=False):
+def check_tag(out, tag, frames):
     res = {"tag": tag, "frames": {}, "ok": True, "problems": []}
     ev_path = os.path.join(out, f"events_{tag}.json")
     ev = json.load(open(ev_path)) if os.path.exists(ev_path) else {"events": [], "fills": []}
@@ -724,7 +724,8 @@ def check_tag(out, tag, frames, still=False):
             zm = np.load(zp)
             inner = (rgba[..., 3] >= 0.999) & (zm < FAR)
             d = np.abs(zm[inner] - bz[inner]) / zm[inner]
-            e["handler_depth_vs_blender_rel"] = {"mean": float(d.mean()), "max": float(d.max())} if inner.any() else None
+            e["handler_depth_vs_blender_rel"] = ({"mean": float(d.mean()), "max": float(d.max())}
+                                                  if inner.any() else None)
             e["blender_depth_background"] = float(bz[rgba[..., 3] == 0].max()) if (rgba[..., 3] == 0).any() else None
             # alternatives computed here from the same inputs: the split without the 3x3 dilation of the depth,
             # and K depth slices picked per pixel by Blender's Depth pass (a compositor-only design)
@@ -763,7 +764,7 @@ def check_tag(out, tag, frames, still=False):
             res["ok"] = False
             res["problems"].append(f"frame {f}: error mean {e['mean_rel']:.4f} p99 {e['p99_rel']:.4f}")
     # each frame has its own content: frame f's image is far from the other frames' references
-    for f, (comp, ref) in refs.items():
+    for f, (comp, _) in refs.items():
         for g, (_, ref_g) in refs.items():
             if g != f:
                 d = errors(comp, ref_g)["mean_abs"]
