@@ -90,15 +90,16 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
     m = np.array(obj.matrix_world)
     np.testing.assert_allclose(m[:3, :3] @ [0, -1, 0], [0, 0, 1], atol=1e-6)
     np.testing.assert_allclose(m[:3, :3] @ [0, 0, 1], [0, 1, 0], atol=1e-6)
-    # the import turns Show Splats on, which hides the point proxy; off, the proxy draws the splats as points
+    # the import turns Show Splats on, which hides the point proxy; off, the proxy draws the splats as points.
+    # Either way two more points of radius 0 (drawn as nothing) hold the splats' bounds, which View Selected frames.
     assert bpy.context.scene.gs_ibl_overlay.show
     ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
     geometry = ev.evaluated_geometry()  # kept: its point cloud lives as long as it does
-    hidden = geometry.pointcloud  # bpy 5.3: no point cloud at all; 5.0: an empty one
-    assert hidden is None or len(hidden.points) == 0
+    hidden = geometry.pointcloud
+    assert len(hidden.points) == 2 and set(hidden.attributes["radius"].data[i].value for i in range(2)) == {0.0}
     bpy.context.scene.gs_ibl_overlay.show = False
     ev = obj.evaluated_get(bpy.context.evaluated_depsgraph_get())
-    assert len(ev.evaluated_geometry().pointcloud.points) == 500
+    assert len(ev.evaluated_geometry().pointcloud.points) == 500 + 2
     from gs_ibl_addon.blender.splats.object import scene_from_mesh
     back = scene_from_mesh(obj.data)
     np.testing.assert_allclose(back.positions, src.positions, atol=1e-6)
