@@ -211,7 +211,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
             lines = s.last_report.split("\n")
             warnings = [line for line in lines if line.startswith(gb.WARNING_PREFIX)]
             # one line (time, face size, error, lighting) and the warnings; the whole report one click away
-            _label_block(col, context, s.last_summary or lines[0], icon="INFO")
+            first = next((line for line in lines if line not in warnings), "")  # a file baked before the summary
+            if s.last_summary or first:
+                _label_block(col, context, s.last_summary or first, icon="INFO")
             for line in warnings:
                 _label_block(col, context, line, icon="ERROR")
             wm = context.window_manager
