@@ -10,4 +10,12 @@ const uint SORT_BLOCK = 4096u;
 const float STRIP_PAD_REL = 0.001;
 const float STRIP_PAD_ABS = 4e-07;
 const float STRIP_MAX_COND = 10000.0;
+struct View {  // VIEW_ROWS: the components each row holds
+    vec4 right_tanx;  // right right right tan_x
+    vec4 down_tany;  // down down down tan_y
+    vec4 fwd;  // forward forward forward -
+    uvec4 dims;  // width height tiles_x first_tile
+    uvec4 extra;  // first_pixel tiles_y x0 y0
+    vec4 grid;  // cx cy frame_width frame_height
+};
 #endif

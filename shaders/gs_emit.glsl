@@ -47,11 +47,9 @@ bool tile_touched(mat3 g, View vw, uint tx, uint ty) {
     vec3 r = vw.right_tanx.xyz, dn = vw.down_tany.xyz, f = vw.fwd.xyz;
     vec3 gr = g * r, gd = g * dn, gf = g * f;
     float A = dot(r, gr), B = dot(dn, gd), C = dot(r, gd), D = dot(r, gf), E = dot(dn, gf), F = dot(f, gf);
-    float w = float(vw.dims.x), h = float(vw.dims.y);
     uint px0 = tx * TILE, py0 = ty * TILE;
     uint px1 = min(px0 + TILE, vw.dims.x) - 1u, py1 = min(py0 + TILE, vw.dims.y) - 1u;
-    float s0 = ((float(px0) + 0.5) / w * 2.0 - 1.0) * vw.right_tanx.w, s1 = ((float(px1) + 0.5) / w * 2.0 - 1.0) * vw.right_tanx.w;
-    float t0 = ((float(py0) + 0.5) / h * 2.0 - 1.0) * vw.down_tany.w, t1 = ((float(py1) + 0.5) / h * 2.0 - 1.0) * vw.down_tany.w;
+    float s0 = view_s(vw, px0), s1 = view_s(vw, px1), t0 = view_t(vw, py0), t1 = view_t(vw, py1);
     // Q(s, t) = A s^2 + B t^2 + 2 C s t + 2 D s + 2 E t + F; its minimum over the rectangle is on an edge or at
     // the interior critical point.
     float m = min(min(qmin_1d(B, C * s0 + E, (A * s0 + 2.0 * D) * s0 + F, t0, t1),

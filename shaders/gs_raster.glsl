@@ -5,6 +5,13 @@
 // order (front-to-back compositing is associative).
 // Several probes (SplatRenderer.render_probes): workgroup z is the probe; total_tiles counts one probe's tiles and
 // total_pixels every probe's pixels; probe k's tiles and pixels follow probe k-1's.
+// RASTER_CUT (the *_cut kernels; camera frames given a depth cut, SplatRenderer.render(cut=...)): each pixel has a
+// cut, the distance along the view axis of the mesh surface it sees (+inf: none). A contribution whose distance
+// along the view axis (its closest approach: the z the depth output averages) is below the cut goes to the FRONT
+// layer (Image), any other to the BEHIND layer (Behind), each composited front to back among its own
+// contributions, so that a caller puts the mesh between them: front + (1 - front.a) (mesh + (1 - mesh.a) behind).
+// The pixel ends once FRONT is opaque (nothing after it shows); BEHIND stops taking contributions once it is opaque
+// itself. With cut = +inf everywhere FRONT is the plain kernel's image bit for bit and BEHIND is 0.
 #include "splat_common.glsl"
 layout(local_size_x = 16, local_size_y = 16) in;
 layout(std430, binding = 0) readonly buffer Views { View views[]; };
@@ -18,6 +25,15 @@ layout(std430, binding = 5) writeonly buffer Depth { float depth[]; };
 // [3]: the most pairs one workgroup (a tile's chunk) went through, for the renderer's loop limit (LOOP_PAIRS: lavapipe
 // ends a shader's loops after 65,535 iterations in all, and would leave the rest of a deeper list out).
 layout(std430, binding = 6) buffer Count { uint count[]; };
+#ifdef RASTER_CUT
+// The *_cut.comp files declare Cut (binding 7: per pixel of the frame) and Behind (binding 8: BEHIND as Image holds
+// FRONT; with chunks > 1 both hold partials, and Depth holds two sums a pixel, front and behind)
+#define CUT_PARAMS , float cut_z, inout vec3 bcolor, inout float bT, inout float bzsum
+#define CUT_ARGS , cut_z, bcolor, bT, bzsum
+#else
+#define CUT_PARAMS
+#define CUT_ARGS
+#endif
 // write_depth 0: nothing is written to Depth (bound to a placeholder), so colour-only frames skip that traffic.
 // plane_forms 0: every pair takes the ray test (plane_form; the conic kernel has none).
 layout(push_constant) uniform P {
@@ -163,7 +179,7 @@ uint plane_strips(uint k) {
 // the rule then composes chunk by chunk, and a nearly opaque last splat does not leave up to 1% of transmittance
 // behind. A negative s_cut says the pair holds its plane form (plane_form): the same for every pixel of the tile,
 // so the branch does not diverge.
-bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum) {
+bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum CUT_PARAMS) {
     float cut = s_cut[k], m, along;
 #ifndef RASTER_CONIC
     if (cut < 0.0) {
@@ -190,6 +206,16 @@ bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T
         along = -od / dd;  // closest approach along d; d's forward part is 1
     }
     float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
+#ifdef RASTER_CUT
+    if (along >= cut_z) {  // at or beyond the mesh: BEHIND, until it is opaque
+        if (bT >= T_MIN) {
+            bcolor += bT * alpha * s_col[k].rgb;
+            if (p.write_depth != 0u) bzsum += bT * alpha * along;
+            bT *= 1.0 - alpha;
+        }
+        return false;
+    }
+#endif
     color += T * alpha * s_col[k].rgb;
     if (p.write_depth != 0u) zsum += T * alpha * along;
     T *= 1.0 - alpha;
@@ -210,16 +236,20 @@ void main() {
     uint px = (local_tile % vw.dims.z) * TILE + gl_LocalInvocationID.x;
     uint py = (local_tile / vw.dims.z) * TILE + gl_LocalInvocationID.y;
     bool inside = px < vw.dims.x && py < vw.dims.y;
-    float s = ((float(px) + 0.5) / float(vw.dims.x) * 2.0 - 1.0) * vw.right_tanx.w;
-    float t = ((float(py) + 0.5) / float(vw.dims.y) * 2.0 - 1.0) * vw.down_tany.w;
+    float s = view_s(vw, px), t = view_t(vw, py);
     vec3 d = vw.fwd.xyz + s * vw.right_tanx.xyz + t * vw.down_tany.xyz;
     // where this pixel's result goes, so that nothing of the view stays live through the loop
-    uint out_index = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px
-                     + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
+    uint pixel_index = probe * probe_pixels + vw.extra.x + py * vw.dims.x + px;
+    uint out_index = pixel_index + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
+#ifdef RASTER_CUT
+    float cut_z = inside ? cuts[pixel_index] : 0.0;
+    vec3 bcolor = vec3(0.0);
+    float bT = 1.0, bzsum = 0.0;
+#endif
     if (gl_LocalInvocationIndex == 0u) {
         s_view[0] = vw.fwd.xyz; s_view[1] = vw.right_tanx.xyz; s_view[2] = vw.down_tany.xyz;
 #ifdef RASTER_STRIPS
-        s_trow = vec2(t, 2.0 * vw.down_tany.w / float(vw.dims.y));  // lane 0's row is the tile's first
+        s_trow = vec2(t, 2.0 * vw.down_tany.w / vw.grid.w);  // lane 0's row is the tile's first
 #endif
     }
 
@@ -279,7 +309,7 @@ void main() {
 #ifdef RASTER_CONIC
                 if (conic_hit(k, s, t))
 #endif
-                done = composite(k, d, s, t, color, T, zsum);
+                done = composite(k, d, s, t, color, T, zsum CUT_ARGS);
             }
         }
 #elif defined(RASTER_CONIC)
@@ -293,17 +323,32 @@ void main() {
             while (mask != 0u && !done) {
                 uint bit = uint(findLSB(mask));
                 mask &= mask - 1u;
-                done = composite(k0 + bit, d, s, t, color, T, zsum);
+                done = composite(k0 + bit, d, s, t, color, T, zsum CUT_ARGS);
             }
         }
 #else
         // not unrolled: the pixel loop's registers are what bounds this kernel (docs/benchmarks.md: registers), and
         // the 53-register build measured best on an H200 had it so
-        [[dont_unroll]] for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum);
+        [[dont_unroll]] for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum CUT_ARGS);
 #endif
     }
     // the pairs this workgroup went through: up to the batch where every pixel was opaque, or the whole chunk
     if (lid == 0u) atomicMax(count[3], min(start, range.y) - range.x);
+#ifdef RASTER_CUT
+    // the depth of FRONT over BEHIND (the splats without the mesh): sum(T alpha z) of both over their coverage
+    if (inside) {
+        if (p.chunks == 1u) {
+            image[out_index] = vec4(color, 1.0 - T);
+            behind[out_index] = vec4(bcolor, 1.0 - bT);
+            float tt = T * bT;
+            if (p.write_depth != 0u) depth[out_index] = tt < 1.0 ? (zsum + T * bzsum) / (1.0 - tt) : 0.0;
+        } else {
+            image[out_index] = vec4(color, T);
+            behind[out_index] = vec4(bcolor, bT);
+            if (p.write_depth != 0u) { depth[2u * out_index] = zsum; depth[2u * out_index + 1u] = bzsum; }
+        }
+    }
+#else
     if (inside) {
         if (p.chunks == 1u) {
             image[out_index] = vec4(color, 1.0 - T);
@@ -313,4 +358,5 @@ void main() {
             if (p.write_depth != 0u) depth[out_index] = zsum;
         }
     }
+#endif
 }

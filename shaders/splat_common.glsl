@@ -1,13 +1,15 @@
 // Splat maths shared by preprocess and emit; mirrors gs_ibl_addon/core/render/splat_math.py.
 #include "common.glsl"
 
-struct View {
-    vec4 right_tanx;   // right (xyz), tan of the half width
-    vec4 down_tany;    // down (xyz), tan of the half height
-    vec4 fwd;          // forward (xyz)
-    uvec4 dims;        // width, height, tiles_x, first tile of this view in the batch
-    uvec4 extra;       // first pixel of this view in the output, tiles_y
-};
+// The View struct (one per view of a batch) is declared in gs_ibl_addon/core/vk/constants.py VIEW_ROWS and
+// generated into constants.glsl: a pixel (px, py) of view v is the frame's pixel (px + x0, py + y0), at
+// image-plane coordinates view_s / view_t.
+float view_s(View v, uint px) {
+    return ((float(px + v.extra.z) + 0.5) / v.grid.z * 2.0 - 1.0) * v.right_tanx.w + v.grid.x;
+}
+float view_t(View v, uint py) {
+    return ((float(py + v.extra.w) + 0.5) / v.grid.w * 2.0 - 1.0) * v.down_tany.w + v.grid.y;
+}
 
 // TILE, MAX_VIEWS, PREP (vec4s per prepared splat) and DEPTH_KEY_SHIFT come from constants.glsl.
 const float DILATION_PX2 = 0.3;
@@ -37,8 +39,14 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
     if (z + sqrt(max(ff, 0.0)) <= 0.0) return false;
     uint tx = v.dims.z, ty = v.extra.y;
     vec3 r = v.right_tanx.xyz, dn = v.down_tany.xyz;
+    // The view's rectangle of the image plane (an off-centre frame, a window of it): s in [sl, sh], t in [tl, th]
+    float gw = v.grid.z, gh = v.grid.w, tnx = v.right_tanx.w, tny = v.down_tany.w;
+    float sl = (float(v.extra.z) / gw * 2.0 - 1.0) * tnx + v.grid.x;
+    float sh = (float(v.extra.z + v.dims.x) / gw * 2.0 - 1.0) * tnx + v.grid.x;
+    float tl = (float(v.extra.w) / gh * 2.0 - 1.0) * tny + v.grid.y;
+    float th = (float(v.extra.w + v.dims.y) / gh * 2.0 - 1.0) * tny + v.grid.y;
     // Outside one of the four side planes of the view's frustum (all through the origin): touches nothing.
-    vec3 planes[4] = vec3[4](v.right_tanx.w * f - r, v.right_tanx.w * f + r, v.down_tany.w * f - dn, v.down_tany.w * f + dn);
+    vec3 planes[4] = vec3[4](sh * f - r, r - sl * f, th * f - dn, dn - tl * f);
     for (int k = 0; k < 4; ++k) {
         vec3 n = planes[k];
         if (dot(n, mu) + sqrt(max(dot(n, cov * n), 0.0)) < 0.0) return false;
@@ -51,9 +59,11 @@ bool view_rect(View v, vec3 mu, mat3 cov, out uvec4 rect) {
     float sx = sqrt(max(bx * bx - a * cx, 0.0)), sy = sqrt(max(by * by - a * cy, 0.0));
     // a < 0: the roots (b -+ sqrt(disc)) / a are the two tangent slopes, smaller first.
     vec2 ux = vec2(bx + sx, bx - sx) / a, uy = vec2(by + sy, by - sy) / a;
+    // in the view's pixels (pixel i spans [i, i + 1]), half a pixel wider
     float w = float(v.dims.x), h = float(v.dims.y);
-    float px0 = (ux.x / v.right_tanx.w + 1.0) * 0.5 * w - 0.5, px1 = (ux.y / v.right_tanx.w + 1.0) * 0.5 * w + 0.5;
-    float py0 = (uy.x / v.down_tany.w + 1.0) * 0.5 * h - 0.5, py1 = (uy.y / v.down_tany.w + 1.0) * 0.5 * h + 0.5;
+    vec2 fx = ((ux - v.grid.x) / tnx + 1.0) * 0.5 * gw - float(v.extra.z);
+    vec2 fy = ((uy - v.grid.y) / tny + 1.0) * 0.5 * gh - float(v.extra.w);
+    float px0 = fx.x - 0.5, px1 = fx.y + 0.5, py0 = fy.x - 0.5, py1 = fy.y + 0.5;
     if (px1 < 0.0 || py1 < 0.0 || px0 > w || py0 > h) return false;
     uint x0 = uint(max(px0, 0.0)) / TILE, y0 = uint(max(py0, 0.0)) / TILE;
     uint x1 = min(uint(min(px1, w)) / TILE + 1u, tx), y1 = min(uint(min(py1, h)) / TILE + 1u, ty);

@@ -9,6 +9,7 @@ from gs_ibl_addon.core.render.renderer import SplatRenderer, StaleFrame
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.synthetic import random_scene
 from gs_ibl_addon.core.vk import VulkanContext, VulkanUnavailable, get_context
+from gs_ibl_addon.core.vk.constants import VIEW_BYTES
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +71,7 @@ def test_probe_reads_back_only_the_small_results(renderer):
     radiance_bytes = 6 * 64 * 64 * 16
     small = 6 * 16 * 16 * 12 + gf.SH_GROUPS_MAX * (27 + 1) * 4 + 64
     assert d["readback_bytes"] <= small < radiance_bytes // 10, d
-    assert d["upload_bytes"] <= 6 * 80 + 16, d  # the views and the probe position, nothing else
+    assert d["upload_bytes"] <= 6 * VIEW_BYTES + 16, d  # the views and the probe position, nothing else
     assert d["submits"] == 2, d  # one recorded render, one recorded filter
 
 

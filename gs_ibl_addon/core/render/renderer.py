@@ -44,7 +44,7 @@ import numpy as np
 from ..colour import check_colour_space
 from ..scene import SplatScene
 from ..vk import Buffer, Program, Recorder, get_context, groups
-from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP, TILE
+from ..vk.constants import DEPTH_KEY_BITS, MAX_VIEWS, PREP, TILE, VIEW_BYTES, VIEW_ROWS
 from ..vk.kernels import KERNELS
 from . import kernel_table
 from .gpu_sort import RadixSorter, Scanner
@@ -79,6 +79,7 @@ CHUNK_BYTES = 128 << 20
 # The strip kernels step once a pair of the pixel's strip, once per 32 pairs and once a batch: 60k pairs stay within.
 LOOP_PAIRS = {"gs_raster": 60_000, "gs_raster_conic": 30_000, "gs_raster_strips": 60_000,
               "gs_raster_conic_strips": 60_000}
+LOOP_PAIRS.update({k + "_cut": v for k, v in LOOP_PAIRS.items()})  # the depth cut's kernels loop as theirs
 
 
 def target_groups(ctx) -> int:
@@ -119,8 +120,9 @@ CONIC_MIN_FACE, CONIC_MAX_FACE = 64, 256
 
 
 def raster_conic(batch: ViewBatch) -> bool:
-    """Whether ``batch`` rasters with the conic pre-test (every view's larger side within the conic's range)."""
-    sides = [max(v.width, v.height) for v in batch.views]
+    """Whether ``batch`` rasters with the conic pre-test (every view's larger side within the conic's range; a
+    window of a frame, a render border, goes by its frame's, and so draws the frame's pixels)."""
+    sides = [max(v.grid) for v in batch.views]
     return CONIC_MIN_FACE <= min(sides) and max(sides) <= CONIC_MAX_FACE
 
 
@@ -140,8 +142,9 @@ EMIT_PER_SPLAT_MAX_TILES = 60_000
 
 
 def batch_face(batch: ViewBatch) -> int:
-    """The frame size the kernel table is looked up by: the larger side of the batch's largest view."""
-    return max(max(v.width, v.height) for v in batch.views)
+    """The frame size the kernel table is looked up by: the larger side of the batch's largest view (of its frame,
+    for a window of one)."""
+    return max(max(v.grid) for v in batch.views)
 
 
 _DEVICE_CLASS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()  # per context, asked of Vulkan once
@@ -179,18 +182,20 @@ def emit_per_splat(ctx, tiles_per_probe: int, face: int | None = None) -> bool:
     return kernel_picks(ctx, face)["emit"].kernel == "splat" and tiles_per_probe <= EMIT_PER_SPLAT_MAX_TILES
 
 
-def raster_kernel(batch: ViewBatch, strips: bool = False) -> str:
-    """The raster kernel that draws ``batch`` (``strips``: raster_strips of the device)."""
+def raster_kernel(batch: ViewBatch, strips: bool = False, cut: bool = False) -> str:
+    """The raster kernel that draws ``batch`` (``strips``: raster_strips of the device; ``cut``: with a depth cut,
+    FRONT and BEHIND layers, render(cut=...))."""
     name = "gs_raster_conic" if raster_conic(batch) else "gs_raster"
-    return name + "_strips" if strips else name
+    return name + ("_strips" if strips else "") + ("_cut" if cut else "")
 
 
-def batch_kernels(ctx, batch: ViewBatch, tiles_per_probe: int) -> dict[str, str]:
+def batch_kernels(ctx, batch: ViewBatch, tiles_per_probe: int, cut: bool = False) -> dict[str, str]:
     """The kernels a render of ``batch`` dispatches for its raster and emit (core/vk/kernels.py names; "emit" is
-    the last of the emit's kernels), and where the choice came from ("raster_source", "emit_source")."""
+    the last of the emit's kernels), and where the choice came from ("raster_source", "emit_source"); ``cut``: the
+    render has a depth cut (the *_cut raster, chosen with the same strips as without)."""
     picks = kernel_picks(ctx, batch_face(batch))
     splat = picks["emit"].kernel == "splat" and tiles_per_probe <= EMIT_PER_SPLAT_MAX_TILES
-    return {"raster": raster_kernel(batch, picks["raster"].kernel == "strips"),
+    return {"raster": raster_kernel(batch, picks["raster"].kernel == "strips", cut),
             "emit": "gs_emit_per_splat" if splat else "gs_emit",
             "raster_source": picks["raster"].source,
             "emit_source": picks["emit"].source if splat == (picks["emit"].kernel == "splat") else
@@ -282,7 +287,9 @@ class StaleFrame(RuntimeError):
 class GpuFrame:
     """One rendered batch on the GPU: ``image`` holds premultiplied linear RGB + coverage (float32 RGBA) per pixel,
     views one after another (a cubemap: faces +X, -X, +Y, -Y, +Z, -Z, rows top first); ``depth`` the view-space z
-    per pixel (0: nothing seen) when the render was asked for it, else None.
+    per pixel (0: nothing seen) when the render was asked for it, else None. A render given a depth cut
+    (render(cut=...)) holds its FRONT layer in ``image`` and its BEHIND layer in ``behind`` (else None), and its
+    depth is that of FRONT over BEHIND.
 
     The buffers belong to the renderer and are reused by its next render: a frame is valid until then (reading a
     stale one raises StaleFrame). Filters take it without a host round trip (probe.gpu_filters).
@@ -292,6 +299,7 @@ class GpuFrame:
     image: Buffer
     depth: Buffer | None
     generation: int
+    behind: Buffer | None = None
 
     @property
     def ctx(self):
@@ -368,6 +376,13 @@ class GpuFrame:
             raise ValueError("this frame has no depth: render(batch, depth=True) writes it")
         return self._split(self.depth.read(np.float32, self.pixels), 1)
 
+    def read_behinds(self) -> list[np.ndarray]:
+        """Per view (H, W, 4) float32, the BEHIND layer of a render given a depth cut (render(cut=...))."""
+        self.wait()
+        if self.behind is None:
+            raise ValueError("this frame has no BEHIND layer: render(batch, cut=...) writes it")
+        return self._split(self.behind.read(np.float32, self.pixels * 4), 4)
+
 
 class RenderResult:
     """What render() returns: the frame, and (once the GPU is done: reading these waits) the GPU time per stage
@@ -407,6 +422,37 @@ class RenderResult:
         """Per view (H, W): view-space z of what is seen, 0: none (renders asked with depth=True)."""
         return self.frame.read_depths()
 
+    @cached_property
+    def behinds(self) -> list[np.ndarray]:
+        """Per view (H, W, 4) float32: the BEHIND layer of a render given a depth cut (``images`` is FRONT)."""
+        return self.frame.read_behinds()
+
+
+def view_values(v, tile_base: int = 0, pixel_base: int = 0) -> dict:
+    """The values of one View as the shaders read them, by VIEW_ROWS' component names (core/vk/constants.py)."""
+    tx, ty = v.tiles
+    fw, fh = v.grid
+    if not (0 <= v.x0 and v.x0 + v.width <= fw and 0 <= v.y0 and v.y0 + v.height <= fh):
+        raise ValueError(f"view window {v.width}x{v.height} at ({v.x0}, {v.y0}) is outside its {fw}x{fh} frame")
+    return {"right": v.right, "tan_x": v.tan_x, "down": v.down, "tan_y": v.tan_y, "forward": v.forward,
+            "width": v.width, "height": v.height, "tiles_x": tx, "first_tile": tile_base,
+            "first_pixel": pixel_base, "tiles_y": ty, "x0": v.x0, "y0": v.y0,
+            "cx": v.cx, "cy": v.cy, "frame_width": fw, "frame_height": fh}
+
+
+def pack_view(values: dict) -> np.ndarray:
+    """One View struct's bytes (VIEW_BYTES) as 4-byte words: each VIEW_ROWS row's components from ``values``
+    (a name repeated over components takes a vector), float rows as float32, uvec4 rows as uint32."""
+    out = np.zeros(VIEW_BYTES // 4, np.uint32)
+    for i, (_, kind, parts) in enumerate(VIEW_ROWS):
+        names = parts.split()
+        row = np.zeros(4)
+        for name in dict.fromkeys(names):
+            if name != "-":
+                row[[j for j, x in enumerate(names) if x == name]] = np.asarray(values[name], np.float64)
+        out[4 * i:4 * i + 4] = row.astype(np.uint32) if kind.startswith("u") else row.astype(np.float32).view(np.uint32)
+    return out
+
 
 def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
     if len(batch.views) > MAX_VIEWS:
@@ -414,18 +460,35 @@ def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
     rows = []
     tile_base = pixel_base = 0
     for v in batch.views:
+        rows.append(pack_view(view_values(v, tile_base, pixel_base)))
         tx, ty = v.tiles
-        f = np.zeros(20, np.float32)
-        f[0:3], f[3] = v.right, v.tan_x
-        f[4:7], f[7] = v.down, v.tan_y
-        f[8:11] = v.forward
-        u = f.view(np.uint32)
-        u[12:16] = (v.width, v.height, tx, tile_base)
-        u[16:20] = (pixel_base, ty, 0, 0)
-        rows.append(f)
         tile_base += tx * ty
         pixel_base += v.width * v.height
     return np.concatenate(rows), tile_base, pixel_base
+
+
+def cut_pixels(batch: ViewBatch, cut) -> np.ndarray:
+    """The depth cut of render(cut=...) as the raster reads it: float32, the views' pixels one after another.
+    ``cut``: per view an (H, W) array (one array for a one-view batch) of distances along the view axis, +inf where
+    no mesh is seen; NaN is refused (say +inf for "no mesh")."""
+    if batch.n_probes != 1:
+        raise ValueError(f"a depth cut is for a batch of views from one origin (a camera), not {batch.n_probes} "
+                         "probes")
+    views = batch.views
+    cuts = [cut] if len(views) == 1 and not isinstance(cut, (list, tuple)) else list(cut)
+    if len(cuts) != len(views):
+        raise ValueError(f"a depth cut needs one (H, W) array per view: {len(views)} views, {len(cuts)} arrays")
+    out = []
+    for i, (v, c) in enumerate(zip(views, cuts)):
+        a = np.asarray(c, np.float32)
+        if a.shape != (v.height, v.width):
+            raise ValueError(f"depth cut of view {i} has shape {a.shape}; the view renders {v.height}x{v.width} "
+                             "(rows x columns; a render border's window, not the whole frame)")
+        if np.isnan(a).any():
+            raise ValueError(f"depth cut of view {i} holds NaN at {int(np.isnan(a).sum())} pixels: give +inf where "
+                             "no mesh is seen")
+        out.append(a.reshape(-1))
+    return np.concatenate(out)
 
 
 class SplatRenderer:
@@ -479,7 +542,7 @@ class SplatRenderer:
             self.count = buf(16, "count")
             self.n_count = buf(16, "n_count")  # pairs of a full group, of the last group
             self._n_count = None  # (probes of a full group, of the last) it holds
-            self.views = buf(MAX_VIEWS * 80, "views")
+            self.views = buf(MAX_VIEWS * VIEW_BYTES, "views")
             self.no_depth = buf(16, "no-depth")  # bound where depth is not written
             if self.lod is not None:
                 self.lod_words = buf(n * 8, "lod")
@@ -596,8 +659,14 @@ class SplatRenderer:
         return self.render(ViewBatch.cubemaps(origins, face_size), timestamps=timestamps, wait=wait, lod_k=lod_k)
 
     def render(self, batch: ViewBatch, timestamps: bool = False, depth: bool = False,
-               wait: bool = True, lod_k: float = 0.0) -> RenderResult:
+               wait: bool = True, lod_k: float = 0.0, cut=None) -> RenderResult:
         """Render ``batch`` into a GpuFrame (RenderResult.frame); ``depth`` also writes the depth image.
+
+        ``cut`` (a batch of views from one origin, not probes): per view an (H, W) array, the distance along the
+        view axis of the mesh surface each pixel sees (+inf where none; one array for a one-view batch). The frame
+        then holds two layers, FRONT (``images``) with the contributions nearer than the cut and BEHIND
+        (``behinds``) with the rest, each composited front to back among its own; a caller composites a mesh
+        between them: front + (1 - front.a) (mesh + (1 - mesh.a) behind) (render_camera).
 
         ``lod_k`` (a renderer built with a level of detail): draw the cut of threshold lod_k x the batch's pixel
         angle, each node once its cell spans at most lod_k pixels; 0 draws every splat.
@@ -615,6 +684,8 @@ class SplatRenderer:
         self.resolve()  # the previous render reads the views and origins written below
         view_data, total_tiles, total_pixels = _views_buffer_data(batch)
         probes = batch.n_probes
+        cut_data = None if cut is None else cut_pixels(batch, cut)
+        layers = cut_data is not None
         if probes > 1:
             check_probes_fit(self.ctx, probes, batch.views[0].width)
         group = probes_per_group(self.ctx, self.nodes, probes, self.lod is not None) if probes > 1 else 1
@@ -632,10 +703,12 @@ class SplatRenderer:
         origins = self._frame_buffer("origins", probes * 16)
         origins.write(np.concatenate([batch.origins, np.zeros((probes, 1))], 1).astype(np.float32))
         self.generation += 1
-        args = (batch, total_tiles, total_pixels, timestamps, depth, float(lod_k), group)
+        args = (batch, total_tiles, total_pixels, timestamps, depth, layers, float(lod_k), group)
         prog = self._program(*args)
+        if layers:
+            self._frame["cut"].write(cut_data)
         frame = self.last_frame = GpuFrame(self, batch, self._frame["image"], self._frame["depth"] if depth else None,
-                                           self.generation)
+                                           self.generation, self._frame["behind"] if layers else None)
         result = RenderResult(frame, t0)
         prog.start()
         self._pending = (prog, result, args)
@@ -714,10 +787,10 @@ class SplatRenderer:
         return min(pairs, self.capacity), min(cut, self.cut_capacity)
 
     def _program(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
-                 depth: bool, lod_k: float = 0.0, group: int = 1) -> Program:
+                 depth: bool, layers: bool = False, lod_k: float = 0.0, group: int = 1) -> Program:
         shape = self._shape(batch, lod_k, group)
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
-        kernels = batch_kernels(self.ctx, batch, total_tiles)
+        kernels = batch_kernels(self.ctx, batch, total_tiles, layers)
         key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity,
                caps, check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"], kernels["emit"], min_chunks)
         prog = self._programs.pop(key, None)
@@ -726,7 +799,7 @@ class SplatRenderer:
             prog = None
         if prog is None:
             prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, kernels,
-                                min_chunks)
+                                min_chunks, layers)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog
@@ -736,11 +809,12 @@ class SplatRenderer:
 
     def _record(self, batch: ViewBatch, total_tiles: int, total_pixels: int, timestamps: bool,
                 depth: bool, lod_k: float, group: int, caps: tuple[int, int], kernels: dict[str, str],
-                min_chunks: int = 1) -> Program:
+                min_chunks: int = 1, layers: bool = False) -> Program:
         """One submission: the probes in groups of ``group``, one group after another through the same pair
         buffers (a batch of one probe, or one that fits, is a single group). ``total_tiles`` / ``total_pixels``
         are one probe's; ``caps`` the (instances, cut nodes) it sorts (_caps); ``kernels`` its raster and emit
-        (batch_kernels); ``min_chunks`` what the loop limit asked for (_loop_chunks)."""
+        (batch_kernels); ``min_chunks`` what the loop limit asked for (_loop_chunks); ``layers``: a depth cut's
+        FRONT and BEHIND (one group: cameras, not probes)."""
         c, nv, probes = self.ctx, len(batch.views), batch.n_probes
         n_groups = -(-probes // group)
         tree = self.lod
@@ -750,20 +824,30 @@ class SplatRenderer:
         counts = self._frame_buffer("group_counts", n_groups * 16)
         ranges = self._frame_buffer("ranges", (group * total_tiles + 1) * 8)  # + the missed-tile key's run
         split = n_groups > 1  # each group rasters into its own image and origins, copied from / to the batch's
+        if layers and split:
+            raise ValueError("a depth cut is for a batch of views from one origin, not probes")
         g_image = self._frame_buffer("group_image", group * total_pixels * 16) if split else image
         g_origin = self._frame_buffer("group_origins", group * 16) if split else origins
         # the same chunks for every group (the last, smaller one included): partial sized for a full group
-        chunk_bytes = group * total_pixels * (16 + (4 if depth else 0))
+        n_layers = 2 if layers else 1
+        chunk_bytes = group * total_pixels * (16 + (4 if depth else 0)) * n_layers
         fit = chunks_that_fit(chunk_bytes)
         chunks = chunks_max = min(max(raster_chunks(total_tiles, group, chunk_bytes, target_groups(c)), min_chunks),
                                   fit)
         if chunks_max > 1:
             partial = self._frame_buffer("partial", group * total_pixels * 16 * chunks_max)
-            partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * chunks_max) if depth
-                             else self.no_depth)
+            partial_depth = (self._frame_buffer("partial_depth", group * total_pixels * 4 * n_layers * chunks_max)
+                             if depth else self.no_depth)
+            if layers:
+                partial_behind = self._frame_buffer("partial_behind", total_pixels * 16 * chunks_max)
+        if layers:
+            behind = self._frame_buffer("behind", total_pixels * 16)
+            cut_buf = self._frame_buffer("cut", total_pixels * 4)
         kernel = kernels["raster"]
         rec = Recorder(c, timestamps=timestamps, reusable=True)
         rec.fill(image, 0, probes * total_pixels * 16)
+        if layers:
+            rec.fill(behind, 0, total_pixels * 16)
         if depth:
             rec.fill(depth_buf, 0, probes * total_pixels * 4)
         rec.timestamp("clear")
@@ -782,12 +866,18 @@ class SplatRenderer:
             if n:
                 inst_val = self._record_sort_emit(rec, batch, g_origin, gp, n, count_index, tiles, lod_k, stamp, caps,
                                                   kernels["emit"])
-            rec.dispatch(KERNELS[kernel],
-                         [self.views, ranges, inst_val, self.prepared, partial if chunks > 1 else g_image,
-                          partial_depth if chunks > 1 else depth_buf, self.count],
+            raster_buffers = [self.views, ranges, inst_val, self.prepared, partial if chunks > 1 else g_image,
+                              partial_depth if chunks > 1 else depth_buf, self.count]
+            if layers:
+                raster_buffers += [cut_buf, partial_behind if chunks > 1 else behind]
+            rec.dispatch(KERNELS[kernel], raster_buffers,
                          groups(total_tiles * chunks, 1, c) + (gp,), n_views=nv, total_tiles=total_tiles,
                          chunks=chunks, total_pixels=pixels, write_depth=int(depth), plane_forms=int(PLANE_FORMS))
-            if chunks > 1:
+            if chunks > 1 and layers:
+                rec.dispatch(KERNELS["gs_merge_cut"], [partial, g_image, partial_depth, depth_buf, partial_behind,
+                                                       behind], groups(pixels, 256, c),
+                             chunks=chunks, total_pixels=pixels, write_depth=int(depth))
+            elif chunks > 1:
                 rec.dispatch(KERNELS["gs_merge"], [partial, g_image, partial_depth, depth_buf], groups(pixels, 256, c),
                              chunks=chunks, total_pixels=pixels, write_depth=int(depth))
             stamp("raster")

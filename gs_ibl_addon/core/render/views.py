@@ -2,8 +2,14 @@
 probes are one batch of six views seen from N origins (``ViewBatch.cubemaps``).
 
 Each view is a rectangle on the plane at distance 1 along ``forward``: pixel (i, j), row 0 at the top, looks along
-``forward + s * tan_x * right + t * tan_y * down`` with s, t the pixel centre in (-1, 1). A cubemap face (tan = 1)
-is exactly the texel convention of core/cubemap.py, so rendered faces and filters agree by construction.
+``forward + (s * tan_x + cx) * right + (t * tan_y + cy) * down`` with s, t the pixel centre in (-1, 1) of the
+frame's pixel grid. A cubemap face (tan = 1, no offset) is exactly the texel convention of core/cubemap.py, so
+rendered faces and filters agree by construction.
+
+Cameras may be off centre (a lens shift: cx, cy) and may render only a window of their frame (a render border or
+crop: the view's ``width`` x ``height`` pixels start at pixel (x0, y0) of a ``frame_width`` x ``frame_height``
+grid). The GPU computes a pixel's (s, t) from its frame pixel, in the frame's own arithmetic, so a window's pixels
+are the full frame's pixels bit for bit (ViewBatch.camera).
 """
 from __future__ import annotations
 
@@ -23,17 +29,35 @@ class View:
     down: np.ndarray
     tan_x: float
     tan_y: float
-    width: int
+    width: int  # the pixels this view renders
     height: int
+    cx: float = 0.0  # the frame's centre in the image plane at distance 1, along right and down (a lens shift)
+    cy: float = 0.0
+    x0: int = 0  # the view's first column and row in the frame's pixel grid (a render border / crop)
+    y0: int = 0
+    frame_width: int = 0  # the frame's pixel grid; 0: the view's own width / height (the whole frame)
+    frame_height: int = 0
+
+    @property
+    def grid(self) -> tuple[int, int]:
+        """The frame's pixel grid (width, height) the view's pixels are taken from."""
+        return self.frame_width or self.width, self.frame_height or self.height
 
     @property
     def tiles(self) -> tuple[int, int]:
         return -(-self.width // TILE), -(-self.height // TILE)
 
+    def image_coords(self) -> tuple[np.ndarray, np.ndarray]:
+        """(s, t) image-plane coordinates (distance 1; tan units plus the centre offset) of the view's pixel
+        columns (W,) and rows (H,), float64."""
+        fw, fh = self.grid
+        s = ((np.arange(self.width) + self.x0 + 0.5) / fw * 2 - 1) * self.tan_x + self.cx
+        t = ((np.arange(self.height) + self.y0 + 0.5) / fh * 2 - 1) * self.tan_y + self.cy
+        return s, t
+
     def pixel_directions(self) -> np.ndarray:
-        """(H, W, 3) unnormalised ray directions of the pixel centres."""
-        s = ((np.arange(self.width) + 0.5) / self.width * 2 - 1) * self.tan_x
-        t = ((np.arange(self.height) + 0.5) / self.height * 2 - 1) * self.tan_y
+        """(H, W, 3) unnormalised ray directions of the pixel centres (forward part 1)."""
+        s, t = self.image_coords()
         tt, ss = np.meshgrid(t, s, indexing="ij")
         return (self.forward[None, None] + ss[..., None] * self.right[None, None]
                 + tt[..., None] * self.down[None, None])
@@ -115,3 +139,48 @@ class ViewBatch:
         tx = float(np.tan(np.radians(fov_deg) / 2))
         ty = tx * height / width
         return ViewBatch(o, (View(f, r, down, tx, ty, int(width), int(height)),), 2.0 * tx / width)
+
+    @staticmethod
+    def camera(cam_to_world, tan_x: float, tan_y: float, width: int, height: int, shift=(0.0, 0.0),
+               window=None) -> "ViewBatch":
+        """A perspective camera as Blender describes one, for its final renders.
+
+        ``cam_to_world``: the camera's 4x4 world matrix (Blender's convention: it looks down its local -Z, +Y up, +X
+        right; scale and shear are taken out). ``tan_x``, ``tan_y``: tangents of the half angles the frame spans
+        (with Blender's sensor fit and pixel aspect already applied). ``width`` x ``height``: the frame's pixels
+        (resolution times its percentage). ``shift``: (cx, cy), where the frame's centre lies in the image plane at
+        distance 1, along the camera's +X (right) and +Y (up): Blender's lens shift times the sensor-fit size,
+        cx = shift_x * 2 * tan(half the fitted angle). ``window``: (x0, y0, x1, y1) renders only columns x0..x1-1
+        and rows y0..y1-1 of the frame, rows counted from the top (a render border or crop; Blender counts its
+        border from the bottom): the image is (y1 - y0) x (x1 - x0), each pixel exactly the full frame's.
+        The anti-aliasing dilation is sized by the frame's pixel (2 tan_x / width)."""
+        try:
+            m = np.asarray(cam_to_world, np.float64)
+        except (TypeError, ValueError):
+            raise ValueError(f"camera matrix must be a 4x4 array of numbers, got {cam_to_world!r:.80}") from None
+        if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise ValueError(f"camera matrix must be a finite 4x4 array, got shape {m.shape}")
+        width, height = int(width), int(height)
+        if width < 1 or height < 1:
+            raise ValueError(f"image size {width}x{height} must be at least 1x1")
+        tx, ty = float(tan_x), float(tan_y)
+        if not (0 < tx < 1e6 and 0 < ty < 1e6):
+            raise ValueError(f"tan_x {tan_x!r} and tan_y {tan_y!r} must be positive and finite (a perspective camera)")
+        cx, cy = (float(v) for v in shift)
+        if not (np.isfinite(cx) and np.isfinite(cy)):
+            raise ValueError(f"lens shift {shift!r} must be finite")
+        x0, y0, x1, y1 = (0, 0, width, height) if window is None else (int(v) for v in window)
+        if not (0 <= x0 < x1 <= width and 0 <= y0 < y1 <= height):
+            raise ValueError(f"window {window!r} must be (x0, y0, x1, y1) with 0 <= x0 < x1 <= {width} and "
+                             f"0 <= y0 < y1 <= {height} (pixels of the {width}x{height} frame, rows from the top)")
+        f = -m[:3, 2]
+        if not np.linalg.norm(f) > 0:
+            raise ValueError("camera matrix has no view direction (its Z column is zero)")
+        f = f / np.linalg.norm(f)
+        r = m[:3, 0] - (m[:3, 0] @ f) * f  # Gram-Schmidt: the matrix's X made orthogonal to the view direction
+        if not np.linalg.norm(r) > 1e-9:
+            raise ValueError("camera matrix has no right direction (its X column is zero or along Z)")
+        r = r / np.linalg.norm(r)
+        down = np.cross(f, r)  # -Y: Blender's camera is right-handed (X right, Y up, looking down -Z)
+        view = View(f, r, down, tx, ty, x1 - x0, y1 - y0, cx, -cy, x0, y0, width, height)
+        return ViewBatch(m[:3, 3].copy(), (view,), 2.0 * tx / width)

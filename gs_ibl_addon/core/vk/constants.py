@@ -27,6 +27,22 @@ STRIP_PAD_REL = 1e-3
 STRIP_PAD_ABS = 4e-7
 STRIP_MAX_COND = 1e4
 
+# The View struct every renderer shader reads (render/views.py View, one per view of a batch): rows of four 4-byte
+# components, each named for the value it holds ("-": unused; a vector's name repeats over its components). Written
+# into shaders/constants.glsl as `struct View`, and render/renderer.py views_buffer_data packs each View by these
+# names, so the Python side and the GLSL read one declaration (tests/test_render_cut.py checks the packing and the
+# SPIR-V's member offsets). (s, t) of a view's pixel (px, py): s = ((px + x0 + 0.5) / frame_width * 2 - 1) tan_x
+# + cx, t likewise down; the pixel looks along forward + s right + t down.
+VIEW_ROWS = (
+    ("right_tanx", "vec4", "right right right tan_x"),
+    ("down_tany", "vec4", "down down down tan_y"),
+    ("fwd", "vec4", "forward forward forward -"),
+    ("dims", "uvec4", "width height tiles_x first_tile"),  # the view's pixels; first_tile: in the batch
+    ("extra", "uvec4", "first_pixel tiles_y x0 y0"),  # first_pixel: in the output; (x0, y0): in the frame
+    ("grid", "vec4", "cx cy frame_width frame_height"),  # the frame's centre offset and pixel grid
+)
+VIEW_BYTES = 16 * len(VIEW_ROWS)
+
 GLSL_CONSTANTS = ("TILE", "MAX_VIEWS", "PREP", "DEPTH_KEY_SHIFT", "SCAN_BLOCK", "SORT_BLOCK",
                   "STRIP_PAD_REL", "STRIP_PAD_ABS", "STRIP_MAX_COND")
 
@@ -40,4 +56,8 @@ def glsl_source() -> str:
         value = globals()[name]
         lines.append(f"const float {name} = {value!r};" if isinstance(value, float)
                      else f"const uint {name} = {value}u;")
+    lines.append("struct View {  // VIEW_ROWS: the components each row holds")
+    for name, kind, parts in VIEW_ROWS:
+        lines.append(f"    {kind} {name};  // {parts}")
+    lines.append("};")
     return "\n".join(lines + ["#endif", ""])

@@ -49,6 +49,7 @@ _EMIT = ("Views DepthKey DepthVal Offsets Total InstKey InstVal Count Prepared R
          "n capacity n_views n_tiles")
 _RASTER = ("Views Ranges InstVal Prepared Image Depth Count",
            "n_views total_tiles chunks total_pixels write_depth plane_forms", (16, 16))
+_RASTER_CUT = (_RASTER[0] + " Cut Behind",) + _RASTER[1:]
 KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
@@ -65,6 +66,12 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("gs_raster_strips", *_RASTER),  # ... with strip masks
     _k("gs_raster_conic_strips", *_RASTER),  # ... with both
     _k("gs_merge", "Partial Image PartialDepth Depth", "chunks total_pixels write_depth"),
+    # camera frames with a depth cut (FRONT in Image, BEHIND in Behind): each raster above with RASTER_CUT
+    _k("gs_raster_cut", *_RASTER_CUT),
+    _k("gs_raster_conic_cut", *_RASTER_CUT),
+    _k("gs_raster_strips_cut", *_RASTER_CUT),
+    _k("gs_raster_conic_strips_cut", *_RASTER_CUT),
+    _k("gs_merge_cut", "Partial Image PartialDepth Depth PartialBehind Behind", "chunks total_pixels write_depth"),
     # prefix sums and radix sorts (render/gpu_sort.py)
     _k("scan_block", "Data Sums", "n"),
     _k("scan_add", "Data Sums", "n"),
