@@ -6,6 +6,7 @@ import bpy
 
 from ..core.vk import pipeline_cache
 from .lighting import auto_update, undo
+from .render import frame as render_frame
 from .splats import cache as splat_cache
 from .splats import importer, webp_decoder
 from .splats import object as splat_object
@@ -28,6 +29,7 @@ def register() -> None:
     splat_object.register_handlers()
     auto_update.register_handlers()
     undo.register_handlers()
+    render_frame.register_handlers()
     overlay.register_overlay()
     picking.register_picking()
     webp_decoder.register()
@@ -37,6 +39,7 @@ def unregister() -> None:
     webp_decoder.unregister()
     picking.unregister_picking()
     overlay.unregister_overlay()
+    render_frame.unregister_handlers()
     undo.unregister_handlers()
     auto_update.unregister_handlers()
     splat_object.unregister_handlers()

@@ -139,6 +139,29 @@ def scene_world_hidden(context) -> bool:
     return shading is not None and shading.type == "MATERIAL" and not shading.use_scene_world
 
 
+def _draw_render_settings(layout, context) -> None:
+    """Splats in Renders, and what F12 will contain (render/setup.py), with the last render's messages."""
+    from ..render import frame as render_frame
+    from ..render import setup as render_setup
+    scene = context.scene
+    rs = getattr(scene, "gs_ibl_render", None)
+    if rs is None:
+        return
+    col = layout.column(align=True)
+    row = col.row(align=True)
+    row.prop(rs, "enabled", icon="RESTRICT_RENDER_OFF" if rs.enabled else "RESTRICT_RENDER_ON")
+    if rs.enabled:
+        row.prop(rs, "write_pass", text="Pass", toggle=True, icon="FILE_IMAGE")
+        if rs.write_pass:
+            col.prop(rs, "pass_path", text="")
+    line, notes = render_setup.describe(scene, getattr(context, "view_layer", None))
+    _label_block(col, context, line, icon="RENDER_STILL")
+    for note in notes:
+        _label_block(col, context, note)
+    for message in render_frame.last_render(scene)["messages"]:
+        _label_block(col, context, f"Last render: {message}", icon="ERROR")
+
+
 class GSIBL_PT_panel(bpy.types.Panel):
     bl_label = "GS-IBL"
     bl_idname = "GSIBL_PT_panel"
@@ -168,6 +191,7 @@ class GSIBL_PT_panel(bpy.types.Panel):
             from ..viewport import overlay
             if overlay.error_text():
                 _label_block(layout.box(), context, f"Splats not drawn: {overlay.error_text()}", icon="ERROR")
+        _draw_render_settings(layout, context)
         probe = find_probe(context)
         layout.operator(GSIBL_OT_add_probe.bl_idname, icon="LIGHTPROBE_SPHERE")
         if probe is None:

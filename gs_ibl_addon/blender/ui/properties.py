@@ -142,13 +142,37 @@ class GSIBL_SplatSettings(bpy.types.PropertyGroup):
         description="What the splats' colours mean, for probe bakes and the overlay")
 
 
-CLASSES = (GSIBL_ProbeSettings, GSIBL_OverlaySettings, GSIBL_SplatSettings)
+def _render_setting_changed(self, context) -> None:
+    # The compositor nodes and images go in or out at once (render/setup.py), on the main thread
+    from ..render import setup
+    if isinstance(self.id_data, bpy.types.Scene):
+        setup.enabled_changed(self.id_data)
+
+
+class GSIBL_RenderSettings(bpy.types.PropertyGroup):
+    """Splats in final renders (F12, Render Animation, blender -b -f/-a), per scene (render/)."""
+    enabled: BoolProperty(name="Splats in Renders", default=True, update=_render_setting_changed,
+                          description="Draw the splat objects whose camera icon is on into F12 renders and "
+                                      "animations, in front of and behind meshes by depth, through nodes added to "
+                                      "the compositor (Film Transparent is turned on); off takes the nodes out "
+                                      "again and restores the settings")
+    write_pass: BoolProperty(name="Splat Pass File", default=False, update=_render_setting_changed,
+                             description="Also write the splats in front of and behind the meshes as layers "
+                                         "'front' and 'behind' of a multilayer EXR per frame (a File Output node), "
+                                         "for compositing elsewhere")
+    pass_path: StringProperty(name="Splat Pass Folder", default="//splat_pass/", subtype="DIR_PATH",
+                              update=_render_setting_changed,
+                              description="Where the Splat Pass File is written (splats_<view layer>_<frame>.exr)")
+
+
+CLASSES = (GSIBL_ProbeSettings, GSIBL_OverlaySettings, GSIBL_SplatSettings, GSIBL_RenderSettings)
 
 
 def register_properties() -> None:
     bpy.types.Object.gs_ibl_probe = PointerProperty(type=GSIBL_ProbeSettings)
     bpy.types.Scene.gs_ibl_overlay = PointerProperty(type=GSIBL_OverlaySettings)
     bpy.types.Object.gs_ibl_splats = PointerProperty(type=GSIBL_SplatSettings)
+    bpy.types.Scene.gs_ibl_render = PointerProperty(type=GSIBL_RenderSettings)
     # UI state only: on the window manager, whose edits are no undo steps and which no scene or probe carries
     bpy.types.WindowManager.gs_ibl_report_details = BoolProperty(
         name="Details", default=False,
@@ -158,6 +182,7 @@ def register_properties() -> None:
 
 def unregister_properties() -> None:
     del bpy.types.WindowManager.gs_ibl_report_details
+    del bpy.types.Scene.gs_ibl_render
     del bpy.types.Object.gs_ibl_splats
     del bpy.types.Scene.gs_ibl_overlay
     del bpy.types.Object.gs_ibl_probe
