@@ -64,7 +64,7 @@ def on_render_init(scene, *_args) -> None:
         return
     record = {"messages": [], "frames": {}, "cancelled": False}
     _last[scene.name] = record
-    _job = {"scene": scene.name, "said": set(), "record": record, "objects": None, "warned_settings": False}
+    _job = {"scene": scene.name, "said": set(), "record": record, "objects": {}, "warned_settings": False}
     if _on_main_thread():  # -b, scripts: the nodes can still be put in place now
         try:
             setup.ensure(scene)
@@ -162,13 +162,13 @@ def fill(scene, dg) -> None:
             for text in not_followed(dg):
                 say(text)
         items, native = splats.collect(dg)
-        names = sorted(ob.name for ob, _ in items)
-        before = _job["objects"]
+        names = sorted({ob.name for ob, _ in items})
+        before = _job["objects"].get(layer)  # per view layer: each may show other objects
         if before is not None and names != before:
             gone = [n for n in before if n not in names]
             if gone:
                 say(f"from frame {frame} on, no splats of {', '.join(gone)} (deleted, hidden or camera icon off)")
-        _job["objects"] = names
+        _job["objects"][layer] = names
         record["objects"] = names
         if items:
             front, behind = _draw(dg, cam, items, record)
