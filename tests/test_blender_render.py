@@ -470,3 +470,21 @@ def test_the_panel_says_what_f12_will_contain(blender, tmp_path):
     scene.gs_ibl_render.enabled = False
     text, props = draw()
     assert "F12: meshes only (Splats in Renders is off)" in text and "write_pass" not in props
+
+
+def test_a_refusal_of_the_renderer_is_said_and_draws_nothing(blender, tmp_path, monkeypatch):
+    """The core's own refusal of a camera frame it cannot hold (render_camera: limits.TooBig naming the size that
+    fits) reaches the user as a message naming the setting; the frame has no splats, none half drawn."""
+    bpy = blender
+    from gs_ibl_addon.blender.render import frame, splats
+    from gs_ibl_addon.core.limits import TooBig
+    scene, wall = build(bpy, tmp_path)
+    render = meshes_only(bpy, tmp_path, wall, "meshes")
+
+    def refuse(*_args):
+        raise TooBig("resolution", W, f"a {W}x{H} camera frame needs 1 GiB: render 32x24 or smaller")
+    monkeypatch.setattr(splats, "render_layers", refuse)
+    out = f12(bpy, tmp_path, "refused")
+    said = frame.last_render(scene)["messages"]
+    assert any("render 32x24 or smaller" in m and "Output Properties > Resolution" in m for m in said), said
+    np.testing.assert_allclose(out, render, atol=1e-6)

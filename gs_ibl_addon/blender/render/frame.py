@@ -194,7 +194,11 @@ def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
     with gpu:  # the shared Vulkan queue (a bake's worker may be using it)
         renderer = splats.renderer_for(items, cam.clip_start)
         check_fits(cam, renderer.scene_count, renderer.ctx)
-        front, behind = splats.render_layers(renderer, cam, cut)
+        try:
+            front, behind = splats.render_layers(renderer, cam, cut)
+        except limits.TooBig as e:
+            raise NotDrawn(f"splats not drawn: {e} (Output Properties > Resolution, or its %, or a render "
+                           "border)") from None
     behind = np.where(no_mesh[..., None], 0.0, behind).astype(np.float32)
     record.update(splats=int(renderer.scene_count), triangles=int(len(tris)),
                   ms_mesh_depth=round(1e3 * (t1 - t0), 1), ms_splats=round(1e3 * (time.perf_counter() - t1), 1))

@@ -154,7 +154,11 @@ def render_layers(renderer, cam, cut: np.ndarray) -> tuple[np.ndarray, np.ndarra
     if has_depth_cut():
         batch = ViewBatch.camera(cam.matrix, cam.tan_x, cam.tan_y, cam.width, cam.height, shift=(cam.cx, cam.cy),
                                  window=window)
-        res = renderer.render(batch, cut=np.asarray(cut, np.float32))
+        cut = np.asarray(cut, np.float32)
+        if hasattr(renderer, "render_camera"):  # arrays in, arrays out; refuses a frame the device cannot hold
+            f = renderer.render_camera(batch, cut=cut, depth=False, timestamps=False)
+            return f.front, f.behind
+        res = renderer.render(batch, cut=cut)
         return res.images[0], res.behinds[0]
     front = _plain(renderer, cam)
     return front, np.zeros_like(front)
