@@ -85,11 +85,14 @@ class GSIBL_OT_bake_probe(JobOperator, bpy.types.Operator):
         probe = find_probe(context)
         # a deleted, unlinked, missing or ambiguous splat object is refused before any work
         splats = sources.require_splats(context.scene, probe, context.active_object)
+        self._probe_name = probe.name
         return gb.bake_job(context.scene, probe, splats)
 
     def finished(self, context, result):
         _result, text, warning = result
-        self.report({"INFO"}, text)
+        probe = context.scene.objects.get(getattr(self, "_probe_name", ""))
+        summary = probe.gs_ibl_probe.last_summary if probe is not None and is_probe(probe) else ""
+        self.report({"INFO"}, summary or text)  # the status bar's one line; the panel's Details hold the rest
         if warning:
             self.report({"WARNING"}, warning)
         return {"FINISHED"}
