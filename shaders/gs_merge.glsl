@@ -3,7 +3,8 @@
 // MERGE_CUT (gs_merge_cut, after the *_cut rasters): each chunk's contributions fell in FRONT or BEHIND by the
 // pixel's cut, and each layer is composited among its own, so each layer's partials join by the same rule, in chunk
 // order (a chunk's contributions all follow the previous chunk's): FRONT ends where it is opaque, and so does the
-// whole pixel, as the unchunked raster ends; BEHIND stops taking chunks once it is opaque itself. PartialDepth holds
+// whole pixel, as the unchunked raster ends; BEHIND stops taking chunks once what it lets through FRONT is below
+// T_MIN. PartialDepth holds
 // two sums a pixel there (front, behind), and Depth gets the depth of FRONT over BEHIND.
 #include "common.glsl"
 layout(local_size_x = 256) in;
@@ -25,16 +26,16 @@ void main() {
     float bt = 1.0, bz = 0.0;
     for (uint k = 0u; k < p.chunks && t >= T_MIN; ++k) {
         uint j = k * p.total_pixels + i;
-        vec4 part = partial[j];
-        c += t * part.rgb;
-        if (p.write_depth != 0u) z += t * partial_depth[2u * j];
-        t *= part.w;
-        if (bt >= T_MIN) {
+        if (t * bt >= T_MIN) {  // BEHIND's chunk while BEHIND shows through FRONT (the raster's rule, chunk by chunk)
             vec4 bpart = partial_behind[j];
             bc += bt * bpart.rgb;
             if (p.write_depth != 0u) bz += bt * partial_depth[2u * j + 1u];
             bt *= bpart.w;
         }
+        vec4 part = partial[j];
+        c += t * part.rgb;
+        if (p.write_depth != 0u) z += t * partial_depth[2u * j];
+        t *= part.w;
     }
     image[i] = vec4(c, 1.0 - t);
     behind[i] = vec4(bc, 1.0 - bt);

@@ -10,8 +10,10 @@
 // along the view axis (its closest approach: the z the depth output averages) is below the cut goes to the FRONT
 // layer (Image), any other to the BEHIND layer (Behind), each composited front to back among its own
 // contributions, so that a caller puts the mesh between them: front + (1 - front.a) (mesh + (1 - mesh.a) behind).
-// The pixel ends once FRONT is opaque (nothing after it shows); BEHIND stops taking contributions once it is opaque
-// itself. With cut = +inf everywhere FRONT is the plain kernel's image bit for bit and BEHIND is 0.
+// The pixel ends once FRONT is opaque (nothing after it shows, transmittance < T_MIN as without a cut); BEHIND stops
+// taking contributions once what it lets through is below T_MIN behind FRONT (T bT < T_MIN: the plain kernel's rule
+// for the whole blend, with the mesh transparent), FRONT going on. With cut = +inf everywhere FRONT is the plain
+// kernel's image bit for bit and BEHIND is 0; with cut = 0, BEHIND is that image and FRONT is 0.
 #include "splat_common.glsl"
 layout(local_size_x = 16, local_size_y = 16) in;
 layout(std430, binding = 0) readonly buffer Views { View views[]; };
@@ -28,9 +30,11 @@ layout(std430, binding = 6) buffer Count { uint count[]; };
 #ifdef RASTER_CUT
 // The *_cut.comp files declare Cut (binding 7: per pixel of the frame) and Behind (binding 8: BEHIND as Image holds
 // FRONT; with chunks > 1 both hold partials, and Depth holds two sums a pixel, front and behind)
-#define CUT_PARAMS , float cut_z, inout vec3 bcolor, inout float bT, inout float bzsum
-#define CUT_ARGS , cut_z, bcolor, bT, bzsum
+#define CUT_PARAMS , float cut_z, float cut_far, inout vec3 bcolor, inout float bT, inout float bzsum, inout bool skip
+#define CUT_ARGS , cut_z, cut_far, bcolor, bT, bzsum, skip
+#define AND_NOT_SKIPPED && !skip
 #else
+#define AND_NOT_SKIPPED
 #define CUT_PARAMS
 #define CUT_ARGS
 #endif
@@ -79,6 +83,23 @@ void footprint_conic(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float
 }
 #endif
 shared uint s_done;
+#ifdef RASTER_CUT
+// Where a pixel's BEHIND no longer shows (T bT < T_MIN), only FRONT contributions are left to take, and a batch's
+// pairs are in order of distance from the origin: once a pair's distance, less the farthest any footprint of the
+// batch reaches, is past the pixel's cut (as a distance along its ray), no later pair of the batch can reach FRONT
+// and the pixel skips the rest of the batch (a bound with a margin far past rounding: the images are the same bit
+// for bit as without it). Per pair its distance, per batch the reach (float bits: positive floats order as uints).
+shared float s_dist[256];
+shared uint s_reach;
+// A contribution's closest approach p = along d lies in the footprint, |W (p - mu)|^2 = m <= cut, so
+// |p - mu| <= sqrt(cut) s'_max (W's rows are R's columns over the dilated scales s'), and |p| >= |mu| - that.
+vec2 dist_reach(vec4 w0, vec4 w1, vec4 w2, float cut) {
+    vec3 ol = vec3(w0.w, w1.w, w2.w);
+    vec3 i2 = 1.0 / vec3(dot(w0.xyz, w0.xyz), dot(w1.xyz, w1.xyz), dot(w2.xyz, w2.xyz));  // s'^2
+    vec3 mu = -(w0.xyz * (ol.x * i2.x) + w1.xyz * (ol.y * i2.y) + w2.xyz * (ol.z * i2.z));
+    return vec2(length(mu), sqrt(max(cut, 0.0) * max(i2.x, max(i2.y, i2.z))));
+}
+#endif
 #ifdef RASTER_STRIPS
 // Per strip of two pixel rows (a warp of 32 lanes on NVIDIA, eight lanes' rows on lavapipe) and per 32 pairs of the
 // batch, which pairs' footprints may reach the strip's rows (strip_mask): each strip composites only those, in
@@ -180,6 +201,10 @@ uint plane_strips(uint k) {
 // behind. A negative s_cut says the pair holds its plane form (plane_form): the same for every pixel of the tile,
 // so the branch does not diverge.
 bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum CUT_PARAMS) {
+#ifdef RASTER_CUT
+    // cut_far: the cut as a distance along the ray, plus the batch's reach (per batch)
+    if (T * bT < T_MIN && s_dist[k] * (1.0 - 1e-3) >= cut_far) { skip = true; return false; }
+#endif
     float cut = s_cut[k], m, along;
 #ifndef RASTER_CONIC
     if (cut < 0.0) {
@@ -207,8 +232,8 @@ bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T
     }
     float alpha = min(ALPHA_MAX, s_col[k].w * exp(-0.5 * m));
 #ifdef RASTER_CUT
-    if (along >= cut_z) {  // at or beyond the mesh: BEHIND, until it is opaque
-        if (bT >= T_MIN) {
+    if (along >= cut_z) {  // at or beyond the mesh: BEHIND, until it is opaque behind what FRONT lets through
+        if (T * bT >= T_MIN) {
             bcolor += bT * alpha * s_col[k].rgb;
             if (p.write_depth != 0u) bzsum += bT * alpha * along;
             bT *= 1.0 - alpha;
@@ -243,8 +268,10 @@ void main() {
     uint out_index = pixel_index + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
 #ifdef RASTER_CUT
     float cut_z = inside ? cuts[pixel_index] : 0.0;
+    float cut_dist = cut_z * length(d), cut_far;
     vec3 bcolor = vec3(0.0);
     float bT = 1.0, bzsum = 0.0;
+    bool skip;
 #endif
     if (gl_LocalInvocationIndex == 0u) {
         s_view[0] = vw.fwd.xyz; s_view[1] = vw.right_tanx.xyz; s_view[2] = vw.down_tany.xyz;
@@ -265,6 +292,9 @@ void main() {
     for (; start < range.y; start += 256u) {
         barrier();
         if (lid == 0u) s_done = 0u;
+#ifdef RASTER_CUT
+        if (lid == 0u) s_reach = 0u;
+#endif
 #ifdef RASTER_STRIPS
         if (lid < 64u) s_bits[lid] = 0u;
 #endif
@@ -277,6 +307,11 @@ void main() {
             s_w2[lid] = prepared[PREP * i + 2u]; s_col[lid] = prepared[PREP * i + 3u];
             vec4 e = prepared[PREP * i + 4u];
             s_cut[lid] = e.x;
+#ifdef RASTER_CUT
+            vec2 dr = dist_reach(s_w0[lid], s_w1[lid], s_w2[lid], e.x);
+            s_dist[lid] = dr.x;
+            atomicMax(s_reach, floatBitsToUint(dr.y));
+#endif
 #ifdef RASTER_CONIC
             footprint_conic(s_view[0], s_view[1], s_view[2], s_w0[lid], s_w1[lid], s_w2[lid], s_cut[lid], s_qa[lid],
                             s_qb[lid]);
@@ -297,13 +332,17 @@ void main() {
         }
         barrier();
         if (s_done == 256u) break;
+#ifdef RASTER_CUT
+        skip = false;
+        cut_far = cut_dist + uintBitsToFloat(s_reach) * (1.0 + 1e-3);
+#endif
         uint batch = min(256u, range.y - start);
 #ifdef RASTER_STRIPS
         // the strip's pairs, lowest first (front to back); with the conic, each one's conic before its ray test
         uint strip = gl_LocalInvocationID.y / 2u;
-        for (uint w = 0u; w < 8u && !done; ++w) {
+        for (uint w = 0u; w < 8u && !done AND_NOT_SKIPPED; ++w) {
             uint bits = s_bits[strip * 8u + w];
-            while (bits != 0u && !done) {
+            while (bits != 0u && !done AND_NOT_SKIPPED) {
                 uint k = w * 32u + uint(findLSB(bits));
                 bits &= bits - 1u;
 #ifdef RASTER_CONIC
@@ -316,11 +355,11 @@ void main() {
         // 32 pairs' conics first, then the ray test of those that pass, lowest first (front to back). The mask
         // loop runs its 32 steps whatever the batch holds, the bound tested inside: bounded by the batch's
         // remainder, lavapipe rastered one tile of the guitar test wrongly.
-        for (uint k0 = 0u; k0 < batch && !done; k0 += 32u) {
+        for (uint k0 = 0u; k0 < batch && !done AND_NOT_SKIPPED; k0 += 32u) {
             uint mask = 0u;
             for (uint bit = 0u; bit < 32u; ++bit)
                 if (k0 + bit < batch && conic_hit(k0 + bit, s, t)) mask |= 1u << bit;
-            while (mask != 0u && !done) {
+            while (mask != 0u && !done AND_NOT_SKIPPED) {
                 uint bit = uint(findLSB(mask));
                 mask &= mask - 1u;
                 done = composite(k0 + bit, d, s, t, color, T, zsum CUT_ARGS);
@@ -329,7 +368,8 @@ void main() {
 #else
         // not unrolled: the pixel loop's registers are what bounds this kernel (docs/benchmarks.md: registers), and
         // the 53-register build measured best on an H200 had it so
-        [[dont_unroll]] for (uint k = 0u; k < batch && !done; ++k) done = composite(k, d, s, t, color, T, zsum CUT_ARGS);
+        [[dont_unroll]] for (uint k = 0u; k < batch && !done AND_NOT_SKIPPED; ++k)
+            done = composite(k, d, s, t, color, T, zsum CUT_ARGS);
 #endif
     }
     // the pairs this workgroup went through: up to the batch where every pixel was opaque, or the whole chunk

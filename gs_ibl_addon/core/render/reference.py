@@ -21,7 +21,8 @@ def _composite(p: PreparedSplats, order: np.ndarray, dirs: np.ndarray, chunk: in
     """Per layer (colour (P, 3), transmittance (P,), zsum (P,)): zsum is the alpha-weighted sum of each
     contribution's closest approach along the ray, in units of the ray direction (view-space z for view rays).
     One layer; with ``cut`` (P,) two, FRONT (closest approach < cut) and BEHIND (the rest), each composited front to
-    back among its own; the ray ends once FRONT is opaque, and BEHIND takes nothing more once it is."""
+    back among its own; the ray ends once FRONT is opaque, and BEHIND takes nothing more once what it lets through
+    FRONT is below T_MIN."""
     n = len(dirs)
     layers = [(np.zeros((n, 3)), np.ones(n), np.zeros(n)) for _ in range(1 if cut is None else 2)]
     for start in range(0, len(order), chunk):
@@ -30,10 +31,13 @@ def _composite(p: PreparedSplats, order: np.ndarray, dirs: np.ndarray, chunk: in
         alpha = np.minimum(ALPHA_MAX, p.opacity[idx, None] * np.exp(-0.5 * m))
         alpha = np.where(ahead & (m <= p.cutoff[idx, None]), alpha, 0.0)
         for k in range(len(idx)):  # compositing is sequential per splat; rays stay vectorised
-            front_open = layers[0][1] >= T_MIN  # the splat crossing T_MIN counts, then the ray is finished
+            # a layer takes the splat while what it lets through is >= T_MIN (the splat crossing it counts): FRONT's
+            # transmittance, BEHIND's times FRONT's
+            t_front = layers[0][1]
+            takes = [t_front >= T_MIN] + [t_front * tr >= T_MIN for _, tr, _ in layers[1:]]
             layer_of = np.zeros(n, int) if cut is None else (t[k] >= cut).astype(int)
             for i, (color, trans, zsum) in enumerate(layers):
-                a = np.where(front_open & (layer_of == i) & (trans >= T_MIN), alpha[k], 0.0)
+                a = np.where(takes[i] & (layer_of == i), alpha[k], 0.0)
                 color += (trans * a)[:, None] * p.color[idx[k]][None, :]
                 zsum += trans * a * t[k]
                 trans *= 1.0 - a

@@ -263,6 +263,42 @@ def check_probes_fit(ctx, n_probes: int, face_size: int) -> None:
                          "or less, or fewer probes per batch")
 
 
+# A camera frame's GPU bytes a pixel with a depth cut: FRONT and BEHIND (RGBA float), depth and the cut (a float each).
+CAMERA_BYTES_PER_PIXEL = 16 + 16 + 4 + 4
+
+
+def largest_camera_frame(ctx, width: int, height: int) -> tuple[int, int]:
+    """The largest frame of ``width``:``height``'s shape (each side scaled by one factor, rounded down) whose images
+    fit this device: a 16-byte-a-pixel image in one storage binding, and CAMERA_BYTES_PER_PIXEL a pixel in
+    GROUP_HEAP_SHARE of its largest heap. (width, height) itself when it fits."""
+    from ..limits import device_local_bytes
+    room = min(_binding_limit(ctx) // 16, int(GROUP_HEAP_SHARE * device_local_bytes(ctx)) // CAMERA_BYTES_PER_PIXEL)
+    w, h = int(width), int(height)
+    if w * h <= room:
+        return w, h
+    f = (room / (w * h)) ** 0.5
+    w2, h2 = max(1, int(w * f)), max(1, int(h * f))
+    while w2 * h2 > room:
+        w2, h2 = max(1, w2 - 1), max(1, round(h * (w2 - 1) / w))
+    return w2, h2
+
+
+def check_camera_fits(ctx, width: int, height: int) -> None:
+    """Refuse a camera frame (the pixels it renders: a border's window, not the whole frame) whose images this
+    device cannot hold, before anything is drawn: limits.TooBig (a ValueError) naming the size that fits."""
+    w2, h2 = largest_camera_frame(ctx, width, height)
+    if (w2, h2) == (int(width), int(height)):
+        return
+    from ..limits import TooBig, _mib, device_local_bytes
+    px = int(width) * int(height)
+    raise TooBig("resolution", int(width),
+                 f"a {width}x{height} camera frame needs {_mib(px * CAMERA_BYTES_PER_PIXEL)} of GPU memory for its "
+                 f"images ({_mib(16 * px)} each for FRONT and BEHIND) but {ctx.device_name} holds "
+                 f"{_mib(_binding_limit(ctx))} in one buffer and {_mib(device_local_bytes(ctx))} in all: render "
+                 f"{w2}x{h2} or smaller ({100 * w2 / int(width):.0f}% of this size), or the frame in parts with render "
+                 "borders (ViewBatch.camera's window)")
+
+
 def probes_per_group(ctx, nodes: int, n_probes: int, lod: bool = False) -> int:
     """How many probes of ``nodes`` splats (or level-of-detail nodes) one group renders at once: every per-pair
     buffer within the device's largest storage binding, pairs and instances within GROUP_HEAP_SHARE of its
@@ -426,6 +462,24 @@ class RenderResult:
     def behinds(self) -> list[np.ndarray]:
         """Per view (H, W, 4) float32: the BEHIND layer of a render given a depth cut (``images`` is FRONT)."""
         return self.frame.read_behinds()
+
+
+@dataclass
+class CameraFrame:
+    """What SplatRenderer.render_camera gives back, on the host (float32, rows from the top).
+
+    ``front``, ``behind``: (H, W, 4) premultiplied linear RGB and alpha (coverage) of the splats nearer than the
+    cut and of the rest, each composited front to back among its own (``behind`` is 0 without a cut). A mesh image
+    ``mesh`` (premultiplied RGBA, whose surface is what the cut gave) composites as
+    ``front + (1 - front.a) * (mesh + (1 - mesh.a) * behind)``. ``depth``: (H, W) the coverage-weighted distance
+    along the view axis of FRONT over BEHIND (0: no splat), None when not asked. ``timings``: GPU ms per stage
+    (timestamp queries, where the device has them) and "wall", the host's ms for the whole call. ``kernels``: the
+    raster and emit kernels that drew it, and why (renderer.batch_kernels)."""
+    front: np.ndarray
+    behind: np.ndarray
+    depth: np.ndarray | None
+    timings: dict[str, float]
+    kernels: dict[str, str]
 
 
 def view_values(v, tile_base: int = 0, pixel_base: int = 0) -> dict:
@@ -716,6 +770,26 @@ class SplatRenderer:
             self.resolve()
         return result
 
+    def render_camera(self, batch: ViewBatch, cut=None, depth: bool = True, timestamps: bool = True,
+                      lod_k: float = 0.0) -> CameraFrame:
+        """A camera frame for a final render, arrays in and arrays out (as gsplat's ``rasterization``): ``batch`` one
+        view (ViewBatch.camera: lens shift, render border), ``cut`` None or the (H, W) float32 distance along the
+        view axis of the mesh surface each pixel sees (+inf where none; the window's pixels for a border), and a
+        CameraFrame of FRONT, BEHIND (render(cut=...)), the depth and the GPU timings back. A frame whose images
+        this device cannot hold is refused first, naming the size that fits (check_camera_fits)."""
+        t0 = time.perf_counter()
+        if batch.n_probes != 1 or len(batch.views) != 1:
+            raise ValueError(f"render_camera draws one camera view; this batch has {batch.n_probes} origin(s) and "
+                             f"{len(batch.views)} views (render() takes any batch)")
+        v = batch.views[0]
+        check_camera_fits(self.ctx, v.width, v.height)
+        res = self.render(batch, timestamps=timestamps, depth=depth, lod_k=lod_k, cut=cut)
+        front = res.images[0]
+        behind = res.behinds[0] if cut is not None else np.zeros_like(front)
+        timings = dict(res.timings_ms)
+        timings["wall"] = (time.perf_counter() - t0) * 1e3
+        return CameraFrame(front, behind, res.depths[0] if depth else None, timings, dict(self.kernels))
+
     def resolve(self, result: RenderResult | None = None) -> bool:
         """Finish the submitted render, if one is in flight; True when it was drawn again, with room for more
         instances or, on a CPU device, in more chunks (LOOP_PAIRS) (see render's ``wait``)."""
@@ -742,7 +816,7 @@ class SplatRenderer:
                 self._budgets[shape] = (pairs_cap, budget_for(self.drawn))
             elif needed > pairs_cap:
                 if needed > self.capacity:
-                    self._ensure_capacity(int(needed * 1.25) + 1024)
+                    self._ensure_capacity(min(int(needed * 1.25) + 1024, self._check_instances(needed, batch)))
                 self._budgets[shape] = (budget_for(needed), cut_cap)
             else:
                 if shape not in self._budgets:  # its first frame: later ones are sized for what it drew
@@ -757,6 +831,21 @@ class SplatRenderer:
             redrawn = True
         result._finished(timings, total)
         return redrawn
+
+    def _check_instances(self, needed: int, batch: ViewBatch) -> int:
+        """The most (tile, splat) instances one storage binding holds; refuses a frame that needs more
+        (limits.TooBig, naming the share of its size that would fit: instances grow about as its pixels)."""
+        most = _binding_limit(self.ctx) // 4
+        if needed <= most:
+            return most
+        from ..limits import TooBig
+        f = (most / needed) ** 0.5
+        v = max(batch.views, key=lambda x: x.width * x.height)
+        raise TooBig("resolution", v.width,
+                     f"this {v.width}x{v.height} frame of {self.scene_count:,} splats has {needed:,} (tile, splat) "
+                     f"pairs, more than {self.ctx.device_name} holds in one buffer ({most:,}): render "
+                     f"{int(v.width * f)}x{int(v.height * f)} or smaller ({100 * f:.0f}% of this size), or the frame "
+                     "in parts with render borders (ViewBatch.camera's window)")
 
     def _loop_chunks(self, prog: Program, deepest: int) -> int | None:
         """More chunks for a frame whose deepest raster workgroup took more pairs than this device's loops run
