@@ -392,7 +392,8 @@ def splat_traits(scene, port: ClassicNumpy, cv: CameraView, ids: np.ndarray) -> 
 CLASSES = ("order", "near", "edge", "needle", "other", "ours-only")
 
 
-def diagnose(scene, port: "ClassicNumpy", cv: CameraView, ours: np.ndarray, ref: np.ndarray) -> tuple[list, list, float]:
+def diagnose(scene, port: "ClassicNumpy", cv: CameraView, ours: np.ndarray,
+             ref: np.ndarray) -> tuple[list, list, float]:
     """(class rows, splat rows, PSNR of ours against 3DGS sorted by distance) for the pixels holding half the
     squared difference (module docstring)."""
     _, dom = port.render(cv, dominant=True)
@@ -538,12 +539,14 @@ def run(args) -> list[dict]:
             t = time.perf_counter()
             port = peer if isinstance(peer, ClassicNumpy) else ClassicNumpy(scene, args.near, args.far)
             cls, splats, if_order = diagnose(scene, port, cv, a, b)
-            base = {"capture": name, "view": cv.name, "psnr": worst["psnr"], "psnr_if_3dgs_sorted_by_distance": if_order}
+            base = {"capture": name, "view": cv.name, "psnr": worst["psnr"],
+                    "psnr_if_3dgs_sorted_by_distance": if_order}
             append_csv(args.worst_csv, [{**base, **r} for r in cls])
             append_csv(args.splats_csv, [{**base, **r} for r in splats])
             summary["classes"] = {r["class"]: r["share_of_sq_error"] for r in cls}
             summary["psnr_if_distance_order"] = if_order
-            log(f"  worst view {cv.name}: {cls[-1]['pixels']:,} pixels ({100 * cls[-1]['pixels'] / (width * height):.2f}%) "
+            share = cls[-1]["pixels"] / (width * height)
+            log(f"  worst view {cv.name}: {cls[-1]['pixels']:,} pixels ({100 * share:.2f}%) "
                 f"hold half the squared difference; by class (share of all of it): "
                 + ", ".join(f"{r['class']} {100 * r['share_of_sq_error']:.1f}%" for r in cls[:-1])
                 + f"; 3DGS's splats in our order (by distance): {if_order:.2f} dB ({time.perf_counter() - t:.1f} s)")
@@ -556,7 +559,7 @@ def run(args) -> list[dict]:
             save_triptych(os.path.join(args.png_dir, f"fidelity_{name}_worst.png"),
                           f"{name}, view {cv.name} ({worst['psnr']:.1f} dB against {peer.name}), {width}x{height}",
                           a, b)
-        if args.check_port and not isinstance(peer, ClassicNumpy):
+        if args.check_port and not isinstance(peer, ClassicNumpy) and not (deadline and time.perf_counter() > deadline):
             check_port(scene, name, up, args, ctx.device_name, date, peer)
         ours.close()
         del peer

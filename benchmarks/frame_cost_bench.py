@@ -217,7 +217,7 @@ def run_bench(args) -> None:
         rows = []
         for x in rends:
             rp = reps[x.name]
-            med = lambda k: round(statistics.median(q[k] for q in rp), 4)  # noqa: E731
+            med = lambda k, rp=rp: round(statistics.median(q[k] for q in rp), 4)  # noqa: E731
             row = {"device": ctx.device_name, "driver": info.get("driver", ""), "date": date, "scene": label,
                    "splats": scene.count, "width": w, "height": h, "renderer": x.name, "gpu_ms": med("gpu_ms"),
                    "gpu_min_ms": round(min(q["gpu_ms"] for q in rp), 4), "wall_ms": med("wall_ms"),

@@ -22,6 +22,15 @@
 #                                        camera.csv, kernel_table.json, performance.png, lod.csv, full.log
 #                                        (and gsplat_cuda.so.xz). Steps end at deadlines, so the call ends in time
 #                                        with what they measured; carry .gl and .whl (prepare makes them)
+#   bash benchmarks/gpu_run.sh final     there, one call of under 8 minutes (issue 36, items 4-5): the final frame's
+#                                        fidelity (fidelity_bench.py: our F12 camera path against gsplat classic, eight
+#                                        1920x1080 views of the guitar and the sample room, the worst view's differing
+#                                        splats; the numpy stand-in checked against gsplat at 480x270) and its cost
+#                                        (frame_cost_bench.py: a 1080p frame with and without a depth cut, per stage,
+#                                        beside gsplat; room, guitar, random and shell at 1M and 3M), the chart. Into
+#                                        $OUT: fidelity.csv, fidelity_worst.csv, fidelity_splats.csv,
+#                                        fidelity_<capture>_worst.png, frame_cost.csv, final-frame-cost.png, final.log
+#                                        (and gsplat_cuda.so.xz). Steps end at deadlines; carry .gl and .whl
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -41,7 +50,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full)
+trials|grid|full|final)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -81,6 +90,25 @@ trials|grid|full)
         --hold-clock --skip-accuracy --csv "$out/lod.csv" || echo "[gpu_run] lod_bench: exit $?"
       echo "[gpu_run] full: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = final ]; then
+    # Deadlines (seconds): fidelity takes no new capture after 180 s of its own (gsplat's ~55 s compile included;
+    # ~100 s expected) and is stopped at 210; the frame cost takes no new scene after 130 s (~80 expected) and is
+    # stopped at 160; with set-up (~30 s) and the chart the call ends within about 7 minutes (about 4 expected).
+    log="$out/final.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 210 python3 benchmarks/fidelity_bench.py --captures guitar,room \
+        --peer gsplat --size 1920x1080 --check-port 480x270 --deadline 180 --csv "$out/fidelity.csv" \
+        --worst-csv "$out/fidelity_worst.csv" --splats-csv "$out/fidelity_splats.csv" --png-dir "$out" \
+        || echo "[gpu_run] fidelity_bench: exit $?"
+      timeout --signal=INT --kill-after=10 160 python3 benchmarks/frame_cost_bench.py bench \
+        --scenes room,guitar,random:1M,shell:1M,random:3M,shell:3M --size 1920x1080 --gsplat-stages \
+        --warmup 0.5 --rounds 3 --block 5 --deadline 130 --csv "$out/frame_cost.csv" \
+        || echo "[gpu_run] frame_cost_bench: exit $?"
+      python3 benchmarks/frame_cost_bench.py plot --csv "$out/frame_cost.csv" --png "$out/final-frame-cost.png" \
+        || echo "[gpu_run] plot: exit $?"
+      echo "[gpu_run] final: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = trials ]; then
     python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic,gs_raster_strips,gs_raster_conic_strips \
       --trials out/trials --csv "$out/trial_stats.csv" | grep -E "Register|Shared Memory|Spill" || true
@@ -99,7 +127,7 @@ trials|grid|full)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final" >&2
   exit 2
   ;;
 esac
