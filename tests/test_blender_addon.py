@@ -85,7 +85,8 @@ def test_import_ply_creates_splat_object(blender, tmp_path, write_3dgs_ply):
     obj = bpy.context.active_object
     assert obj.name == "garden" and obj.select_get() and obj.name in bpy.context.scene.objects
     assert obj["gs_ibl"]["source"] == str(path) and obj["gs_ibl"]["sh_degree"] == 2
-    assert len(obj.data.vertices) == 500 and obj.hide_render
+    assert len(obj.data.vertices) == 500 and not obj.hide_render  # in renders, drawn by blender/render/
+    assert not obj.modifiers[0].show_render  # the point proxy never renders
     # default orientation (3DGS/OpenCV): the file's -Y is Blender's +Z, its +Z is Blender's +Y
     m = np.array(obj.matrix_world)
     np.testing.assert_allclose(m[:3, :3] @ [0, -1, 0], [0, 0, 1], atol=1e-6)

@@ -32,7 +32,7 @@ def test_below_5_3_our_import_makes_our_mesh(blender, tmp_path, write_3dgs_ply):
     write_3dgs_ply(path, random_scene(20, sh_degree=1))
     assert blender.ops.gs_ibl.import_splats(filepath=str(path), native=True) == {"FINISHED"}
     obj = blender.context.active_object
-    assert splat_object.is_mesh_splats(obj) and obj.hide_render
+    assert splat_object.is_mesh_splats(obj) and not obj.hide_render
     with pytest.raises(ValueError, match="no native Gaussian splats"):
         splat_object.create_splat_object(blender.context, random_scene(5), "N", native=True)
     labels: list[str] = []

@@ -23,7 +23,8 @@ points (at most PROXY_POINTS) with their colour; very large scenes also switch t
 puts out two points of radius 0 at the corners of every splat's bounds: Blender frames (View Selected, Numpad .)
 and culls the evaluated geometry, which with the subset alone, or with none while the overlay shows (Fraction 0),
 was a part of the capture or nothing at all (View Selected then framed the object's origin: a person's legs).
-The object never renders (hide_render): its light reaches meshes through the baked probe, not as geometry.
+Its camera icon (hide_render) is on after an import, like any object's: F12 draws it with our renderer
+(blender/render/); the point proxy is a viewport stand-in that never renders (its modifier's show_render is off).
 """
 from __future__ import annotations
 
@@ -215,6 +216,7 @@ def unregister_handlers() -> None:
 def _add_proxy(obj: bpy.types.Object, scene: SplatScene) -> None:
     tree = _proxy_tree()
     mod = obj.modifiers.new(PROXY_MODIFIER, "NODES")
+    mod.show_render = False  # the splats themselves are drawn in renders (blender/render/), never these points
     mod.node_group = tree
     ids = modifier_input_identifiers(tree)
     set_modifier_input(mod, ids["Fraction"], float(min(1.0, PROXY_POINTS / max(scene.count, 1))))
@@ -308,7 +310,6 @@ def create_steps(context: bpy.types.Context, scene: SplatScene, name: str, matri
             # a Matrix, not nested lists: RNA would read nested lists column-major (transposed)
             obj.matrix_world = Matrix([list(r) for r in np.asarray(matrix, np.float64)])
         if not native:
-            obj.hide_render = True
             if proxy:
                 _add_proxy(obj, scene)
         collection.objects.link(obj)
