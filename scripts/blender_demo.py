@@ -9,8 +9,9 @@ renders a small Cycles frame to --out (PNG) and saves the .blend next to it (or 
     .venv/bin/python scripts/blender_demo.py --out docs/img/blender_demo.png          # bpy module
     blender -b --python scripts/blender_demo.py -- --out demo.png                     # a Blender binary
 
-The splats are not in the frame themselves (F12 renders only meshes); what the camera sees behind the meshes
-is the baked probe (the room as seen from the probe), and every mesh is lit by it.
+The splats are in the frame: gs-ibl draws them from the scene camera and composites them with the meshes by depth
+(blender/render/: splats behind a mesh are hidden by it, splats in front of it hide it), and every mesh is lit by
+the baked probe. The floor under the meshes is a shadow catcher, so their shadows darken the splat floor.
 """
 from __future__ import annotations
 
@@ -84,7 +85,7 @@ def build_scene(tmp: str, face_size: int = 256) -> tuple[bpy.types.Object, bpy.t
     bpy.ops.gs_ibl.import_splats(filepath=ply)  # the default (Auto) reads the sample's declared axes: Z up
     splats = bpy.context.active_object
     splats.name = "Sample Environment"
-    # A row of meshes on the floor (z = 0) in the middle of the room, facing the camera (which looks along +Y).
+    # A row of meshes on the floor (z = 0) in the open middle of the room, seen from its open side.
     _add("uv_sphere", (-0.85, 0.4, 0.35), _material("White Diffuse", (0.8, 0.8, 0.8), roughness=1.0),
          radius=0.35, segments=64, ring_count=32)
     _add("uv_sphere", (0.85, 0.4, 0.35), _material("Metal", (0.95, 0.93, 0.88), metallic=1.0, roughness=0.12),
@@ -113,8 +114,8 @@ def setup_render(args) -> None:
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(cam)
     cam.data.lens = 24.0
-    cam.location = (-0.9, -2.3, 1.15)
-    target = (0.35, 0.5, 0.5)
+    cam.location = (2.0, -1.6, 1.3)  # from the open side of the room: the table (x < -0.3) stays out of the way
+    target = (-0.15, 0.55, 0.35)
     d = [t - c for t, c in zip(target, cam.location)]
     cam.rotation_euler = (math.atan2(math.hypot(d[0], d[1]), -d[2]), 0.0, math.atan2(d[1], d[0]) - math.pi / 2)
     scene.camera = cam
