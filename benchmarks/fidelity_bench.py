@@ -38,7 +38,7 @@ GPU machine (rows with peer "numpy-port" in the CSV: it is a faithful stand-in w
 
   python benchmarks/fidelity_bench.py [CAPTURE.ply[@UP] ...] [--size 1920x1080] [--fov 60] [--peer auto|gsplat|numpy]
          [--csv out/bench/fidelity.csv] [--worst-csv ...] [--splats-csv ...] [--png-dir out/bench]
-         [--check-port 480x270] [--deadline SECONDS]
+         [--check-port 320x180] [--what-if-all] [--deadline SECONDS]
 
 Captures: tests/data/guitar.compressed.ply (up -Y: a Y-down capture) and samples/room.ply (up +Z), plus any path
 on the command line (``path@+z`` names its up axis; default -y, the COLMAP convention of trained captures).
@@ -513,8 +513,12 @@ def run(args) -> list[dict]:
                    "view": cv.name, "azimuth": cv.azimuth, "elevation": cv.elevation,
                    "distance": round(cv.distance, 4), "core_radii": cv.factor, "shift_x": round(cv.shift[0], 4),
                    "shift_y": round(cv.shift[1], 4), "width": width, "height": height, "fov": args.fov,
-                   "near": args.near, **compare(a, b), "window_max_diff": "", "nocut_max_diff": "",
+                   "near": args.near, **compare(a, b), "psnr_if_distance_order": "",
+                   "window_max_diff": "", "nocut_max_diff": "",
                    "sm_mhz": gpu_clock(), "ours_s": round(t_ours, 3), "peer_s": round(t_peer, 3)}
+            if args.what_if_all:  # 3DGS's splats blended in our order, by distance (diagnose's what-if)
+                w = ClassicNumpy(scene, args.near, args.far, order="distance").render(cv)
+                row["psnr_if_distance_order"] = round(psnr(a[..., :3], w[..., :3]), 3)
             if cv is views[0]:  # a render border's window and the frame without the cut: the same pixels
                 x0, y0, x1, y1 = width // 4, height // 3, (3 * width) // 4, (5 * height) // 6
                 win = ours.render(cv, window=(x0, y0, x1, y1))
@@ -524,7 +528,9 @@ def run(args) -> list[dict]:
             images[cv.name] = (a, b)
             log(f"  {name} {cv.name} az {cv.azimuth:3.0f} el {cv.elevation:3.0f} {cv.factor:.2f} R shift "
                 f"{cv.shift[0]:+.3f},{cv.shift[1]:+.3f}: PSNR {row['psnr']:.2f} dB (alpha {row['psnr_alpha']:.2f}), "
-                f"max {row['max_abs']:.3f}, >1%: {100 * row['px_over_1pct']:.2f}% | ours {t_ours:.2f} s, "
+                f"max {row['max_abs']:.3f}, >1%: {100 * row['px_over_1pct']:.2f}%"
+                + (f", {row['psnr_if_distance_order']:.2f} dB if 3DGS sorted by distance" if args.what_if_all else "")
+                + f" | ours {t_ours:.2f} s, "
                 f"peer {t_peer:.2f} s")
             append_csv(args.csv, [row])
         ps = [r["psnr"] for r in rows]
@@ -579,7 +585,8 @@ def check_port(scene, name, up, args, device, date, peer) -> None:
                "view": cv.name, "azimuth": cv.azimuth, "elevation": cv.elevation, "distance": round(cv.distance, 4),
                "core_radii": cv.factor, "shift_x": round(cv.shift[0], 4), "shift_y": round(cv.shift[1], 4),
                "width": w, "height": h, "fov": args.fov, "near": args.near, **compare(a, b),
-               "window_max_diff": "", "nocut_max_diff": "", "sm_mhz": "", "ours_s": "", "peer_s": ""}
+               "psnr_if_distance_order": "", "window_max_diff": "", "nocut_max_diff": "", "sm_mhz": "", "ours_s": "",
+               "peer_s": ""}
         append_csv(args.csv, [row])
         ps.append(row["psnr"])
     log(f"  numpy port against gsplat at {w}x{h}: PSNR min {min(ps):.1f}, median {statistics.median(ps):.1f} dB")
@@ -611,6 +618,8 @@ def main(argv=None) -> list[dict]:
     ap.add_argument("--check-port", default="", help="WxH: also the numpy port against gsplat at this size")
     ap.add_argument("--no-diagnose", dest="diagnose", action="store_false",
                     help="skip the worst view's classification (a numpy render of it)")
+    ap.add_argument("--what-if-all", action="store_true", help="every view also against 3DGS's splats blended in "
+                    "our order (by distance; a numpy render of each view): column psnr_if_distance_order")
     ap.add_argument("--deadline", type=float, default=0.0, help="seconds: captures not begun by then are left out")
     ap.add_argument("--csv", default=os.path.join(ROOT, "out", "bench", "fidelity.csv"))
     ap.add_argument("--worst-csv", default=os.path.join(ROOT, "out", "bench", "fidelity_worst.csv"))

@@ -25,7 +25,7 @@
 #   bash benchmarks/gpu_run.sh final     there, one call of under 8 minutes (issue 36, items 4-5): the final frame's
 #                                        fidelity (fidelity_bench.py: our F12 camera path against gsplat classic, eight
 #                                        1920x1080 views of the guitar and the sample room, the worst view's differing
-#                                        splats; the numpy stand-in checked against gsplat at 480x270) and its cost
+#                                        splats; the numpy stand-in checked against gsplat at 320x180) and its cost
 #                                        (frame_cost_bench.py: a 1080p frame with and without a depth cut, per stage,
 #                                        beside gsplat; room, guitar, random and shell at 1M and 3M), the chart. Into
 #                                        $OUT: fidelity.csv, fidelity_worst.csv, fidelity_splats.csv,
@@ -98,7 +98,7 @@ trials|grid|full|final)
     (
       set +e
       timeout --signal=INT --kill-after=10 210 python3 benchmarks/fidelity_bench.py --captures guitar,room \
-        --peer gsplat --size 1920x1080 --check-port 480x270 --deadline 180 --csv "$out/fidelity.csv" \
+        --peer gsplat --size 1920x1080 --check-port 320x180 --deadline 180 --csv "$out/fidelity.csv" \
         --worst-csv "$out/fidelity_worst.csv" --splats-csv "$out/fidelity_splats.csv" --png-dir "$out" \
         || echo "[gpu_run] fidelity_bench: exit $?"
       timeout --signal=INT --kill-after=10 160 python3 benchmarks/frame_cost_bench.py bench \
