@@ -2,12 +2,13 @@
 rasterization, eight views around each real capture.
 
 Ours is what an F12 render draws (blender/render/splats.py render_layers): ``ViewBatch.camera`` with the frame's
-lens shift, ``SplatRenderer(scene, near=clip_start).render(batch, cut=...)`` with the cut at the far clip where no
-mesh stands (every pixel here: the FRONT layer is the frame). The peer is 3DGS's look as its viewers draw it:
-gsplat's ``rasterization(..., rasterize_mode="classic", packed=True, eps2d=0.3)`` with 3DGS's own projection (EWA,
-the clamped Jacobian), the same camera (OpenCV view matrix, K with the shifted principal point), the same near and
-far planes. The colour rule is off (each scene's colour space set to "linear": colour = max(SH(d) + 0.5, 0), what
-gsplat computes), so both images are the values the capture was trained to show.
+lens shift, ``SplatRenderer(scene, near=clip_start).render_camera(batch, cut=...)`` (render(cut=...) where the core
+has no render_camera) with the cut at the far clip where no mesh stands (every pixel here: FRONT is the frame).
+The peer is 3DGS's look as its viewers draw it: gsplat's ``rasterization(..., rasterize_mode="classic",
+packed=True, eps2d=0.3)`` with 3DGS's own projection (EWA, the clamped Jacobian), the same camera (OpenCV view
+matrix, K with the shifted principal point), the same near and far planes. The colour rule is off (each scene's
+colour space set to "linear": colour = max(SH(d) + 0.5, 0), what gsplat computes), so both images are the values
+the capture was trained to show.
 
 Views (``camera_views``): around the capture's centre (the median of its splats), looking at it, from outside its
 dense core (R: the distance from the centre within which 80% of the splats lie), at 1920x1080 and 60° across by
@@ -197,6 +198,8 @@ class Ours:
         batch = our_batch(cv, window)
         v = batch.views[0]
         c = np.full((v.height, v.width), self.far, np.float32) if cut else None
+        if hasattr(self.r, "render_camera"):  # what F12 calls (blender/render/splats.py render_layers)
+            return self.r.render_camera(batch, cut=c, depth=False, timestamps=False).front
         return self.r.render(batch, cut=c).images[0]
 
     def close(self) -> None:

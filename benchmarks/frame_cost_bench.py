@@ -4,12 +4,14 @@ the same frame (classic mode, the same camera), one process, one GPU.
 
 The frame (blender/render/frame.py _draw): the meshes' planar depth per pixel (core/render/mesh_depth.py, on the
 CPU; here a UV sphere of 32x16 quads standing in the view, the far clip where no mesh is), then
-``SplatRenderer.render(ViewBatch.camera(...), cut=...)`` and the two layers read back. Without a cut: the same
-render with ``cut=None`` and one layer read back. Rows per scene and renderer: the median GPU time (timestamp
-queries; gsplat: CUDA events) and per stage (ours: clear, preprocess, sort_depth, emit, sort_tiles, ranges, raster;
-gsplat: its kernels by the same names, torch profiler, where ``--gsplat-stages``), the wall time in parts
-(mesh_depth, render: submit and wait, readback) and whole, the SM clock before and after the blocks (NVML), the
-(tile, splat) pairs. Renderers are warmed up, then timed in interleaved blocks, as peer_bench does.
+``SplatRenderer.render_camera(ViewBatch.camera(...), cut=...)`` (render(cut=...) and the two layers read back;
+render() and its images where the core has no render_camera), BEHIND kept where a mesh is. Without a cut: the same
+call with ``cut=None``. Rows per scene and renderer: the median GPU time (timestamp queries; gsplat: CUDA events)
+and per stage (ours: clear, preprocess, sort_depth, emit, sort_tiles, ranges, raster; gsplat: its kernels by the
+same names, torch profiler, where ``--gsplat-stages``), the wall time in parts (mesh_depth; splats: our renderer's
+call with the layers read back, or gsplat's call, synchronize and its images read back; post: BEHIND masked where no
+mesh is) and whole, the SM clock before and after the blocks (NVML), the (tile, splat) pairs drawn. Renderers are
+warmed up, then timed in interleaved blocks, as peer_bench does.
 
 Scenes: ``room`` (samples/room.ply), ``guitar`` (tests/data/guitar.compressed.ply) from fidelity_bench's view v4
 (1.25 dense-core radii out: the capture fills the frame), and peer_bench's synthetic ones, ``random:N`` (bench_scene:
@@ -41,7 +43,9 @@ sys.path.insert(0, HERE)
 from bench_common import append_csv, bench_scene, gpu_clock, hold_gpu_clock, shell_scene  # noqa: E402
 
 STAGES = ("clear", "preprocess", "sort_depth", "emit", "sort_tiles", "ranges", "raster")
-WALL_PARTS = ("mesh_depth", "render", "readback")
+WALL_PARTS = ("mesh_depth", "splats", "post")
+WALL_LABELS = {"mesh_depth": "wall: mesh depth (CPU)", "splats": "wall: splats drawn and read back",
+               "post": "wall: BEHIND masked"}
 FOV = 60.0
 CLIP_END = 1000.0
 NEAR = 0.1
@@ -93,20 +97,30 @@ def scene_and_camera(spec: str, width: int, height: int):
 
 
 class Ours:
-    """The F12 frame (cut=True: mesh depth, render with the cut, FRONT and BEHIND read back) or the same frame
-    without a cut (one layer)."""
+    """The F12 frame (cut=True: mesh depth, the splats with the cut, FRONT and BEHIND back on the host, BEHIND kept
+    where a mesh is) or the same frame without a cut. The splats as F12 draws them (blender/render/splats.py
+    render_layers): SplatRenderer.render_camera (render(cut=...) and the layers read back) where the core has it."""
 
     def __init__(self, renderer, cv, tris, cut: bool) -> None:
         import fidelity_bench as fb
         self.r, self.cv, self.tris, self.cut = renderer, cv, tris, cut
         self.batch = fb.our_batch(cv)
         self.name = "gs-ibl cut" if cut else "gs-ibl"
+        self.mesh_share = 0.0
+
+    def splats(self, cut) -> tuple[np.ndarray, np.ndarray, dict]:
+        if hasattr(self.r, "render_camera"):
+            f = self.r.render_camera(self.batch, cut=cut, depth=False, timestamps=True)
+            return f.front, f.behind, f.timings
+        res = self.r.render(self.batch, timestamps=True, cut=cut)
+        front = res.images[0]
+        return front, res.behinds[0] if cut is not None else np.zeros_like(front), res.timings_ms
 
     def rep(self) -> dict:
         from gs_ibl_addon.core.render.mesh_depth import mesh_depth
         cv = self.cv
         t0 = time.perf_counter()
-        cut = None
+        cut = no_mesh = None
         if self.cut:
             z = mesh_depth(self.tris, cv.matrix, cv.tan_x, cv.tan_y, cv.width, cv.height, cv.shift[0], cv.shift[1],
                            near=NEAR, far=CLIP_END)
@@ -114,18 +128,20 @@ class Ours:
             self.mesh_share = 1.0 - float(no_mesh.mean())
             cut = np.where(no_mesh, np.float32(CLIP_END), z).astype(np.float32)
         t1 = time.perf_counter()
-        res = self.r.render(self.batch, timestamps=True, cut=cut)
+        front, behind, t = self.splats(cut)
         t2 = time.perf_counter()
-        layers = [res.images[0]]
         if self.cut:  # frame.py _draw: BEHIND only where a mesh is
-            layers.append(np.where(no_mesh[..., None], 0.0, res.behinds[0]).astype(np.float32))
+            behind = np.where(no_mesh[..., None], 0.0, behind).astype(np.float32)
         t3 = time.perf_counter()
-        self.last = layers
-        t = res.timings_ms
-        out = {"gpu_ms": t["total"], "mesh_depth": (t1 - t0) * 1e3, "render": (t2 - t1) * 1e3,
-               "readback": (t3 - t2) * 1e3, "wall_ms": (t3 - t0) * 1e3, "pairs": res.instances}
-        for s in STAGES:
-            out[s] = t.get(s, 0.0) + sum(v for k, v in t.items() if k.startswith(s + "."))
+        self.last = (front, behind)
+        try:
+            pairs = int(self.r.count.read(np.uint32, 1)[0])  # the pairs the raster drew (peer_bench.drawn_pairs)
+        except Exception:  # noqa: BLE001 - a renderer without that buffer
+            pairs = ""
+        out = {"gpu_ms": t["total"], "mesh_depth": (t1 - t0) * 1e3, "splats": (t2 - t1) * 1e3,
+               "post": (t3 - t2) * 1e3, "wall_ms": (t3 - t0) * 1e3, "pairs": pairs}
+        for st in STAGES:
+            out[st] = t.get(st, 0.0) + sum(v for k, v in t.items() if k.startswith(st + "."))
         return out
 
 
@@ -157,11 +173,10 @@ def gsplat_peer(scene, cv):
             colors, alphas, meta = self.call()
             self.e1.record()
             torch.cuda.synchronize()
-            t1 = time.perf_counter()
             colors.cpu().numpy(), alphas.cpu().numpy()
             t2 = time.perf_counter()
-            return {"gpu_ms": self.e0.elapsed_time(self.e1), "mesh_depth": 0.0, "render": (t1 - t0) * 1e3,
-                    "readback": (t2 - t1) * 1e3, "wall_ms": (t2 - t0) * 1e3, "pairs": int(meta["isect_ids"].numel())}
+            return {"gpu_ms": self.e0.elapsed_time(self.e1), "mesh_depth": 0.0, "splats": (t2 - t0) * 1e3,
+                    "post": 0.0, "wall_ms": (t2 - t0) * 1e3, "pairs": int(meta["isect_ids"].numel())}
 
     return Frame()
 
@@ -235,7 +250,7 @@ def run_bench(args) -> None:
         cut_rows = rows[1]
         log(f"{label} {w}x{h}: " + " | ".join(
             f"{q['renderer']} GPU {q['gpu_ms']:.2f} ms, wall {q['wall_ms']:.1f} (mesh depth {q['mesh_depth_ms']:.1f}, "
-            f"render {q['render_ms']:.1f}, read back {q['readback_ms']:.1f})" for q in rows)
+            f"splats {q['splats_ms']:.1f}, post {q['post_ms']:.1f})" for q in rows)
             + f" | SM {cut_rows['sm_mhz_min']}-{cut_rows['sm_mhz_max']} MHz | "
             + " ".join(f"{s} {cut_rows[s + '_ms']:.2f}" for s in STAGES) + f" | mesh on {100 * mesh_share:.0f}%")
         r.close()
@@ -254,7 +269,7 @@ def run_plot(args) -> None:
     scenes = list(dict.fromkeys(r["scene"] for r in rows))
     fig, axes = plt.subplots(1, len(scenes), figsize=(max(8.0, 3.3 * len(scenes) + 1), 5.0), squeeze=False)
     colours = dict(zip(STAGES, plt.cm.tab10.colors))
-    wall_col = {"mesh_depth": "#999999", "render": "#5577aa", "readback": "#bb8844"}
+    wall_col = {"mesh_depth": "#999999", "splats": "#5577aa", "post": "#bb8844"}
     for ax, sc in zip(axes[0], scenes):
         rs = [r for r in rows if r["scene"] == sc]
         names = [r["renderer"] for r in rs]
@@ -276,7 +291,7 @@ def run_plot(args) -> None:
             for p in WALL_PARTS:
                 v = float(r[p + "_ms"] or 0)
                 ax.bar(x + 1, v, 0.9, bottom=bottom, color=wall_col[p], hatch="//",
-                       label=f"wall: {p.replace('_', ' ')}" if i == 0 else None)
+                       label=WALL_LABELS[p] if i == 0 else None)
                 bottom += v
             ax.text(x, float(r["gpu_ms"]), f"{float(r['gpu_ms']):.1f}", ha="center", va="bottom", fontsize=7)
             ax.text(x + 1, float(r["wall_ms"]), f"{float(r['wall_ms']):.0f}", ha="center", va="bottom", fontsize=7)

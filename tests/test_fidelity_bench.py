@@ -50,7 +50,7 @@ class FrameStandIn:
     name = "gsplat"
 
     def rep(self) -> dict:
-        return {"gpu_ms": 1.0, "mesh_depth": 0.0, "render": 1.0, "readback": 0.1, "wall_ms": 1.1, "pairs": 7}
+        return {"gpu_ms": 1.0, "mesh_depth": 0.0, "splats": 1.1, "post": 0.0, "wall_ms": 1.1, "pairs": 7}
 
     def kernel_ms(self):
         return [("fully_fused_projection_packed_fwd_kernel", 0.1), ("rasterize_to_pixels_fwd_kernel", 0.3),
@@ -108,7 +108,7 @@ def test_final_mode_dry(benches, tmp_path):
     assert [r["scene"] for r in rows[::3]] == ["room", "guitar", "random 0.003M", "shell 0.003M"]
     for r in rows:
         if r["renderer"].startswith("gs-ibl"):
-            assert float(r["raster_ms"]) > 0 and float(r["render_ms"]) > 0 and int(r["pairs"]) > 0
+            assert float(r["raster_ms"]) > 0 and float(r["splats_ms"]) > 0 and int(r["pairs"]) > 0
     cut = [r for r in rows if r["renderer"] == "gs-ibl cut"]
     assert all(float(r["mesh_depth_ms"]) > 0 and 0 < float(r["mesh_share"]) < 1 for r in cut)
     g = rows[2]
