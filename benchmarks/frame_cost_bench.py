@@ -299,6 +299,7 @@ def run_plot(args) -> None:
         ax.set_xticklabels([n.replace("gs-ibl cut", "ours, cut").replace("gs-ibl", "ours") for n in names],
                            fontsize=8)
         ax.set_title(f"{sc} ({int(rs[0]['splats']):,})", fontsize=9)
+        ax.set_ylim(0, 1.12 * max(max(float(r["gpu_ms"]), float(r["wall_ms"])) for r in rs))
         ax.grid(True, axis="y", alpha=0.3)
     axes[0][0].set_ylabel("ms per frame (left bar GPU by stage, right bar wall)")
     handles, labels = axes[0][0].get_legend_handles_labels()
