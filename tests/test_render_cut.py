@@ -308,6 +308,28 @@ def test_cut_layers(monkeypatch, wall, variant):
     assert err[on_mesh].mean() <= 0.01, err[on_mesh].mean()
 
 
+def test_the_mesh_reference_at_its_limits():
+    """render_reference_mesh with no mesh is the splats' frame, with the mesh nearer than every splat the mesh over
+    them, and farther than every splat the splats over it; the twin's layers at those cuts are the frame and 0."""
+    scene, batch = _wall(600), _batch(32, 24)
+    plain = render_reference(scene, batch)[0].astype(np.float64)
+    rng = np.random.default_rng(2)
+    a = rng.uniform(0.3, 1.0, (24, 32, 1))
+    mesh = np.concatenate([rng.uniform(0, 1, (24, 32, 3)) * a, a], -1).astype(np.float32)
+    none = render_reference_mesh(scene, batch, mesh, np.full((24, 32), np.inf))[0]
+    near = render_reference_mesh(scene, batch, mesh, np.full((24, 32), 0.5))[0]
+    far = render_reference_mesh(scene, batch, mesh, np.full((24, 32), 50.0))[0]
+    zero = np.zeros_like(mesh)
+    np.testing.assert_allclose(none, plain, atol=1e-6)
+    # (the blend stops where its transmittance falls below 1e-4: at another splat when a mesh is in it)
+    np.testing.assert_allclose(near, _over(mesh, zero, plain), atol=1e-4)
+    np.testing.assert_allclose(far, _over(plain, zero, mesh), atol=1e-4)
+    for cut, layer in ((0.5, 1), (50.0, 0)):
+        layers = render_reference(scene, batch, cut=np.full((24, 32), cut))
+        np.testing.assert_allclose(layers[layer][0], plain, atol=1e-6)
+        assert not layers[1 - layer][0].any()
+
+
 def test_the_mesh_scene_tests_both_occlusions(wall):
     """The quad's near end stands in front of the wall and its far end inside it: the inserted reference is the mesh
     over the splats at one end and neither that nor the splats over the mesh at the other."""
