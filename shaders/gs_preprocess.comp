@@ -98,11 +98,20 @@ vec3 sh_color(uint i, vec3 d) {
     return splat_radiance(c + 0.5);
 }
 
-// The distance's float bits without their low DEPTH_KEY_SHIFT (constants.py). Splats are uploaded in tie order
+// The sort depth's float bits without their low DEPTH_KEY_SHIFT (constants.py). Splats are uploaded in tie order
 // (render/splat_math.py tie_order), which the stable sort keeps among equal keys: co-distant splats composite in
 // the order of a hash of their position, not of the file's storage.
 uint depth_sort_key(float dist) {
     return floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
+}
+
+// The sort depth (splat_math.depth_keys): a batch of one view (camera frames, the viewport) sorts by depth along its
+// view axis, z = forward . mu, as 3DGS does, clamped to SORT_DEPTH_MIN (> 0: positive floats order as their bits)
+// so that a splat centred behind the camera plane comes first; probes (six faces) by distance from the origin,
+// one order for all their views. gs_raster.glsl's depth-cut skip relies on this order (dist_reach).
+const float SORT_DEPTH_MIN = 1e-20;
+float sort_depth(vec3 mu, float dist) {
+    return p.n_views == 1u ? max(dot(views[0].fwd.xyz, mu), SORT_DEPTH_MIN) : dist;
 }
 
 void main() {
@@ -165,5 +174,5 @@ void main() {
     // .y: exact below 2^24 (renderer.py); .zw: the centre's direction, octahedral, for the raster's plane forms
     prepared[PREP * q + 4u] = vec4(cutoff, float(probe * probe_tiles), octahedral(mu));
     tile_count[q] = count;
-    depth_key[q] = depth_sort_key(dist);
+    depth_key[q] = depth_sort_key(sort_depth(mu, dist));
 }

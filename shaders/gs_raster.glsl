@@ -85,19 +85,27 @@ void footprint_conic(vec3 fwd, vec3 r, vec3 dn, vec4 w0, vec4 w1, vec4 w2, float
 shared uint s_done;
 #ifdef RASTER_CUT
 // Where a pixel's BEHIND no longer shows (T bT < T_MIN), only FRONT contributions are left to take, and a batch's
-// pairs are in order of distance from the origin: once a pair's distance, less the farthest any footprint of the
-// batch reaches, is past the pixel's cut (as a distance along its ray), no later pair of the batch can reach FRONT
+// pairs are in the order of their sort depth (gs_preprocess sort_depth): once a pair's sort depth, less the
+// farthest any footprint of the batch reaches, is past the pixel's cut, no later pair of the batch can reach FRONT
 // and the pixel skips the rest of the batch (a bound with a margin far past rounding: the images are the same bit
-// for bit as without it). Per pair its distance, per batch the reach (float bits: positive floats order as uints).
+// for bit as without it). Per pair its sort depth less its margin, per batch the reach plus the margins (float
+// bits: positive floats order as uints). Probes (several views) sort by distance from the origin, compared with the
+// cut as a distance along the ray; a batch of one view (all depth cuts are camera frames) by z = forward . mu,
+// compared with the cut itself.
 shared float s_dist[256];
 shared uint s_reach;
 // A contribution's closest approach p = along d lies in the footprint, |W (p - mu)|^2 = m <= cut, so
-// |p - mu| <= sqrt(cut) s'_max (W's rows are R's columns over the dilated scales s'), and |p| >= |mu| - that.
-vec2 dist_reach(vec4 w0, vec4 w1, vec4 w2, float cut) {
+// |p - mu| <= sqrt(cut) s'_max = r (W's rows are R's columns over the dilated scales s'), and |p| >= |mu| - r.
+// One view: d's forward part is 1, so along = forward . p >= forward . mu - r. A later pair j has sort depth
+// z_j >= z_k (up to the key's dropped bits, 3e-5 relative, and rounding of z_j, ulps of |mu_j|): the margins
+// 1e-3 |mu| on pair k's z and on every pair's reach (1e-3 |mu_j| of the batch's max) cover both.
+vec2 dist_reach(vec4 w0, vec4 w1, vec4 w2, float cut, bool one_view, vec3 fwd) {
     vec3 ol = vec3(w0.w, w1.w, w2.w);
     vec3 i2 = 1.0 / vec3(dot(w0.xyz, w0.xyz), dot(w1.xyz, w1.xyz), dot(w2.xyz, w2.xyz));  // s'^2
     vec3 mu = -(w0.xyz * (ol.x * i2.x) + w1.xyz * (ol.y * i2.y) + w2.xyz * (ol.z * i2.z));
-    return vec2(length(mu), sqrt(max(cut, 0.0) * max(i2.x, max(i2.y, i2.z))));
+    float r = sqrt(max(cut, 0.0) * max(i2.x, max(i2.y, i2.z))), l = length(mu);
+    if (one_view) return vec2(dot(fwd, mu) - 1e-3 * l, r + 1e-3 * l);
+    return vec2(l * (1.0 - 1e-3), r);
 }
 #endif
 #ifdef RASTER_STRIPS
@@ -202,8 +210,8 @@ uint plane_strips(uint k) {
 // so the branch does not diverge.
 bool composite(uint k, vec3 d, float s, float t, inout vec3 color, inout float T, inout float zsum CUT_PARAMS) {
 #ifdef RASTER_CUT
-    // cut_far: the cut as a distance along the ray, plus the batch's reach (per batch)
-    if (T * bT < T_MIN && s_dist[k] * (1.0 - 1e-3) >= cut_far) { skip = true; return false; }
+    // cut_far: the cut in the batch's sort depth plus the batch's reach (per batch; dist_reach)
+    if (T * bT < T_MIN && s_dist[k] >= cut_far) { skip = true; return false; }
 #endif
     float cut = s_cut[k], m, along;
 #ifndef RASTER_CONIC
@@ -268,7 +276,8 @@ void main() {
     uint out_index = pixel_index + (p.chunks > 1u ? chunk * p.total_pixels : 0u);
 #ifdef RASTER_CUT
     float cut_z = inside ? cuts[pixel_index] : 0.0;
-    float cut_dist = cut_z * length(d), cut_far;
+    // the cut in the batch's sort depth: along the view axis (one view) or as a distance along the ray (dist_reach)
+    float cut_dist = p.n_views == 1u ? cut_z : cut_z * length(d), cut_far;
     vec3 bcolor = vec3(0.0);
     float bT = 1.0, bzsum = 0.0;
     bool skip;
@@ -308,7 +317,7 @@ void main() {
             vec4 e = prepared[PREP * i + 4u];
             s_cut[lid] = e.x;
 #ifdef RASTER_CUT
-            vec2 dr = dist_reach(s_w0[lid], s_w1[lid], s_w2[lid], e.x);
+            vec2 dr = dist_reach(s_w0[lid], s_w1[lid], s_w2[lid], e.x, p.n_views == 1u, s_view[0]);
             s_dist[lid] = dr.x;
             atomicMax(s_reach, floatBitsToUint(dr.y));
 #endif

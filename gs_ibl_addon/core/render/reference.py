@@ -1,7 +1,8 @@
 """A plain numpy splat renderer: the same maths as the GPU path, readable, for small scenes and tests.
 
-No tiles: every live splat is tested against every ray, front to back by distance from the origin, with the
-GPU's rules (alpha clamp, nothing outside a splat's footprint, a ray finished once transmittance < 1e-4).
+No tiles: every live splat is tested against every ray, front to back in the GPU's depth order
+(splat_math.sort_depths: distance from the origin, or depth along the view axis for one view), with the GPU's
+rules (alpha clamp, nothing outside a splat's footprint, a ray finished once transmittance < 1e-4).
 
 Two more for camera frames with meshes (SplatRenderer.render_camera): ``render_reference(cut=...)`` splits each
 pixel's blend at a depth cut into FRONT and BEHIND layers by the GPU's rule, and ``render_reference_mesh`` is what
@@ -12,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..scene import SplatScene
-from .splat_math import ALPHA_MAX, DEFAULT_NEAR, T_MIN, PreparedSplats, depth_keys, prepare, ray_mahalanobis
+from .splat_math import (ALPHA_MAX, DEFAULT_NEAR, T_MIN, PreparedSplats, batch_forward, depth_keys, prepare,
+                         ray_mahalanobis, sort_depths)
 from .views import ViewBatch
 
 
@@ -46,8 +48,8 @@ def _composite(p: PreparedSplats, order: np.ndarray, dirs: np.ndarray, chunk: in
     return layers
 
 
-def _front_to_back(scene: SplatScene, origin, p: PreparedSplats) -> np.ndarray:
-    order = np.argsort(depth_keys(scene, origin), kind="stable")
+def _front_to_back(scene: SplatScene, origin, p: PreparedSplats, forward=None) -> np.ndarray:
+    order = np.argsort(depth_keys(scene, origin, forward), kind="stable")
     return order[p.alive[order]]
 
 
@@ -75,7 +77,7 @@ def render_reference(scene: SplatScene, batch: ViewBatch, near: float = DEFAULT_
     ``cut`` (per view an (H, W) distance along the view axis; one array for one view): the GPU's depth cut
     (SplatRenderer.render(cut=...)): returns (fronts, behinds[, depths]), the depth being FRONT over BEHIND's."""
     p = prepare(scene, batch.origin, batch.dilation, near, batch.energy_preserving)
-    order = _front_to_back(scene, batch.origin, p)
+    order = _front_to_back(scene, batch.origin, p, batch_forward(batch))
     cuts = _per_view(batch, cut) if cut is not None else [None] * len(batch.views)
     images, behinds, depths = [], [], []
     for view, c in zip(batch.views, cuts):
@@ -95,9 +97,10 @@ def render_reference(scene: SplatScene, batch: ViewBatch, near: float = DEFAULT_
 
 
 def _composite_mesh(p: PreparedSplats, order: np.ndarray, dirs: np.ndarray, rgba: np.ndarray,
-                    mesh_dist: np.ndarray, chunk: int) -> np.ndarray:
+                    mesh_dist: np.ndarray, chunk: int, splat_dist: np.ndarray) -> np.ndarray:
     """(P, 4): the blend along rays (P, 3) of the splats in ``order`` and one mesh sample a ray (premultiplied
-    ``rgba`` (P, 4) at ``mesh_dist`` (P,) from the origin, +inf: none), each mesh sample after the splats nearer."""
+    ``rgba`` (P, 4) at sort depth ``mesh_dist`` (P,), +inf: none), each mesh sample after the splats whose sort
+    depth ``splat_dist`` (N,) is nearer."""
     n = len(dirs)
     color, trans, placed = np.zeros((n, 3)), np.ones(n), ~np.isfinite(mesh_dist)
 
@@ -111,7 +114,7 @@ def _composite_mesh(p: PreparedSplats, order: np.ndarray, dirs: np.ndarray, rgba
         alpha = np.minimum(ALPHA_MAX, p.opacity[idx, None] * np.exp(-0.5 * m))
         alpha = np.where(ahead & (m <= p.cutoff[idx, None]), alpha, 0.0)
         for k in range(len(idx)):
-            now = ~placed & (mesh_dist <= p.distance[idx[k]])
+            now = ~placed & (mesh_dist <= splat_dist[idx[k]])
             put_mesh(now)
             placed |= now
             a = np.where(trans >= T_MIN, alpha[k], 0.0)
@@ -127,14 +130,19 @@ def render_reference_mesh(scene: SplatScene, batch: ViewBatch, mesh_rgba, mesh_d
                           chunk: int = 64) -> list[np.ndarray]:
     """What a mesh looks like standing in the splats, per view (H, W, 4) float32: each pixel's mesh sample
     (``mesh_rgba``: premultiplied (H, W, 4); ``mesh_depth``: (H, W) distance along the view axis, +inf where no
-    mesh) inserted into the splats' front-to-back blend at its depth: the blend is ordered by distance from the
-    origin, and the mesh point, at mesh_depth |d| along the pixel's ray d, goes after every splat nearer the origin
-    than it and before the rest. Several views take a list of each, as render_reference's ``cut``."""
+    mesh) inserted into the splats' front-to-back blend at its depth: the blend is ordered by the sort depth
+    (splat_math.sort_depths): for one view the depth along its axis, and the mesh point, at mesh_depth, goes after
+    every splat whose centre is nearer along that axis and before the rest; for several views the distance from the
+    origin, the mesh point at mesh_depth |d| along the pixel's ray d. Several views take a list of each, as
+    render_reference's ``cut``."""
     p = prepare(scene, batch.origin, batch.dilation, near, batch.energy_preserving)
-    order = _front_to_back(scene, batch.origin, p)
+    forward = batch_forward(batch)
+    order = _front_to_back(scene, batch.origin, p, forward)
+    splat_dist = sort_depths(scene, batch.origin, forward).astype(np.float64) if forward is not None else p.distance
     out = []
     for view, rgba, depth in zip(batch.views, _per_view(batch, mesh_rgba, 4), _per_view(batch, mesh_depth)):
         dirs = view.pixel_directions().reshape(-1, 3)
-        img = _composite_mesh(p, order, dirs, rgba, depth * np.linalg.norm(dirs, axis=1), chunk)
+        mesh_dist = depth if forward is not None else depth * np.linalg.norm(dirs, axis=1)
+        img = _composite_mesh(p, order, dirs, rgba, mesh_dist, chunk, splat_dist)
         out.append(img.reshape(view.height, view.width, 4).astype(np.float32))
     return out

@@ -7,7 +7,8 @@ probe position travels in a buffer), so a render costs the host one submit and o
 
 Stages (each a compute dispatch, timed with timestamp queries when asked):
   preprocess   per splat, once for all views: cull, ray-evaluation frame, SH colour, tiles touched, depth key
-  sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces); splats are
+  sort_depth   radix sort of splats by distance from the origin (one order serves all six cube faces), or for a
+               batch of one view by depth along its axis (3DGS's order; splat_math.sort_depths); splats are
                uploaded in tie order (render/upload.py), which its stable passes keep among equal keys
   emit         prefix sum of tile counts in depth order, then one (tile, splat) instance per touched tile
   sort_tiles   stable radix sort of instances by tile id (depth order survives inside each tile)

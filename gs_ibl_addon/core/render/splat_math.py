@@ -213,13 +213,33 @@ def tie_bits(positions: np.ndarray) -> np.ndarray:
     return tie_hash(positions) >> np.uint32(32 - TIE_BITS)
 
 
-def depth_keys(scene: SplatScene, origin: np.ndarray) -> np.ndarray:
-    """The depth order's keys: float32 distance bits without their low 8 bits, then TIE_BITS of tie_hash. Splats whose
-    distances agree to 3e-5 composite in an order set by their positions, whatever the file's order; only those
-    whose hashes also agree keep storage order, on the GPU and here (stable argsort) alike. The GPU sorts the
-    distance bits alone of splats uploaded in tie_order: the same order (constants.py)."""
+SORT_DEPTH_MIN = np.float32(1e-20)  # gs_preprocess.comp: a one-view batch's sort depth is at least this (> 0)
+
+
+def sort_depths(scene: SplatScene, origin: np.ndarray, forward: np.ndarray | None = None) -> np.ndarray:
+    """(N,) float32: what the depth sort orders by. ``forward`` None (probes: one order for all six faces): the
+    distance from the origin; a view's (unit) forward (batches of one view: camera frames, the viewport): the depth
+    along the view axis, z = forward . mu, as 3DGS sorts, clamped to SORT_DEPTH_MIN so that a splat centred behind
+    the camera plane comes first (positive floats order as their bits)."""
     mu = scene.positions.astype(np.float32) - np.asarray(origin, np.float32)
-    dist = np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
+    if forward is None:
+        return np.sqrt(np.sum(mu * mu, axis=1, dtype=np.float32), dtype=np.float32)
+    z = mu @ np.asarray(forward, np.float32).reshape(3)
+    return np.maximum(z.astype(np.float32), SORT_DEPTH_MIN)
+
+
+def batch_forward(batch) -> np.ndarray | None:
+    """The forward that orders a ViewBatch's splats (sort_depths): its view's for one view, None for several."""
+    return np.asarray(batch.views[0].forward, np.float64) if len(batch.views) == 1 else None
+
+
+def depth_keys(scene: SplatScene, origin: np.ndarray, forward: np.ndarray | None = None) -> np.ndarray:
+    """The depth order's keys: float32 sort depth bits (sort_depths: distance from the origin, or with ``forward``
+    depth along that view axis) without their low 8 bits, then TIE_BITS of tie_hash. Splats whose depths agree to
+    3e-5 composite in an order set by their positions, whatever the file's order; only those whose hashes also agree
+    keep storage order, on the GPU and here (stable argsort) alike. The GPU sorts the depth bits alone of splats
+    uploaded in tie_order: the same order (constants.py)."""
+    dist = sort_depths(scene, origin, forward)
     return ((dist.view(np.uint32) >> np.uint32(DEPTH_KEY_SHIFT)) << np.uint32(TIE_BITS)) | tie_bits(scene.positions)
 
 
