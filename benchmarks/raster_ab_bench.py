@@ -15,7 +15,7 @@ applies render/kernel_table.py's rule per device class, stage and size, and writ
 the rows of an existing table for the device classes the CSVs do not measure. ``--table`` does the same right
 after a bench run, from its own rows. The committed table is
   python benchmarks/raster_ab_bench.py table docs/bench/raster_ab_lavapipe.csv docs/bench/emit_ab_lavapipe.csv \
-         docs/bench/kernel_ab_nvidia-h200.csv
+         docs/bench/peer_nvidia-h200_2026-12-05.csv docs/bench/camera_nvidia-h200_2026-12-05.csv
 
 All variants draw with one renderer (a switch is part of the key of the programs it records, so each variant
 records and keeps its own; the scene is uploaded once). Per scene

@@ -92,7 +92,7 @@ def test_the_rule_takes_what_the_measurements_say():
         assert table.pick("cpu", "raster", face).kernel == "strips"
         assert table.pick("cpu", "emit", face).kernel == "splat"
     # every measured size of every device class and stage: a kernel at least as fast in every cell is taken (the
-    # H200 run of issue 38: strips where they won, docs/bench/kernel_ab_nvidia-h200.csv), and one that loses by
+    # H200 run of 2026-12-05: docs/bench/peer_nvidia-h200_2026-12-05.csv and camera_nvidia-h200_2026-12-05.csv), and one that loses by
     # more than 10% in some cell is not taken where the other loses by 10% or less everywhere
     cells, _ = _bench("raster_ab_bench").table_cells(_sources())
     groups = {}
