@@ -105,13 +105,14 @@ uint depth_sort_key(float dist) {
     return floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
 }
 
-// The sort depth (splat_math.depth_keys): a batch of one view (camera frames, the viewport) sorts by depth along its
+// The sort depth (splat_math.depth_keys): a batch of one camera view (camera frames, the viewport; not one face of
+// a probe rendered alone, whose faces must share one order: energy_preserving tells them apart) sorts by depth along its
 // view axis, z = forward . mu, as 3DGS does, clamped to SORT_DEPTH_MIN (> 0: positive floats order as their bits)
 // so that a splat centred behind the camera plane comes first; probes (six faces) by distance from the origin,
 // one order for all their views. gs_raster.glsl's depth-cut skip relies on this order (dist_reach).
 const float SORT_DEPTH_MIN = 1e-20;
 float sort_depth(vec3 mu, float dist) {
-    return p.n_views == 1u ? max(dot(views[0].fwd.xyz, mu), SORT_DEPTH_MIN) : dist;
+    return p.n_views == 1u && p.energy_preserving == 0u ? max(dot(views[0].fwd.xyz, mu), SORT_DEPTH_MIN) : dist;
 }
 
 void main() {

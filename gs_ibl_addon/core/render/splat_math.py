@@ -229,8 +229,11 @@ def sort_depths(scene: SplatScene, origin: np.ndarray, forward: np.ndarray | Non
 
 
 def batch_forward(batch) -> np.ndarray | None:
-    """The forward that orders a ViewBatch's splats (sort_depths): its view's for one view, None for several."""
-    return np.asarray(batch.views[0].forward, np.float64) if len(batch.views) == 1 else None
+    """The forward that orders a ViewBatch's splats (sort_depths): its view's for a batch of one camera view, None
+    for several views and for probe faces (energy-preserving), even one face rendered alone: a probe's faces share
+    one order (gs_preprocess.comp sort_depth)."""
+    camera = len(batch.views) == 1 and not batch.energy_preserving
+    return np.asarray(batch.views[0].forward, np.float64) if camera else None
 
 
 def depth_keys(scene: SplatScene, origin: np.ndarray, forward: np.ndarray | None = None) -> np.ndarray:
