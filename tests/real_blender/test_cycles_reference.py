@@ -59,7 +59,10 @@ WORLD_SAMPLES = 256
 ALBEDO = 0.8
 BLOCKS = 3  # the sphere's face split into BLOCKS x BLOCKS screen blocks, each compared on its own
 SPHERE_RTOL = 0.02  # the issue's bar: Cycles' native render = our bake's prediction within 2%
-VIEW_RTOL = 0.03  # mean |ours - Cycles| over the mean radiance of the camera view (measured 1.2-1.8%)
+# mean |ours - Cycles| over the mean radiance of the camera view: ours blends a camera view in 3DGS's order (depth
+# along the view axis, as captures are trained and their viewers draw them), Cycles each ray's hits in the order
+# it meets them: measured 2.3-3.6% on 2026-12-05 (1.2-1.8% while camera views were sorted by distance)
+VIEW_RTOL = 0.045
 COVERAGE_TOL = 0.01  # mean |alpha ours - alpha Cycles|
 CAPTURE_SIZE = (80, 128)  # the guitar capture's front view (tests/test_render_real_capture.py's, twice as fine)
 CAPTURE_SAMPLES = 64
