@@ -68,11 +68,16 @@ class Work:
             return self.fn(*self.args, **self.kwargs, progress=_scaled(progress, self.span))
 
 
+def _into(a: float, b: float, fraction: float) -> float:
+    """``fraction`` of a part's own progress (clamped to [0, 1]) as its caller's, the part being [a, b] of it."""
+    return a + (b - a) * min(max(float(fraction), 0.0), 1.0)
+
+
 def _scaled(progress: Progress, span: tuple[float, float] | None) -> Progress:
     if span is None:
         return progress
     a, b = span
-    return lambda text, fraction: progress(text, a + (b - a) * min(max(float(fraction), 0.0), 1.0))
+    return lambda text, fraction: progress(text, _into(a, b, fraction))
 
 
 def within(job: Job, a: float, b: float) -> Job:
@@ -88,10 +93,10 @@ def within(job: Job, a: float, b: float) -> Job:
             return stop.value
         value = error = None
         if isinstance(item, Step) and item.fraction is not None:
-            item = Step(item.text, a + (b - a) * min(max(float(item.fraction), 0.0), 1.0), item.wait_for)
+            item = Step(item.text, _into(a, b, item.fraction), item.wait_for)
         elif isinstance(item, Work):
             lo, hi = item.span or (0.0, 1.0)
-            item.span = (a + (b - a) * lo, a + (b - a) * hi)
+            item.span = (_into(a, b, lo), _into(a, b, hi))
         try:
             value = yield item
         except GeneratorExit:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..common import handlers
 from ..common.datablocks import is_probe
 from ..common.jobs import Job, busy, cancel_all, within
 from ..common.jobs import start as start_job
@@ -208,22 +209,15 @@ def on_load_post(*_args) -> None:
         refresh_notice(bpy.context.scene)  # a file saved with an out-of-date bake says so when opened
 
 
+_HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("load_pre", on_load_pre), ("load_post", on_load_post))
+
+
 def register_handlers() -> None:
-    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-    if on_load_pre not in bpy.app.handlers.load_pre:
-        bpy.app.handlers.load_pre.append(on_load_pre)
-    if on_load_post not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(on_load_post)
+    handlers.add(_HANDLERS)
 
 
 def unregister_handlers() -> None:
-    while on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    while on_load_pre in bpy.app.handlers.load_pre:
-        bpy.app.handlers.load_pre.remove(on_load_pre)
-    while on_load_post in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(on_load_post)
+    handlers.remove(_HANDLERS)
     if bpy.app.timers.is_registered(run_pending):
         bpy.app.timers.unregister(run_pending)
     on_load_pre()

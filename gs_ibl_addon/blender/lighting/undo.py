@@ -6,9 +6,9 @@ copy is checked against the restored objects, and Update When Moved takes the re
 """
 from __future__ import annotations
 
-import bpy
 from bpy.app.handlers import persistent
 
+from ..common import handlers
 from ..splats import cache as splat_cache
 from . import stamps
 from .auto_update import rebaseline_after_undo
@@ -30,15 +30,9 @@ _HANDLERS = (("undo_post", on_undo_redo), ("redo_post", on_undo_redo), ("load_pr
 
 
 def register_handlers() -> None:
-    for name, fn in _HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if fn not in handlers:
-            handlers.append(fn)
+    handlers.add(_HANDLERS)
 
 
 def unregister_handlers() -> None:
-    for name, fn in _HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        while fn in handlers:
-            handlers.remove(fn)
+    handlers.remove(_HANDLERS)
     stamps.forget()

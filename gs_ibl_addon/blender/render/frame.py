@@ -18,12 +18,12 @@ from __future__ import annotations
 import threading
 import time
 
-import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
 from ...core import limits
 from ...core.render.mesh_depth import mesh_depth
+from ..common import handlers
 from ..common.jobs import gpu
 from ..splats.object import is_splat_object
 from . import compositor, setup, splats
@@ -242,18 +242,12 @@ _HANDLERS = (("render_init", on_render_init), ("render_complete", on_render_end)
 
 
 def register_handlers() -> None:
-    for name, fn in _HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        if fn not in handlers:
-            handlers.append(fn)
+    handlers.add(_HANDLERS)
 
 
 def unregister_handlers() -> None:
     global _job
-    for name, fn in _HANDLERS:
-        handlers = getattr(bpy.app.handlers, name)
-        while fn in handlers:
-            handlers.remove(fn)
+    handlers.remove(_HANDLERS)
     _job = None
     with gpu:
         splats.clear()

@@ -24,6 +24,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from ..common import handlers
 from ..common.jobs import Job, Progress, Step, Work, busy, cancel_all, gpu, run_now
 from .object import colour_space_of, read_steps, splat_count, to_world
 
@@ -229,16 +230,13 @@ def on_load_pre(*_args) -> None:
     clear()
 
 
+_HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("load_pre", on_load_pre))
+
+
 def register_handlers() -> None:
-    if on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(on_depsgraph_update)
-    if on_load_pre not in bpy.app.handlers.load_pre:
-        bpy.app.handlers.load_pre.append(on_load_pre)
+    handlers.add(_HANDLERS)
 
 
 def unregister_handlers() -> None:
-    while on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(on_depsgraph_update)
-    while on_load_pre in bpy.app.handlers.load_pre:
-        bpy.app.handlers.load_pre.remove(on_load_pre)
+    handlers.remove(_HANDLERS)
     clear()

@@ -38,6 +38,7 @@ from mathutils import Matrix
 from ...core.colour import linear_sh_for_srgb_rule
 from ...core.scene import SplatScene, sh_dc_to_rgb
 from ...core.sh import degree_of
+from ..common import handlers
 from ..common.compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
 from ..common.datablocks import MARKER, find_ours
 from ..common.jobs import Step, run_now
@@ -203,14 +204,15 @@ def on_load_post(*_args) -> None:
     upgrade_proxy_trees()  # a file saved before the bounds points frames its splats whole too
 
 
+_HANDLERS = (("load_post", on_load_post),)
+
+
 def register_handlers() -> None:
-    if on_load_post not in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.append(on_load_post)
+    handlers.add(_HANDLERS)
 
 
 def unregister_handlers() -> None:
-    while on_load_post in bpy.app.handlers.load_post:
-        bpy.app.handlers.load_post.remove(on_load_post)
+    handlers.remove(_HANDLERS)
 
 
 def _add_proxy(obj: bpy.types.Object, scene: SplatScene) -> None:

@@ -27,6 +27,7 @@ import bpy
 import numpy as np
 from bpy.app.handlers import persistent
 
+from ..common import handlers
 from ..common.compat import get_modifier_input, modifier_input_identifiers, set_modifier_input
 from ..common.redraw import tag_redraw
 from ..splats import cache as splat_cache
@@ -298,13 +299,15 @@ def _on_depsgraph_update(scene, depsgraph) -> None:
         hide_helpers(True)
 
 
+_HANDLERS = (("depsgraph_update_post", _on_depsgraph_update),)
+
+
 def register_overlay() -> None:
     """The draw handler and the depsgraph handler (picking.py registers the click operators)."""
     global _handle
     if _handle is None:
         _handle = bpy.types.SpaceView3D.draw_handler_add(draw_callback, (), "WINDOW", "POST_VIEW")
-    if _on_depsgraph_update not in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.append(_on_depsgraph_update)
+    handlers.add(_HANDLERS)
 
 
 def unregister_overlay() -> None:
@@ -312,8 +315,7 @@ def unregister_overlay() -> None:
     if _handle is not None:
         bpy.types.SpaceView3D.draw_handler_remove(_handle, "WINDOW")
         _handle = None
-    while _on_depsgraph_update in bpy.app.handlers.depsgraph_update_post:
-        bpy.app.handlers.depsgraph_update_post.remove(_on_depsgraph_update)
+    handlers.remove(_HANDLERS)
     if _refine_scheduled and bpy.app.timers.is_registered(_refine):
         bpy.app.timers.unregister(_refine)
     _refine_scheduled = False
