@@ -153,6 +153,7 @@ def gsplat_peer(scene, cv):
 
     class Frame(Gsplat):
         name = "gsplat"
+        readback = True
 
         def __init__(self) -> None:
             super().__init__(scene)
@@ -166,17 +167,9 @@ def gsplat_peer(scene, cv):
                                far_plane=CLIP_END, rasterize_mode="classic", packed=True)
 
         def rep(self) -> dict:
-            torch = self.torch
-            torch.cuda.synchronize()
-            t0 = time.perf_counter()
-            self.e0.record()
-            colors, alphas, meta = self.call()
-            self.e1.record()
-            torch.cuda.synchronize()
-            colors.cpu().numpy(), alphas.cpu().numpy()
-            t2 = time.perf_counter()
-            return {"gpu_ms": self.e0.elapsed_time(self.e1), "mesh_depth": 0.0, "splats": (t2 - t0) * 1e3,
-                    "post": 0.0, "wall_ms": (t2 - t0) * 1e3, "pairs": int(meta["isect_ids"].numel())}
+            r = super().rep()
+            return {"gpu_ms": r["gpu_ms"], "mesh_depth": 0.0, "splats": r["wall_ms"], "post": 0.0,
+                    "wall_ms": r["wall_ms"], "pairs": r["pairs"]}
 
     return Frame()
 

@@ -277,7 +277,10 @@ class Gsplat:
         return self.raster(*self.t, self.vm, self.k, *self.size, sh_degree=3, near_plane=0.01,
                            rasterize_mode=self.mode, packed=True)
 
+    readback = False  # a final frame's peer reads its images back to the host, as ours does there
+
     def rep(self) -> dict:
+        """One call: GPU ms between CUDA events, wall ms to the synchronize (and the readback, where asked)."""
         torch = self.torch
         torch.cuda.synchronize()
         t0 = time.perf_counter()
@@ -285,6 +288,8 @@ class Gsplat:
         colors, alphas, meta = self.call()
         self.e1.record()
         torch.cuda.synchronize()
+        if self.readback:
+            colors.cpu().numpy(), alphas.cpu().numpy()
         wall = (time.perf_counter() - t0) * 1e3
         return {"gpu_ms": self.e0.elapsed_time(self.e1), "wall_ms": wall, "pairs": int(meta["isect_ids"].numel())}
 
