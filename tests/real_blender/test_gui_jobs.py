@@ -26,6 +26,14 @@ BIG_SPLATS = 400_000  # an import and upload of some seconds on llvmpipe, a file
 MAX_GAP_S = 1.5  # the longest the main thread may be away while a job runs (llvmpipe draws a frame in ~0.2-1 s)
 
 
+def _max_gap() -> float:
+    """MAX_GAP_S on an idle machine, stretched by the load: with more runnable threads than cores the main thread
+    waits its turn (an earlier run under load 6.7 on 2 cores saw 2.7 s). A job that blocks the UI blocks it for its
+    whole length (tens of seconds), far above either."""
+    import os
+    return MAX_GAP_S * max(1.0, os.getloadavg()[0] / (os.cpu_count() or 1))
+
+
 def _big_ply(path: Path) -> None:
     from gs_ibl_addon.core.formats.ply import write_ply
     from gs_ibl_addon.core.synthetic import random_scene
@@ -65,19 +73,21 @@ def test_gui_jobs(tmp_path_factory):
     assert not cancel["running"], cancel
     assert cancel["world"] == before["world"] and cancel["images"] == before["images"], (cancel, before)
     assert cancel["report"] == before["report"] and cancel["probe_world"] is None, cancel
-    assert cancel["max_gap"] < MAX_GAP_S, f"the UI was blocked for {cancel['max_gap']:.2f} s during the bake"
+    limit = _max_gap()
+    print(f"[gui-jobs] longest allowed gap {limit:.2f} s")
+    assert cancel["max_gap"] < limit, f"the UI was blocked for {cancel['max_gap']:.2f} s during the bake"
 
     done = steps["bake_done"]
     assert not done["running"] and done["probe_world"] and done["world"] == done["probe_world"], done
     assert done["report"].startswith("Baked "), done["report"]
-    assert done["max_gap"] < MAX_GAP_S, f"the UI was blocked for {done['max_gap']:.2f} s during the bake"
+    assert done["max_gap"] < limit, f"the UI was blocked for {done['max_gap']:.2f} s during the bake"
 
     assert steps["import_call"] == ["RUNNING_MODAL"], steps["import_call"]
     imported = steps["import_done"]
     assert imported["new"] == ["big"] and imported["show"], imported
     assert "big" in (imported["drawn"] or []) and imported["overlay_error"] is None, imported
     for name in ("import_read", "upload_done"):
-        assert steps[name]["max_gap"] < MAX_GAP_S, (name, steps[name]["max_gap"])
+        assert steps[name]["max_gap"] < limit, (name, steps[name]["max_gap"])
     # a dropped file: the options popup, Return, then the import as a modal job
     drop = steps["drop_done"]  # the overlay's upload or first frame of the new object may still run: not the import
     assert drop["new"] == ["room.001"] and not any("importing" in s for s in drop["running"]), drop
