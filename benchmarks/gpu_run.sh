@@ -31,6 +31,13 @@
 #                                        $OUT: fidelity.csv, fidelity_worst.csv, fidelity_splats.csv,
 #                                        fidelity_<capture>_worst.png, frame_cost.csv, final-frame-cost.png, final.log
 #                                        (and gsplat_cuda.so.xz). Steps end at deadlines; carry .gl and .whl
+#   bash benchmarks/gpu_run.sh refs      there, one call of under 6 minutes (issue 36, items 1 and 5): gsplat 1.5.3
+#                                        classic's reference images for native_frame_bench.py (fidelity_bench's eight
+#                                        views of the guitar and the sample room at 480x270, float16, ours beside
+#                                        them) and at 1920x1080 our time per frame (GPU, wall) and gsplat's, our PSNR.
+#                                        Into $OUT: refs_guitar.npz, refs_room.npz, refs_guitar.png, refs_room.png,
+#                                        refs.csv, refs.log (and gsplat_cuda.so.xz); they belong in
+#                                        docs/bench/native_frame_refs/. Carry .gl and .whl
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -50,7 +57,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full|final)
+trials|grid|full|final|refs)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -109,6 +116,15 @@ trials|grid|full|final)
         || echo "[gpu_run] plot: exit $?"
       echo "[gpu_run] final: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = refs ]; then
+    # Deadline: gsplat's ~55 s compile, then ~2 s a view; stopped at 300 s
+    log="$out/refs.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 300 python3 benchmarks/native_frame_bench.py refs --captures guitar,room \
+        --peer gsplat --size 480x270 --out "$out" || echo "[gpu_run] native_frame_bench refs: exit $?"
+      echo "[gpu_run] refs: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = trials ]; then
     python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic,gs_raster_strips,gs_raster_conic_strips \
       --trials out/trials --csv "$out/trial_stats.csv" | grep -E "Register|Shared Memory|Spill" || true
@@ -127,7 +143,7 @@ trials|grid|full|final)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs" >&2
   exit 2
   ;;
 esac
