@@ -1,25 +1,77 @@
-"""A kernel's descriptor pool that fills and is reset while a frame is being recorded (pipelines.py: the sets of
-that pool are freed, the context's epoch moves on) must not leave the renderer with a program it cannot run: the
-renderer records the frame again (the whole suite once hit 'recorded program is stale' in a bake this way)."""
+"""A kernel's descriptor pool that fills (pipelines.py) is retired, never reset under a recording or a submission
+in flight: the context resets retired pools at the next recording boundary with nothing in flight and moves its
+epoch on, so recorded programs re-record. Each case below forces it with a pool of 6 sets: a renderer's frames
+(the whole suite once hit 'recorded program is stale' in a bake), one one-shot recording that binds more sets than
+a pool holds, and a render submitted without waiting (render(wait=False)) whose filter is recorded behind it."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from gs_ibl_addon.core.probe import filter_probe
+from gs_ibl_addon.core.render.gpu_sort import Scanner
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.synthetic import random_scene
-from gs_ibl_addon.core.vk import pipelines
+from gs_ibl_addon.core.vk import Buffer, Recorder, get_context, pipelines
+
+SIZES = (16, 24, 32, 40, 48, 56)
 
 
-def test_frames_survive_a_pool_reset_while_recording(monkeypatch):
+@pytest.fixture
+def small_pools(monkeypatch):
+    monkeypatch.setattr(pipelines.Pipeline, "POOL_SETS", 6)
+
+
+def test_frames_survive_a_pool_filling_while_recording(monkeypatch):
     scene = random_scene(3000, seed=5, sh_degree=1)
-    sizes = (16, 24, 32, 40, 48, 56)
     with SplatRenderer(scene) as r:
-        want = [np.array(r.render(ViewBatch.cubemap([0, 0, 0], s)).images) for s in sizes]
-    # a pool of a few sets fills within a recording or two: every frame below meets a reset somewhere
+        want = [np.array(r.render(ViewBatch.cubemap([0, 0, 0], s)).images) for s in SIZES]
+    # a pool of a few sets fills within a recording or two: every frame below meets a full pool somewhere
     monkeypatch.setattr(pipelines.Pipeline, "POOL_SETS", 6)
     with SplatRenderer(scene) as r:
         for _ in range(2):
-            for s, w in zip(sizes, want):
+            for s, w in zip(SIZES, want):
                 got = np.array(r.render(ViewBatch.cubemap([0, 0, 0], s)).images)
+                np.testing.assert_array_equal(got, w)
+
+
+def test_one_recording_binds_more_sets_than_a_pool_holds(small_pools):
+    ctx = get_context()
+    rng = np.random.default_rng(3)
+    data = [rng.integers(0, 100, 1000).astype(np.uint32) for _ in range(10)]
+    bufs = [Buffer(ctx, 4000, f"scan{i}") for i in range(10)]
+    scanner = Scanner(ctx, 1000)
+    try:
+        for b, d in zip(bufs, data):
+            b.write(d)
+        epoch = ctx.epoch
+        with Recorder(ctx) as rec:  # ten scans' sets of one kernel: the pool fills twice within this recording
+            for b in bufs:
+                scanner.record(rec, b, 1000)
+        assert ctx.epoch == epoch  # nothing was reset under the recording
+        for b, d in zip(bufs, data):
+            np.testing.assert_array_equal(b.read(np.uint32, 1000), np.cumsum(d) - d)
+        with Recorder(ctx):  # the next boundary, nothing in flight: the full pools are reset
+            pass
+        assert ctx.epoch == epoch + 1 and not any(p.retired for p in ctx._pipelines.values())
+    finally:
+        scanner.destroy()
+        for b in bufs:
+            b.destroy()
+
+
+def test_a_render_in_flight_keeps_its_sets(monkeypatch):
+    scene = random_scene(3000, seed=7, sh_degree=1)
+    settings = dict(irradiance_size=8, method="exact", roughness=None, read_radiance=False)
+    with SplatRenderer(scene) as r:
+        want = [filter_probe(r.render(ViewBatch.cubemap([0, 0, 0], s)).frame, **settings).irradiance
+                for s in SIZES]
+    monkeypatch.setattr(pipelines.Pipeline, "POOL_SETS", 6)
+    with SplatRenderer(scene) as r:
+        for _ in range(2):
+            for s, w in zip(SIZES, want):
+                res = r.render(ViewBatch.cubemap([0, 0, 0], s), wait=False)
+                # the filter records (and fills pools) while the render is in flight
+                got = filter_probe(res.frame, **settings).irradiance
                 np.testing.assert_array_equal(got, w)

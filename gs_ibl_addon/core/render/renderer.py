@@ -888,12 +888,9 @@ class SplatRenderer:
             prog.close()
             prog = None
         if prog is None:
+            # (a kernel's descriptor pool that fills meanwhile is retired, not reset: the recording stays valid)
             prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, kernels,
                                 min_chunks, layers)
-            if not prog.valid:  # a kernel's descriptor pool filled and was reset while recording (pipelines.py):
-                prog.close()    # the sets bound before the reset are gone; the pool has room for all of them now
-                prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps,
-                                    kernels, min_chunks, layers)
             while len(self._programs) >= PROGRAMS_KEPT:  # the least recently used goes
                 self._programs.pop(next(iter(self._programs))).close()
         self._programs[key] = prog

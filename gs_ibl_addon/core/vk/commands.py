@@ -59,6 +59,7 @@ def _submit(ctx: VulkanContext, cmd):
             ctx._free_fences.append(fence)
             raise
         ctx.stats.submits += 1
+        ctx.in_flight += 1
         return fence
 
 
@@ -72,6 +73,7 @@ def _wait(ctx: VulkanContext, fence) -> None:
         vk.vkResetFences(ctx.device, 1, fences)
         with ctx.lock:
             ctx._free_fences.append(fence)
+            ctx.in_flight -= 1
 
 
 def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
@@ -91,6 +93,7 @@ def _read_stamps(ctx: VulkanContext, query_pool, labels: list[str]) -> dict[str,
     for i in range(1, n):
         out[labels[i]] = out.get(labels[i], 0.0) + float(ms[i] - ms[i - 1])
     out["total"] = float(ms[-1] - ms[0])
+    ctx.stats.gpu_ms += out["total"]
     return out
 
 
@@ -107,6 +110,10 @@ class Recorder:
         vk = self.vk = ctx.vk
         self.ctx = ctx
         self.reusable = reusable
+        with ctx.lock:  # a recording boundary: full descriptor pools are reset here when nothing is in flight
+            ctx.reset_descriptor_pools()
+            ctx.open_recordings += 1
+        self._open = True
         self.epoch = ctx.epoch
         self.buffers: dict[int, Buffer] = {}  # every buffer the recording uses (a Program checks they live)
         self.cmd = _take_command_buffer(ctx)
@@ -117,7 +124,8 @@ class Recorder:
         self.timings_ms: dict[str, float] = {}
         self.query_pool = None
         self._barrier()
-        if timestamps and ctx.timestamps_supported:
+        self._forced = not timestamps and ctx.stamp_all  # profiling: stamped for stats.gpu_ms, not reported
+        if (timestamps or self._forced) and ctx.timestamps_supported:
             self.query_pool = _take_query_pool(ctx)
             vk.vkCmdResetQueryPool(self.cmd, self.query_pool, 0, MAX_STAMPS)
             self.timestamp("start")
@@ -180,20 +188,34 @@ class Recorder:
                                     self.query_pool, len(self.labels))
         self.labels.append(label)
 
+    def _end(self) -> None:
+        if self._forced:
+            self.timestamp("end")
+        self.vk.vkEndCommandBuffer(self.cmd)
+        self._close_recording()
+
+    def _close_recording(self) -> None:
+        if self._open:
+            self._open = False
+            with self.ctx.lock:
+                self.ctx.open_recordings -= 1
+
     def submit(self) -> dict[str, float]:
-        vk, ctx = self.vk, self.ctx
-        vk.vkEndCommandBuffer(self.cmd)
+        ctx = self.ctx
+        self._end()
         try:
             _submit_and_wait(ctx, self.cmd)
-            self.timings_ms = _read_stamps(ctx, self.query_pool, self.labels)
+            stamps = _read_stamps(ctx, self.query_pool, self.labels)
+            self.timings_ms = {} if self._forced else stamps
         finally:
             self._give_back()
         return self.timings_ms
 
     def program(self) -> "Program":
         """End the recording and keep it: Program.run() submits it again and again."""
-        self.vk.vkEndCommandBuffer(self.cmd)
+        self._end()
         prog = Program(self.ctx, self.cmd, self.query_pool, list(self.labels), list(self.buffers.values()), self.epoch)
+        prog.forced = self._forced
         self.cmd = self.query_pool = None
         return prog
 
@@ -215,6 +237,7 @@ class Recorder:
             self.submit()
         elif self.cmd is not None:
             self.vk.vkEndCommandBuffer(self.cmd)
+            self._close_recording()
             self._give_back()
 
 
@@ -254,7 +277,8 @@ class Program:
         if fence is None:
             raise RuntimeError("program waited on without a start")
         _wait(self.ctx, fence)
-        return _read_stamps(self.ctx, self.query_pool, self.labels)
+        stamps = _read_stamps(self.ctx, self.query_pool, self.labels)
+        return {} if getattr(self, "forced", False) else stamps
 
     @property
     def running(self) -> bool:

@@ -100,9 +100,16 @@ class VulkanContext:
         self._free_queries: list = []
         self._staging: dict[str, object] = {}
         self._scratch: dict[int, list] = {}
-        # Descriptor-set generation: bumped when a pipeline's descriptor pool is reset, which invalidates recorded
-        # command buffers (commands.Program checks it before each submission).
+        # Descriptor-set generation: bumped when pipelines' retired descriptor pools are reset, which invalidates
+        # recorded command buffers (commands.Program checks it before each submission). Resets happen only at a
+        # recording boundary with nothing in flight (reset_descriptor_pools): recordings open and submissions not
+        # yet waited for are counted by commands.py.
         self.epoch = 0
+        self.pools_retired = False
+        self.open_recordings = 0
+        self.in_flight = 0
+        # Profiling (benchmarks): every recording gets timestamps, so stats.gpu_ms counts all GPU time.
+        self.stamp_all = False
         # Stage objects cached per context (tables uploaded once, recorded programs), closed with it.
         self.cache: dict[object, object] = {}
         self.stats = TransferStats()
@@ -167,6 +174,18 @@ class VulkanContext:
                 return i
         raise VulkanUnavailable(f"{self.device_name}: no memory type with flags {flags:#x}")
 
+    def reset_descriptor_pools(self) -> None:
+        """Free the sets of pipelines' full (retired) descriptor pools, when no recording is open and no submission
+        is in flight; recorded programs then re-record (the epoch). Called by each new recording."""
+        with self.lock:
+            if not self.pools_retired or self.open_recordings or self.in_flight:
+                return
+            for p in self._pipelines.values():
+                if p.retired:
+                    p.reset_retired()
+            self.pools_retired = False
+            self.epoch += 1
+
     def release(self, buffer) -> None:
         """Return a scratch buffer to the pool (its contents are kept until reused)."""
         self._scratch.setdefault(buffer.nbytes, []).append(buffer)
@@ -213,11 +232,12 @@ class TransferStats:
 
     def __init__(self) -> None:
         self.uploads = self.upload_bytes = self.readbacks = self.readback_bytes = self.submits = 0
+        self.gpu_ms = 0.0  # GPU time of timestamped submissions (first to last stamp); all of them with stamp_all
 
-    def snapshot(self) -> dict[str, int]:
+    def snapshot(self) -> dict[str, float]:
         return dict(vars(self))
 
-    def since(self, before: dict[str, int]) -> dict[str, int]:
+    def since(self, before: dict[str, float]) -> dict[str, float]:
         return {k: v - before.get(k, 0) for k, v in vars(self).items()}
 
 

@@ -45,11 +45,36 @@ class Pipeline:
         cpcis = [cpci]
         self.handle = vk.vkCreateComputePipelines(ctx.device, ctx.pipeline_cache.handle, 1, cpcis, None)[0]
         del code, stage, cpci, cpcis, entry
-        pool_sizes = [vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
-                                              descriptorCount=max(1, self.n_buffers) * self.POOL_SETS)]
-        dpci = vk.VkDescriptorPoolCreateInfo(maxSets=self.POOL_SETS, poolSizeCount=1, pPoolSizes=pool_sizes)
-        self.pool = vk.vkCreateDescriptorPool(ctx.device, dpci, None)
+        self._pools: list = []  # [current, ...retired]: a full pool is retired, never reset while it may be in use
+        self._spare: list = []  # reset pools, reused before a new one is made
+        self._pool = self._new_pool()
         self._sets: dict[tuple, object] = {}
+
+    def _new_pool(self):
+        if self._spare:
+            pool = self._spare.pop()
+        else:
+            vk = self.ctx.vk
+            pool_sizes = [vk.VkDescriptorPoolSize(type=vk.VK_DESCRIPTOR_TYPE_STORAGE_BUFFER,
+                                                  descriptorCount=max(1, self.n_buffers) * self.POOL_SETS)]
+            dpci = vk.VkDescriptorPoolCreateInfo(maxSets=self.POOL_SETS, poolSizeCount=1, pPoolSizes=pool_sizes)
+            pool = vk.vkCreateDescriptorPool(self.ctx.device, dpci, None)
+        self._pools.insert(0, pool)
+        return pool
+
+    @property
+    def retired(self) -> int:
+        """Full pools waiting for reset_retired (their sets may still be bound by a recording or a program)."""
+        return len(self._pools) - 1
+
+    def reset_retired(self) -> None:
+        """Free the sets of the retired pools. Only at a recording boundary with nothing in flight (the context's
+        reset_descriptor_pools), where the epoch moves on so recorded programs that may bind them re-record."""
+        vk = self.ctx.vk
+        for pool in self._pools[1:]:
+            vk.vkResetDescriptorPool(self.ctx.device, pool, 0)
+            self._spare.append(pool)
+        del self._pools[1:]
 
     def descriptor_set(self, buffers: Sequence[Buffer]):
         vk = self.ctx.vk
@@ -60,13 +85,14 @@ class Pipeline:
         if ds is not None:
             return ds
         if len(self._sets) >= self.POOL_SETS:
-            # Safe for one-shot recordings (every submission waits for completion); recorded programs see the
-            # new epoch and re-record.
-            vk.vkResetDescriptorPool(self.ctx.device, self.pool, 0)
+            # A full pool is retired, not reset: a recording open now or a program in flight may bind its sets
+            # (a reset here freed them under a frame being recorded). The context resets retired pools at the
+            # next recording boundary with nothing in flight (commands.Recorder).
+            self._pool = self._new_pool()
             self._sets.clear()
-            self.ctx.epoch += 1
+            self.ctx.pools_retired = True
         layouts = [self.set_layout]
-        dsai = vk.VkDescriptorSetAllocateInfo(descriptorPool=self.pool, descriptorSetCount=1, pSetLayouts=layouts)
+        dsai = vk.VkDescriptorSetAllocateInfo(descriptorPool=self._pool, descriptorSetCount=1, pSetLayouts=layouts)
         ds = vk.vkAllocateDescriptorSets(self.ctx.device, dsai)[0]
         infos = [vk.VkDescriptorBufferInfo(buffer=b.handle, offset=0, range=b.nbytes) for b in buffers]
         writes = [vk.VkWriteDescriptorSet(dstSet=ds, dstBinding=i, descriptorCount=1,
@@ -80,7 +106,9 @@ class Pipeline:
 
     def destroy(self) -> None:
         vk, dev = self.ctx.vk, self.ctx.device
-        vk.vkDestroyDescriptorPool(dev, self.pool, None)
+        for pool in self._pools + self._spare:
+            vk.vkDestroyDescriptorPool(dev, pool, None)
+        self._pools, self._spare = [], []
         vk.vkDestroyPipeline(dev, self.handle, None)
         vk.vkDestroyShaderModule(dev, self.module, None)
         vk.vkDestroyPipelineLayout(dev, self.layout, None)
