@@ -89,6 +89,7 @@ def build(bpy, tmp_path, cam_x=0.0):
     world = bpy.data.worlds.new("Black")
     world.color = (0.0, 0.0, 0.0)
     scene.world = world
+    scene.gs_ibl_render.shadows = False  # no baked probe here (it would be said): tests/test_shadows_blender.py
     bpy.context.view_layer.update()
     return scene, wall
 

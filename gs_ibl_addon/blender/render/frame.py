@@ -12,6 +12,11 @@ compositor puts in front of and behind the render (compositor.py). A frame's ima
 layers are complete. Where the splats cannot be drawn (no camera, an orthographic or panoramic one, a frame too
 large for the device, an error) both images are cleared, so no splats of another frame appear, and the reason is
 said once per render, in the console and in the panel.
+
+Shadows on Splats (the scene's render settings): the meshes darken the splat surface under them, lit from the probe
+whose World the scene uses (its environment and the suns its bake split off), by core/render/shadows.py, in numpy
+on FRONT and BEHIND before they are written: so Cycles and EEVEE, and every Blender, get the same shadows. A scene
+whose World is not a baked probe's gets none, and the render says so once.
 """
 from __future__ import annotations
 
@@ -22,8 +27,10 @@ import numpy as np
 from bpy.app.handlers import persistent
 
 from ...core import limits
+from ...core.render import shadows
 from ...core.render.mesh_depth import mesh_depth
 from ..common import handlers
+from ..common.datablocks import MARKER, is_probe
 from ..common.jobs import gpu
 from ..splats.object import is_splat_object
 from . import compositor, setup, splats
@@ -32,6 +39,8 @@ from .camera import NotDrawn, frame_camera, not_followed
 PREFIX = "GS-IBL render: "
 _job: dict | None = None  # the render job running now (between render_init and render_complete/cancel)
 _last: dict[str, dict] = {}  # scene name -> the last render's messages and per-frame record (panel, tests)
+PROBE_OWNER_KEY = "gs_ibl_probe"  # lighting/lights_from_probe.OWNER_KEY: on a light, the probe that made it
+RADIANCE_NODE, STRENGTH_NODE = "GS-IBL Radiance", "GS-IBL Strength"  # lighting/world.py build_world's nodes
 
 
 def rendering() -> bool:
@@ -101,12 +110,14 @@ def on_frame_change_post(scene, depsgraph=None) -> None:
         say(f"splats not drawn: {type(e).__name__}: {e}")
 
 
-def _mesh_triangles(dg) -> np.ndarray:
-    """World-space triangles (m, 3, 3) of the meshes the camera sees (evaluated: modifiers, instances)."""
-    out = []
+def _mesh_triangles(dg) -> tuple[np.ndarray, np.ndarray]:
+    """World-space triangles (m, 3, 3) of the meshes the camera sees and of those that cast shadows (Object >
+    Visibility > Ray Visibility: Camera, Shadow; evaluated: modifiers, instances)."""
+    out, seen_by, casts = [], [], []
     for inst in dg.object_instances:
         ob = inst.object
-        if ob.type != "MESH" or not ob.visible_camera or is_splat_object(ob.original):
+        seen, shadow = getattr(ob, "visible_camera", True), getattr(ob, "visible_shadow", True)
+        if ob.type != "MESH" or not (seen or shadow) or is_splat_object(ob.original):
             continue
         me = ob.data
         if hasattr(me, "calc_loop_triangles"):
@@ -121,7 +132,12 @@ def _mesh_triangles(dg) -> np.ndarray:
         m = np.array(inst.matrix_world, np.float64)
         v = co.reshape(-1, 3).astype(np.float64) @ m[:3, :3].T + m[:3, 3]
         out.append(v[idx.reshape(-1, 3)])
-    return np.concatenate(out) if out else np.zeros((0, 3, 3))
+        seen_by.append(np.full(len(tris), bool(seen)))
+        casts.append(np.full(len(tris), bool(shadow)))
+    if not out:
+        return np.zeros((0, 3, 3)), np.zeros((0, 3, 3))
+    tri = np.concatenate(out)
+    return tri[np.concatenate(seen_by)], tri[np.concatenate(casts)]
 
 
 def check_fits(cam, splat_count: int, ctx) -> None:
@@ -185,7 +201,9 @@ def fill(scene, dg) -> None:
 def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
     """FRONT and BEHIND of the frame, the size of the compositor's images, rows top first."""
     t0 = time.perf_counter()
-    tris = _mesh_triangles(dg)
+    tris, casters = _mesh_triangles(dg)
+    rs = getattr(dg.scene_eval, "gs_ibl_render", None)
+    shadowed = bool(getattr(rs, "shadows", False)) and len(casters) > 0
     z = mesh_depth(tris, cam.matrix, cam.tan_x, cam.tan_y, cam.width, cam.height, cam.cx, cam.cy, cam.window,
                    near=cam.clip_start, far=cam.clip_end)
     t1 = time.perf_counter()
@@ -195,18 +213,68 @@ def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
         renderer = splats.renderer_for(items, cam.clip_start)
         check_fits(cam, renderer.scene_count, renderer.ctx)
         try:
-            front, behind = splats.render_layers(renderer, cam, cut)
+            depth = [] if shadowed else None
+            front, behind = splats.render_layers(renderer, cam, cut, depth)
         except limits.TooBig as e:
             raise NotDrawn(f"splats not drawn: {e} (Output Properties > Resolution, or its %, or a render "
                            "border)") from None
+    t2 = time.perf_counter()
+    if shadowed and depth and depth[0] is not None:
+        front, behind = _shadow(dg, cam, front, behind, depth[0], casters, no_mesh, float(rs.shadow_strength),
+                                record)
     behind = np.where(no_mesh[..., None], 0.0, behind).astype(np.float32)
     record.update(splats=int(renderer.scene_count), triangles=int(len(tris)),
-                  ms_mesh_depth=round(1e3 * (t1 - t0), 1), ms_splats=round(1e3 * (time.perf_counter() - t1), 1))
+                  ms_mesh_depth=round(1e3 * (t1 - t0), 1), ms_splats=round(1e3 * (t2 - t1), 1))
     if cam.window is not None and not cam.crop:  # a full-size frame, splats only where Blender renders
         x0, y0, x1, y1 = cam.window
         full = np.zeros((cam.height, cam.width, 4), np.float32), np.zeros((cam.height, cam.width, 4), np.float32)
         full[0][y0:y1, x0:x1], full[1][y0:y1, x0:x1] = front, behind
         front, behind = full
+    return front, behind
+
+
+def probe_light(scene) -> tuple[shadows.LightSamples | None, str | None]:
+    """(the light samples of the probe whose World ``scene`` uses: the World's radiance image at its strength and
+    the suns the probe's bake split off, or None; why not, or None)."""
+    world = scene.world
+    if world is None or world.get(MARKER) != "world" or world.node_tree is None:
+        return None, "no shadows on the splats: the scene's World is not a baked probe's (bake a probe, or turn " \
+                     "Shadows on Splats off in the GS-IBL panel)"
+    env = world.node_tree.nodes.get(RADIANCE_NODE)
+    image = getattr(env, "image", None)
+    if image is None or not image.size[0] or not image.size[1]:
+        return None, f"no shadows on the splats: World '{world.name}' has no radiance image (bake its probe again)"
+    w, h = image.size
+    buf = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(buf)
+    latlong = buf.reshape(h, w, 4)[::-1, :, :3]  # rows top first (+Z), as lighting/world.py wrote them
+    node = world.node_tree.nodes.get(STRENGTH_NODE)
+    strength = float(node.inputs["Strength"].default_value) if node is not None else 1.0
+    probes = {o.name for o in scene.objects if is_probe(o) and getattr(o.gs_ibl_probe, "world", None) == world}
+    lights = []
+    for o in scene.objects:
+        if o.type == "LIGHT" and o.get(PROBE_OWNER_KEY) in probes and o.data.type == "SUN" and not o.hide_render:
+            m = np.array(o.matrix_world, np.float64)
+            irr = float(o.data.energy) * np.asarray(o.data.color, np.float64)
+            lights.append({"direction": m[:3, 2] / np.linalg.norm(m[:3, 2]), "irradiance": irr,  # +Z: toward it
+                           "angle": float(np.degrees(o.data.angle))})
+    return shadows.light_samples(latlong, strength, lights), None
+
+
+def _shadow(dg, cam, front, behind, depth, casters, no_mesh, strength, record) -> tuple[np.ndarray, np.ndarray]:
+    """FRONT and BEHIND with the casters' shadows on the splat surface (core/render/shadows.py)."""
+    t0 = time.perf_counter()
+    if "light" not in _job:  # once per render job: the World's image read, the light sampled
+        _job["light"] = probe_light(dg.scene)
+    samples, why = _job["light"]
+    if samples is None:
+        say(why)
+        return front, behind
+    alpha = 1.0 - (1.0 - front[..., 3]) * (1.0 - behind[..., 3])
+    ratio = shadows.frame_ratio(depth, alpha, casters, samples, cam.matrix, cam.tan_x, cam.tan_y, cam.width,
+                                cam.height, cam.cx, cam.cy, cam.window)
+    front, behind = shadows.apply(front, behind, ratio, no_mesh, strength)
+    record.update(ms_shadows=round(1e3 * (time.perf_counter() - t0), 1), light_samples=samples.count)
     return front, behind
 
 

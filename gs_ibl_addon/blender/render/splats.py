@@ -143,12 +143,13 @@ def has_depth_cut() -> bool:
     return hasattr(ViewBatch, "camera") and "cut" in inspect.signature(SplatRenderer.render).parameters
 
 
-def render_layers(renderer, cam, cut: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def render_layers(renderer, cam, cut: np.ndarray, depth: list | None = None) -> tuple[np.ndarray, np.ndarray]:
     """FRONT and BEHIND (H, W, 4) premultiplied RGBA, rows top first, of the camera's window (its whole frame
     without a border): the splats nearer than ``cut`` (planar depth per pixel of the window) and the rest.
 
     Without the core's depth cut (has_depth_cut), the plain frame is FRONT and BEHIND is zero: splats always in
-    front of meshes."""
+    front of meshes. ``depth``: a list that gets the splats' (H, W) depth of FRONT over BEHIND appended (the
+    shadows' receivers, core/render/shadows.py), or None where the core gives none."""
     from ...core.render.views import ViewBatch
     window = cam.window
     if has_depth_cut():
@@ -156,7 +157,9 @@ def render_layers(renderer, cam, cut: np.ndarray) -> tuple[np.ndarray, np.ndarra
                                  window=window)
         cut = np.asarray(cut, np.float32)
         if hasattr(renderer, "render_camera"):  # arrays in, arrays out; refuses a frame the device cannot hold
-            f = renderer.render_camera(batch, cut=cut, depth=False, timestamps=False)
+            f = renderer.render_camera(batch, cut=cut, depth=depth is not None, timestamps=False)
+            if depth is not None:
+                depth.append(f.depth)
             return f.front, f.behind
         res = renderer.render(batch, cut=cut)
         return res.images[0], res.behinds[0]

@@ -157,6 +157,11 @@ def _draw_render_settings(layout, context) -> None:
         row.prop(rs, "write_pass", text="Pass", toggle=True, icon="FILE_IMAGE")
         if rs.write_pass:
             col.prop(rs, "pass_path", text="")
+        if hasattr(rs, "shadows"):
+            row = col.row(align=True)
+            row.prop(rs, "shadows", icon="LIGHT_SUN")
+            if rs.shadows:
+                row.prop(rs, "shadow_strength", text="Strength", slider=True)
     line, notes = render_setup.describe(scene, getattr(context, "view_layer", None))
     _label_block(col, context, line, icon="RENDER_STILL")
     for note in notes:

@@ -163,6 +163,13 @@ class GSIBL_RenderSettings(bpy.types.PropertyGroup):
     pass_path: StringProperty(name="Splat Pass Folder", default="//splat_pass/", subtype="DIR_PATH",
                               update=_render_setting_changed,
                               description="Where the Splat Pass File is written (splats_<view layer>_<frame>.exr)")
+    shadows: BoolProperty(name="Shadows on Splats", default=True,
+                          description="Meshes darken the splats under them (shadows and contact darkening), lit "
+                                      "from the baked probe whose World the scene uses; the same in Cycles and "
+                                      "EEVEE. Needs a baked probe")
+    shadow_strength: FloatProperty(name="Shadow Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
+                                   description="How much of the light the meshes block is taken from the splats "
+                                               "(1: all of it, as a path tracer would)")
 
 
 CLASSES = (GSIBL_ProbeSettings, GSIBL_OverlaySettings, GSIBL_SplatSettings, GSIBL_RenderSettings)

@@ -94,8 +94,10 @@ def rasterise(triangles, cam_to_world, tan_x: float, tan_y: float, width: int, h
     return z.astype(np.float32)
 
 
-def _scan(px: np.ndarray, py: np.ndarray, inv_d: np.ndarray, ww: int, wh: int, zbuf: np.ndarray) -> None:
-    """Min-depth of screen-space triangles (vertices px, py: (m, 3), 1/depth inv_d: (m, 3)) into zbuf (wh * ww)."""
+def _scan(px: np.ndarray, py: np.ndarray, inv_d: np.ndarray, ww: int, wh: int, zbuf: np.ndarray,
+          reciprocal: bool = True) -> None:
+    """Min-depth of screen-space triangles (vertices px, py: (m, 3), 1/depth inv_d: (m, 3)) into zbuf (wh * ww).
+    reciprocal=False: ``inv_d`` is the depth itself, affine in screen space (an orthographic view)."""
     # edge functions e_k(x, y) = A_k x + B_k y + C_k, >= 0 inside for a triangle of either winding
     xa, xb = px, np.roll(px, -1, 1)
     ya, yb = py, np.roll(py, -1, 1)
@@ -149,9 +151,28 @@ def _scan(px: np.ndarray, py: np.ndarray, inv_d: np.ndarray, ww: int, wh: int, z
         col = c0[span] + (np.arange(int(ns.sum())) - np.repeat(first, ns))
         tt = t[span]
         inv = alpha[tt] * (col + 0.5) + beta[tt] * (row[span] + 0.5) + gamma[tt]
-        depth = 1.0 / np.maximum(inv, 1e-300)
+        depth = 1.0 / np.maximum(inv, 1e-300) if reciprocal else inv
         np.minimum.at(zbuf, row[span] * ww + col, depth)
         start = stop
+
+
+def rasterise_ortho(triangles, basis, extent, width: int, height: int) -> np.ndarray:
+    """Depth (H, W) float32 of the nearest of ``triangles`` (m, 3, 3) world-space vertices seen by an orthographic
+    view, +inf where none; rows top first. ``basis``: (3, 3) rows right, up, forward (orthonormal); depth is
+    p . forward (any sign: nothing is clipped); ``extent`` (u0, v0, u1, v1): the view's rectangle in (p . right,
+    p . up), column i's centre at u0 + (i + 0.5) (u1 - u0) / W, row j's at v1 - (j + 0.5) (v1 - v0) / H. A light's
+    shadow map (core/render/shadows.py)."""
+    zbuf = np.full(int(width) * int(height), np.inf, np.float64)
+    tri = np.asarray(triangles, np.float64).reshape(-1, 3, 3)
+    tri = tri[np.isfinite(tri).all((1, 2))]
+    if len(tri) and width > 0 and height > 0:
+        b = np.asarray(basis, np.float64)
+        u0, v0, u1, v1 = (float(e) for e in extent)
+        p = tri @ b.T  # (m, 3, 3): right, up, forward coordinates
+        px = (p[..., 0] - u0) * (width / (u1 - u0))
+        py = (v1 - p[..., 1]) * (height / (v1 - v0))
+        _scan(px, py, p[..., 2], int(width), int(height), zbuf, reciprocal=False)
+    return zbuf.reshape(int(height), int(width)).astype(np.float32)
 
 
 def fill_edges(z: np.ndarray) -> np.ndarray:

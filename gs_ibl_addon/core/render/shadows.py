@@ -1,0 +1,346 @@
+"""Shadows of meshes on the capture, in numpy: how much of a probe's light each splat pixel of a final render loses
+to the meshes standing in it (issue 36, item 3; docs/final-frame.md, "Shadows").
+
+The capture's colours already hold its own shadows and its light; what it cannot hold is a mesh added to it. So a
+splat pixel is multiplied by the share of its light that no mesh blocks:
+
+    ratio = sum_k L_k max(0, n . l_k) V_k / sum_k L_k max(0, n . l_k)          (per RGB channel)
+
+over light samples k (a direction l_k toward the light and its RGB weight L_k, irradiance at normal incidence),
+n the capture's surface normal there and V_k whether the meshes leave the way to the light open. It is 1 where no
+mesh is in the way, whatever the capture's colours or the light's strength, so the capture is never relit, only
+shadowed.
+
+The light samples (``light_samples``) come from the probe: its environment (the lat-long the World shows), split
+into its bright compact part (a sun, a lamp, a window: texels over ``BRIGHT_FACTOR`` times the median, as the bake's
+light finder has it, core/probe/lights.py) and the rest (sky, walls), each sampled by its own share of samples in
+proportion to its power (a 2D low-discrepancy set through the texels' inverse CDF, so the samples spread over the
+source: a sun's samples cover its disc and give its penumbra, the sky's give contact darkening); plus the lights a
+bake split off the probe (Blender suns: direction, irradiance, angle), each a disc of samples of its width.
+
+Visibility (``shadow_ratio``): one orthographic shadow map per sample (mesh_depth.rasterise_ortho: the meshes'
+depth along the light, over their own footprint, so a receiver outside it is lit), looked up with a 2x2
+percentage-closer filter. Only meshes are in the maps: the capture's own occluders are already in its colours.
+
+The receivers (``surface_points``): each pixel's point on the capture from the renderer's depth (the coverage-
+weighted depth of FRONT over BEHIND along the view axis), its normal from that depth's differences (the smaller
+of the one-sided ones, so an edge does not bend it), at a reduced resolution where the frame is large, the ratio
+brought back to full size by depth-aware (joint bilateral) upsampling.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..probe.lights import BRIGHT_FACTOR, LUMA, weighted_median
+from .mesh_depth import rasterise_ortho
+
+BRIGHT_SAMPLES = 32  # directions over the environment's bright compact part (penumbra steps)
+SKY_SAMPLES = 96  # directions over the rest (contact darkening)
+LIGHT_SAMPLES = 24  # directions over each disc of a split-off light
+BRIGHT_MAP = 256  # shadow map side (texels) for the bright part's and the lights' samples
+SKY_MAP = 128  # for the sky's: many soft overlapping shadows need less detail
+MAX_SIDE = 480  # receivers are computed on a grid no larger than this (the frame's larger side, in samples)
+MIN_ALPHA = 0.05  # pixels of less splat coverage are left as they are
+
+
+@dataclass(frozen=True)
+class LightSamples:
+    """Directions toward the light (K, 3) unit, their RGB weights (K, 3) (irradiance at normal incidence each
+    carries) and the side of their shadow maps (K,)."""
+    directions: np.ndarray
+    weights: np.ndarray
+    map_sides: np.ndarray
+
+    @property
+    def count(self) -> int:
+        return len(self.directions)
+
+
+def _radical_inverse(k: np.ndarray) -> np.ndarray:
+    """Van der Corput in base 2 of each integer in ``k``."""
+    k = np.asarray(k, np.uint64)
+    out = np.zeros(k.shape, np.float64)
+    f = 0.5
+    while np.any(k):
+        out += f * (k & np.uint64(1))
+        k = k >> np.uint64(1)
+        f *= 0.5
+    return out
+
+
+def _sample_texels(power: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, continuous columns) of ``n`` samples of a lat-long texel power map (H, W) in proportion to power:
+    a Hammersley set through the rows' marginal and each row's conditional inverse CDF."""
+    h, w = power.shape
+    k = np.arange(n)
+    u1, u2 = (k + 0.5) / n, _radical_inverse(k)
+    rows_p = power.sum(1)
+    row_cdf = np.cumsum(rows_p) / rows_p.sum()
+    rows = np.minimum(np.searchsorted(row_cdf, u1, "right"), h - 1)
+    cond = np.cumsum(power[rows], 1)
+    cond /= np.maximum(cond[:, -1:], 1e-300)
+    cols = np.array([min(np.searchsorted(c, v, "right"), w - 1) for c, v in zip(cond, u2)])
+    # where within the texel: the part of u2 that falls inside it (keeps the samples spread inside a wide texel)
+    lo = np.where(cols > 0, cond[np.arange(n), np.maximum(cols - 1, 0)], 0.0)
+    hi = cond[np.arange(n), cols]
+    frac = np.clip((u2 - lo) / np.maximum(hi - lo, 1e-300), 0.0, 1.0)
+    return rows, cols + frac
+
+
+def _latlong_direction(rows: np.ndarray, cols: np.ndarray, h: int, w: int) -> np.ndarray:
+    """Directions at texel row ``rows`` (centre) and continuous column ``cols`` (cubemap.latlong_directions' map)."""
+    theta = (rows + 0.5) / h * np.pi
+    phi = (0.5 - cols / w) * 2.0 * np.pi
+    st = np.sin(theta)
+    return np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], -1)
+
+
+def environment_samples(latlong: np.ndarray, bright_samples: int = BRIGHT_SAMPLES,
+                        sky_samples: int = SKY_SAMPLES) -> LightSamples:
+    """Light samples of a lat-long environment (H, 2H, 3) linear RGB radiance (Blender's equirectangular map, top
+    row +Z): its bright compact part and the rest, each sampled in proportion to its power. The weights sum to
+    the environment's integral of radiance over the sphere (per channel, up to sampling)."""
+    env = np.asarray(latlong, np.float64)[..., :3]
+    h, w = env.shape[:2]
+    omega = (2.0 * np.pi / w) * (np.pi / h) * np.sin((np.arange(h) + 0.5) / h * np.pi)[:, None]
+    luma = np.maximum(env @ LUMA, 0.0)
+    power = luma * omega
+    total = float(power.sum())
+    if total <= 0:
+        return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int))
+    bright = luma > BRIGHT_FACTOR * max(weighted_median(luma.ravel(), np.broadcast_to(omega, luma.shape).ravel()),
+                                        1e-12)
+    dirs, weights, sides = [], [], []
+    for mask, n, side in ((bright, bright_samples, BRIGHT_MAP), (~bright, sky_samples, SKY_MAP)):
+        p = np.where(mask, power, 0.0)
+        part = float(p.sum())
+        if part <= 1e-6 * total or n <= 0:
+            continue
+        rows, cols = _sample_texels(p, n)
+        texel = rows, np.minimum(cols.astype(int), w - 1)
+        colour = env[texel] / np.maximum(luma[texel], 1e-30)[:, None]  # chosen by luminance: RGB over it
+        dirs.append(_latlong_direction(rows, cols, h, w))
+        weights.append(colour * (part / n))
+        sides.append(np.full(n, side))
+    return LightSamples(np.concatenate(dirs), np.concatenate(weights), np.concatenate(sides))
+
+
+def _tangents(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors orthogonal to unit ``d`` and to each other (any rotation about d)."""
+    a = np.array([1.0, 0.0, 0.0]) if abs(d[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+    t = np.cross(d, a)
+    t /= np.linalg.norm(t)
+    return t, np.cross(d, t)
+
+
+def disc_samples(direction, irradiance, angle_deg: float, n: int = LIGHT_SAMPLES) -> LightSamples:
+    """A distant light (a Blender sun: ``direction`` toward it, RGB ``irradiance`` at normal incidence, apparent
+    diameter ``angle_deg``) as ``n`` samples spread evenly over its disc (a Vogel spiral)."""
+    d = np.asarray(direction, np.float64)
+    d /= np.linalg.norm(d)
+    half = np.radians(max(float(angle_deg), 0.0)) / 2.0
+    n = n if half > 0 else 1
+    k = np.arange(n)
+    r = np.tan(half) * np.sqrt((k + 0.5) / n)
+    a = k * np.pi * (3.0 - np.sqrt(5.0))
+    t, b = _tangents(d)
+    dirs = d + r[:, None] * (np.cos(a)[:, None] * t + np.sin(a)[:, None] * b)
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    w = np.tile(np.asarray(irradiance, np.float64) / n, (n, 1))
+    return LightSamples(dirs, w, np.full(n, BRIGHT_MAP))
+
+
+def light_samples(latlong: np.ndarray | None, strength: float = 1.0, lights: list[dict] = ()) -> LightSamples:
+    """The samples of a probe's light: its environment (``latlong`` times ``strength``; None: none) and the
+    lights split off it (dicts with direction, irradiance, angle, as probe.json's "lights" and the suns a bake
+    makes)."""
+    parts = []
+    if latlong is not None and strength > 0:
+        env = environment_samples(latlong)
+        parts.append(LightSamples(env.directions, env.weights * strength, env.map_sides))
+    parts += [disc_samples(li["direction"], li["irradiance"], li.get("angle", 0.0)) for li in lights]
+    parts = [p for p in parts if p.count]
+    if not parts:
+        return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int))
+    return LightSamples(*(np.concatenate([getattr(p, f) for p in parts]) for f in
+                          ("directions", "weights", "map_sides")))
+
+
+# ---- receivers ----
+
+def camera_rays(cam_to_world, tan_x: float, tan_y: float, width: int, height: int, cx: float = 0.0,
+                cy: float = 0.0, window=None, step: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(rays (h, w, 3), origin (3,)): per pixel centre of the window (every ``step``-th pixel, starting at the
+    middle of each block) the world direction whose component along the view axis is 1, so that a point at
+    planar depth z is origin + z ray; the camera model of mesh_depth (rows top first)."""
+    from .mesh_depth import camera_basis
+    b = camera_basis(cam_to_world)
+    x0, y0, x1, y1 = (0, 0, int(width), int(height)) if window is None else (int(v) for v in window)
+    off = (step - 1) // 2
+    i = x0 + np.arange(off, x1 - x0, step) + 0.5
+    j = y0 + np.arange(off, y1 - y0, step) + 0.5
+    s = (i / width * 2.0 - 1.0) * tan_x + cx  # right
+    t = (j / height * 2.0 - 1.0) * tan_y - cy  # down
+    right, up, fwd = b[:3, 0], b[:3, 1], -b[:3, 2]
+    rays = fwd + s[None, :, None] * right + t[:, None, None] * (-up)
+    return rays, b[:3, 3].copy()
+
+
+def surface_points(depth: np.ndarray, rays: np.ndarray, origin: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(points (h, w, 3), normals (h, w, 3)) of a planar depth image on its rays; each normal from the cross
+    product of the smaller one-sided differences across and down, turned toward the camera; NaN where the depth
+    or a neighbour is missing (depth <= 0 or not finite)."""
+    z = np.where(np.isfinite(depth) & (depth > 0), depth, np.nan).astype(np.float64)
+    p = origin + z[..., None] * rays
+
+    def smaller(axis):
+        fwd = np.diff(p, axis=axis, append=np.nan)
+        bwd = np.diff(p, axis=axis, prepend=np.nan)
+        take_bwd = ~(np.linalg.norm(fwd, axis=-1) <= np.linalg.norm(bwd, axis=-1))  # NaN forward: backward
+        take_bwd &= np.isfinite(bwd).all(-1)
+        return np.where(take_bwd[..., None], bwd, fwd)
+    n = np.cross(smaller(0), smaller(1))  # down x right: toward the camera on a surface facing it (fixed below)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    flip = (n * rays).sum(-1) > 0
+    n = np.where(flip[..., None], -n, n)
+    return p, n
+
+
+# ---- visibility ----
+
+def visibility(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, direction: np.ndarray,
+               side: int) -> np.ndarray:
+    """(N,) in [0, 1]: how open the way from each point (N, 3) along ``direction`` is past ``tris`` (a shadow map
+    of ``side`` texels over where the meshes' and the points' footprints along the light overlap, 2x2 percentage-
+    closer filtered; each point moved one texel along its normal first)."""
+    fwd = -np.asarray(direction, np.float64)
+    t, b = _tangents(fwd)
+    basis = np.stack([t, b, fwd])
+    vis = np.ones(len(points))
+    uv_m = tris.reshape(-1, 3) @ basis[:2].T
+    uv_p = points @ basis[:2].T
+    lo = np.maximum(uv_m.min(0), uv_p.min(0))
+    hi = np.minimum(uv_m.max(0), uv_p.max(0))
+    if np.any(hi < lo):  # no point in the meshes' shadow
+        return vis
+    size = np.maximum(hi - lo, 1e-9)
+    texel = max(size.max() / side, 1e-9)
+    lo, hi = lo - 2 * texel, hi + 2 * texel  # whole texels round the footprint for the filter
+    w, h = (int(np.ceil(v)) for v in (hi - lo) / texel)
+    u0, v0, u1, v1 = lo[0], lo[1], lo[0] + w * texel, lo[1] + h * texel
+    zmap = rasterise_ortho(tris, basis, (u0, v0, u1, v1), w, h).astype(np.float64)
+    q = points + normals * texel
+    x = (q @ basis[0] - u0) / texel - 0.5  # continuous texel coordinates (centres at integers)
+    y = (v1 - q @ basis[1]) / texel - 0.5
+    d = q @ basis[2]
+    inside = (x > -1) & (x < w) & (y > -1) & (y < h)
+    if not inside.any():
+        return vis
+    xi, yi, di = x[inside], y[inside], d[inside]
+    fx, fy = np.floor(xi), np.floor(yi)
+    ax, ay = xi - fx, yi - fy
+    pad = np.pad(zmap, 1, constant_values=np.inf)
+    bias = 2.0 * texel
+    out = np.zeros(len(xi))
+    for dx, dy, wgt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)), (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
+        zz = pad[(fy + dy).astype(int) + 1, (fx + dx).astype(int) + 1]
+        out += wgt * (zz >= di - bias)
+    vis[inside] = out
+    return vis
+
+
+def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samples: LightSamples) -> np.ndarray:
+    """(N, 3) per RGB channel the share of the light reaching each point (N, 3) with normal (N, 3) that ``tris``
+    (m, 3, 3) leave: 1 where nothing blocks it; 1 for points without a normal (NaN)."""
+    pts = np.asarray(points, np.float64).reshape(-1, 3)
+    nrm = np.asarray(normals, np.float64).reshape(-1, 3)
+    ok = np.isfinite(pts).all(1) & np.isfinite(nrm).all(1)
+    ratio = np.ones((len(pts), 3))
+    tris = np.asarray(tris, np.float64).reshape(-1, 3, 3)
+    if not len(tris) or not samples.count or not ok.any():
+        return ratio
+    p, n = pts[ok], nrm[ok]
+    num = np.zeros((len(p), 3))
+    den = np.zeros((len(p), 3))
+    for d, wgt, side in zip(samples.directions, samples.weights, samples.map_sides):
+        cos = n @ d
+        lit = cos > 0
+        if not lit.any():
+            continue
+        c = np.where(lit, cos, 0.0)
+        den += c[:, None] * wgt
+        v = np.ones(len(p))
+        v[lit] = visibility(p[lit], n[lit], tris, d, int(side))
+        num += (c * v)[:, None] * wgt
+    ratio[ok] = np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
+    return np.clip(ratio, 0.0, 1.0)
+
+
+# ---- a frame ----
+
+def _upsample(ratio_lo: np.ndarray, z_lo: np.ndarray, z: np.ndarray, step: int) -> np.ndarray:
+    """Full-size (H, W, 3) ratio from the grid of every ``step``-th pixel (block centres): bilinear over the four
+    nearest grid samples, each weighted down by its depth's difference from the pixel's own (joint bilateral), so
+    a shadow on the floor does not bleed onto a nearer object; a pixel no sample matches takes the nearest."""
+    h, w = z.shape
+    hl, wl = z_lo.shape
+    off = (step - 1) // 2
+    gy = np.clip((np.arange(h) - off) / step, 0, hl - 1)
+    gx = np.clip((np.arange(w) - off) / step, 0, wl - 1)
+    y0 = np.minimum(np.floor(gy).astype(int), max(hl - 2, 0))
+    x0 = np.minimum(np.floor(gx).astype(int), max(wl - 2, 0))
+    fy, fx = gy - y0, gx - x0
+    zf = np.where(np.isfinite(z), z, np.nan)
+    acc = np.zeros((h, w, 3))
+    wsum = np.zeros((h, w))
+    for dy in (0, 1):
+        for dx in (0, 1):
+            yy, xx = np.minimum(y0 + dy, hl - 1), np.minimum(x0 + dx, wl - 1)
+            bil = (fy if dy else 1 - fy)[:, None] * (fx if dx else 1 - fx)[None, :]
+            zs = z_lo[yy][:, xx]
+            rel = np.abs(zs - zf) / np.maximum(np.abs(zf), 1e-9)
+            wgt = bil * np.exp(-np.square(np.nan_to_num(rel, nan=1.0) / 0.02)) + 1e-12 * bil
+            acc += wgt[..., None] * ratio_lo[yy][:, xx]
+            wsum += wgt
+    return acc / np.maximum(wsum, 1e-30)[..., None]
+
+
+def frame_ratio(depth: np.ndarray, alpha: np.ndarray, tris, samples: LightSamples, cam_to_world, tan_x: float,
+                tan_y: float, width: int, height: int, cx: float = 0.0, cy: float = 0.0, window=None,
+                max_side: int = MAX_SIDE) -> np.ndarray:
+    """(H, W, 3) the shadow ratio of a camera frame's splat pixels (the window's, as the renderer gave ``depth``
+    and the splats' coverage ``alpha``): 1 where the coverage is under MIN_ALPHA, no mesh blocks the light, or no
+    light is given. Computed on every ``step``-th pixel where the window's larger side passes ``max_side``."""
+    depth = np.asarray(depth, np.float64)
+    h, w = depth.shape
+    ones = np.ones((h, w, 3), np.float32)
+    tris = np.asarray(tris, np.float64).reshape(-1, 3, 3)
+    covered = (np.asarray(alpha) >= MIN_ALPHA) & (depth > 0)
+    if not len(tris) or not samples.count or not covered.any():
+        return ones
+    step = max(1, int(np.ceil(max(h, w) / max_side)))
+    z = np.where(covered, depth, np.nan)
+    off = (step - 1) // 2
+    z_lo = z[off::step, off::step]
+    rays, origin = camera_rays(cam_to_world, tan_x, tan_y, width, height, cx, cy, window, step)
+    hl, wl = z_lo.shape
+    p, n = surface_points(z_lo, rays, origin)
+    ratio = shadow_ratio(p.reshape(-1, 3), n.reshape(-1, 3), tris, samples).reshape(hl, wl, 3)
+    if step > 1:
+        ratio = _upsample(ratio, z_lo, z, step)
+    return np.where(covered[..., None], ratio, 1.0).astype(np.float32)
+
+
+def apply(front: np.ndarray, behind: np.ndarray, ratio: np.ndarray, no_mesh: np.ndarray,
+          strength: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """FRONT and BEHIND with the capture's surface shadowed: FRONT where no mesh covers the pixel (it holds all
+    the splats there), BEHIND where one does (seen at the mesh's anti-aliased edges and through it); colour only,
+    coverage kept. ``strength`` 0..1 scales the darkening."""
+    r = 1.0 - float(strength) * (1.0 - np.asarray(ratio, np.float32))
+    front, behind = front.copy(), behind.copy()
+    m = np.asarray(no_mesh, bool)
+    front[m, :3] *= r[m]
+    behind[~m, :3] *= r[~m]
+    return front, behind
