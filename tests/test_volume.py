@@ -1,0 +1,159 @@
+"""The light volume's layout and lookup (core/probe/volume.py, issue 37): octahedral maps, their atlas and the node
+group's numpy twin, against plain references and analytic fields. No render here (test_volume_bake.py bakes)."""
+import numpy as np
+import pytest
+
+from gs_ibl_addon.core.probe import volume as vol
+from gs_ibl_addon.core.probe.grid import GridSpec
+from gs_ibl_addon.core.synthetic import fibonacci_sphere
+
+SPEC = GridSpec((-1.0, -0.5, 0.0), (2.0, 1.5, 1.0), (4, 3, 2))
+
+
+def _dirs(n=2000, seed=0):
+    d = np.random.default_rng(seed).normal(size=(n, 3))
+    axes = np.vstack([np.eye(3), -np.eye(3), [[1, 1, 0], [1, -1, 0], [-1, 0, 0.0], [0.3, 0.0, -0.7]]])
+    return np.vstack([d / np.linalg.norm(d, axis=1, keepdims=True), axes / np.linalg.norm(axes, axis=1,
+                                                                                           keepdims=True)])
+
+
+def test_octahedral_round_trip_and_range():
+    d = _dirs()
+    uv = vol.oct_encode(d)
+    assert np.all(np.abs(uv) <= 1 + 1e-12)
+    assert np.allclose(vol.oct_decode(uv), d, atol=1e-12)
+    uv2 = np.random.default_rng(1).uniform(-1, 1, (2000, 2))
+    assert np.allclose(vol.oct_encode(vol.oct_decode(uv2)), uv2, atol=1e-9)
+    # the interface's rule, spelled out for two lower-hemisphere directions (sign(0) = +1)
+    assert np.allclose(vol.oct_encode([[0.0, 0.0, -1.0]]), [[1.0, 1.0]])
+    # p = (0.5, -0.25) folded: (1 - |p.y|, 1 - |p.x|) sign(p) = (0.75, -0.5)
+    assert np.allclose(vol.oct_encode([[0.5, -0.25, -0.25]]), [[0.75, -0.5]])
+
+
+def test_the_fold_edges_and_corners():
+    v = np.linspace(-1, 1, 41)
+    for side in (-1.0, 1.0):
+        edge = np.stack([np.full_like(v, side), v], -1)
+        assert np.allclose(vol.oct_decode(edge), vol.oct_decode(edge * [1, -1]), atol=1e-12)
+        edge = np.stack([v, np.full_like(v, side)], -1)
+        assert np.allclose(vol.oct_decode(edge), vol.oct_decode(edge * [-1, 1]), atol=1e-12)
+    corners = np.array([[1, 1], [-1, 1], [1, -1], [-1, -1.0]])
+    assert np.allclose(vol.oct_decode(corners), [0, 0, -1])
+
+
+def test_border_texels_are_the_texels_across_the_fold():
+    """Each border texel holds the value of the map texel whose centre is the mirror of the border texel's centre
+    across the edge: the same direction as the point half a texel beyond the edge mirrored back."""
+    n = 5
+    m = np.arange(n * n, dtype=float).reshape(n, n, 1)
+    b = vol.add_border(m)[..., 0]
+    assert np.array_equal(b[1:-1, 1:-1], m[..., 0])
+    assert np.array_equal(b[1:-1, 0], m[::-1, 0, 0]) and np.array_equal(b[1:-1, -1], m[::-1, -1, 0])
+    assert np.array_equal(b[0, 1:-1], m[0, ::-1, 0]) and np.array_equal(b[-1, 1:-1], m[-1, ::-1, 0])
+    assert (b[0, 0], b[0, -1], b[-1, 0], b[-1, -1]) == (m[-1, -1, 0], m[-1, 0, 0], m[0, -1, 0], m[0, 0, 0])
+
+
+def test_bilinear_lookup_is_seamless_across_the_fold():
+    """A lookup just either side of an edge of the map (the equator folded, and the u, v axes of the lower half)
+    changes by no more than the step size: the border continues the map across every fold."""
+    rng = np.random.default_rng(3)
+    maps = np.broadcast_to(rng.normal(size=(vol.IRR, vol.IRR, 3)), (1, vol.IRR, vol.IRR, 3))
+    eps = 1e-7
+    phi = rng.uniform(0, 2 * np.pi, 500)
+    # the lower hemisphere's fold lines: z = 0 (the square's diamond), x = 0 and y = 0 (the square's edges)
+    seams = [lambda s: np.stack([np.cos(phi), np.sin(phi), np.full_like(phi, s * eps)], -1),
+             lambda s: np.stack([np.full_like(phi, s * eps), np.cos(phi), -np.abs(np.sin(phi))], -1),
+             lambda s: np.stack([np.cos(phi), np.full_like(phi, s * eps), -np.abs(np.sin(phi))], -1)]
+    m = np.broadcast_to(maps, (len(phi), vol.IRR, vol.IRR, 3))
+    for seam in seams:
+        a, b = vol.bilinear_map(m, seam(1.0)), vol.bilinear_map(m, seam(-1.0))
+        assert np.abs(a - b).max() < 1e-4
+
+
+def test_bilinear_matrix_is_the_lookup():
+    d = _dirs(500)
+    n = 7
+    maps = np.random.default_rng(4).normal(size=(n, n, 3))
+    want = vol.bilinear_map(np.broadcast_to(maps, (len(d), n, n, 3)), d)
+    assert np.allclose(vol.bilinear_matrix(n, d) @ maps.reshape(-1, 3), want, atol=1e-12)
+
+
+def test_atlas_layout():
+    v = vol.synthetic_volume(SPEC, wall_x=0.7)
+    irr, vis = vol.pack_atlas(v)
+    cols, rows = vol.atlas_tiles(SPEC.count)
+    assert (cols, rows) == (5, 5)
+    assert irr.shape == (rows * (vol.IRR + 2), cols * (vol.IRR + 2), 3) and irr.dtype == np.float32
+    assert vis.shape == (rows * (vol.VIS + 2), cols * (vol.VIS + 2), 3)
+    c = vol.shader_constants(SPEC)
+    assert c["irradiance_size"] == (irr.shape[1], irr.shape[0]) and c["visibility_size"] == (vis.shape[1],
+                                                                                             vis.shape[0])
+    # probe (ix, iy, iz) = (1, 2, 1): i = 1 + 4 (2 + 3) = 21 -> tile column 1, tile row 4 (rows from the bottom)
+    i, t = 21, vol.IRR + 2
+    tile = irr[4 * t + 1:4 * t + 1 + vol.IRR, 1 * t + 1:1 * t + 1 + vol.IRR]
+    assert np.array_equal(tile, v.irradiance[1, 2, 1].astype(np.float32))
+    assert np.allclose(vol.probe_positions(SPEC)[i], SPEC.points()[1, 2, 1])
+    assert np.array_equal(vol.grid_maps(vol.flat_maps(v.moments), SPEC.shape), v.moments)
+    assert np.all(vis[..., 2] == 0) and np.allclose(vis[..., 1], vis[..., 0] ** 2, rtol=1e-6)
+
+
+@pytest.mark.parametrize("visibility", [True, False])
+def test_packed_lookup_is_the_reference(visibility):
+    """sample_packed (the node group's twin, float32 images) == sample (the unpacked maps), inside and outside the
+    box, with a wall the visibility must see."""
+    v = vol.synthetic_volume(SPEC, wall_x=0.7)
+    rng = np.random.default_rng(5)
+    pts = rng.uniform([-1.5, -1.0, -0.5], [2.5, 2.0, 1.5], (3000, 3))
+    nrm = rng.normal(size=(3000, 3))
+    irr, vis = vol.pack_atlas(v)
+    got = vol.sample_packed(irr, vis, SPEC, pts, nrm, visibility)
+    want = vol.sample(v, pts, nrm, visibility)
+    assert np.abs(got - want).max() < 2e-5 * np.abs(want).max()
+
+
+def test_a_field_of_direction_alone_is_reproduced_everywhere():
+    """Every probe holding the same E(n): the weights cancel, the lookup is the map's bilinear interpolation of a
+    smooth field (point-sampled texels here: the octahedral folds' kinks cost up to 2% of a linear field)."""
+    sky = lambda p, n: np.stack([0.6 + 0.3 * n[..., 2], 0.5 + 0.1 * n[..., 0], 0.4 - 0.2 * n[..., 1]], -1)  # noqa
+    v = vol.synthetic_volume(SPEC, sky, wall_x=0.7)
+    rng = np.random.default_rng(6)
+    pts = rng.uniform(SPEC.lo, SPEC.hi, (2000, 3))
+    nrm = fibonacci_sphere(2000)
+    err = np.abs(vol.sample(v, pts, nrm) - sky(pts, nrm))
+    assert err.max() < 0.025 and err.mean() < 0.003
+
+
+def test_a_ramp_in_position_is_interpolated():
+    """At a node the node's own map; midway between two x layers, with normals across x, the corner pairs weigh alike
+    and the ramp (0.5 + 0.1 x) comes out as the mean of the two layers; along a line in x it rises monotonically."""
+    v = vol.synthetic_volume(SPEC)
+    bias = vol.NORMAL_BIAS * vol.spec_spacing(SPEC)
+    nodes = SPEC.points().reshape(-1, 3)
+    up = np.tile([0.0, 0.0, 1.0], (len(nodes), 1))
+    at = vol.sample(v, nodes - bias * up, up, visibility=False)
+    assert np.allclose(at[:, 0], 0.5 + 0.1 * nodes[:, 0], atol=1e-9)
+    rng = np.random.default_rng(7)
+    x = rng.choice(SPEC.axis_points(0)[:-1], 400) + 0.5  # the x nodes are 1 m apart
+    pts = np.stack([x, rng.uniform(-0.5, 1.5, 400), rng.uniform(0.0, 1.0, 400)], -1)
+    normals = np.tile([0.0, 0.0, 1.0], (400, 1))
+    got = vol.sample(v, pts - bias * normals, normals, visibility=False)
+    assert np.allclose(got[:, 0], 0.5 + 0.1 * x, atol=1e-9)
+    line = np.stack([np.linspace(-1, 2, 301), np.full(301, 0.3), np.full(301, 0.4)], -1)
+    ramp = vol.sample(v, line, np.tile([0.0, 0.6, 0.8], (301, 1)), visibility=False)[:, 0]
+    assert np.all(np.diff(ramp) > 0) and abs(ramp[0] - 0.4) < 1e-9 and abs(ramp[-1] - 0.7) < 1e-9
+
+
+def test_visibility_keeps_light_behind_a_wall_out():
+    """Probes beyond a wall (x > 0.9) hold bright light, those before it dark; points 0.2-0.35 m before the wall,
+    in cells whose far corners are beyond it, see only the dark probes with visibility, a leak of the bright ones
+    without. (The normal bias moves a point 0.125 m here: facing the wall from within ~0.1 m light leaks.)"""
+    spec = GridSpec((0.0, 0.0, 0.0), (1.5, 1.0, 1.0), (4, 3, 3))
+    bright = lambda p, n: np.where(p[..., :1] > 0.9, 10.0, 0.1) * np.ones(3)  # noqa: E731
+    v = vol.synthetic_volume(spec, bright, wall_x=0.9)
+    rng = np.random.default_rng(8)
+    pts = np.stack([rng.uniform(0.55, 0.7, 200), rng.uniform(0.1, 0.9, 200), rng.uniform(0.1, 0.9, 200)], -1)
+    nrm = np.concatenate([np.zeros((200, 1)), rng.normal(size=(200, 2))], 1)
+    with_vis = vol.sample(v, pts, nrm)
+    without = vol.sample(v, pts, nrm, visibility=False)
+    assert np.all(np.abs(with_vis - 0.1) < 0.002)
+    assert np.all(without[:, 0] > 0.5)
