@@ -2,6 +2,7 @@
 costs (issue 22, goal 3).
 
 Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
+     python benchmarks/auto_bake_core.py --stages [--repeats 5] [--out CSV]
 
 The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3: blender_scene.ROOM_SPHERE), the panel's
 defaults and Lighting Auto's work as blender/lighting/bake.py bake_into_world and blender/lighting/auto_light.py do
@@ -10,6 +11,14 @@ it, on one uploaded renderer (Blender's splat cache keeps it between bakes): the
 sphere's grid the measurement did not place (18 of 3 x 3 x 3, 116 of 5 x 5 x 5), when it asks for a grid. Wall
 time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA context:
 bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv).
+
+``--stages`` (issue 38: a bake whose wall time is its GPU time): per stage, wall time beside the GPU time of the
+submissions it waited for (every recording timestamped: the context's stamp_all) and the submissions it made, host
+= wall - GPU, for three pieces of work on the one uploaded renderer: the sample's default bake (the command line's:
+face size and irradiance size from the tolerance, the probe at the splats' centre; its stages as bake_probe reports
+them, core/stage_times.py), Lighting Auto's bake of the sphere (the World probe, the measurement, the grid nodes;
+each a stage) and a 1920x1080 camera frame from the World probe's place (render_camera, depth on, no cut). Medians
+of --repeats after one warm-up. Prints a table; appends to --out (default docs/bench/bake_stages_<device>.csv).
 """
 from __future__ import annotations
 
@@ -28,13 +37,15 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "tests", "real_blender"))
 from bench_common import append_csv, gpu_clock, hold_gpu_clock  # noqa: E402
 from blender_scene import ROOM_SPHERE  # noqa: E402 (native_bench.py's sphere)
-from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
+from gs_ibl_addon.core.bake import ProbeSettings, bake_probe, default_probe_position  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
                                                 measured_nodes, mesh_grid)
 from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
 from gs_ibl_addon.core.probe.result import write_probe  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
+from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
+from gs_ibl_addon.core.stage_times import StageTimes, stages  # noqa: E402
 
 REPO = os.path.dirname(HERE)
 PROBE = np.array(ROOM_SPHERE["centre"])
@@ -63,9 +74,70 @@ def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
             "faces": "/".join(str(x) for x in result.settings.get("face_sizes", []))}
 
 
+def stage_runs(r: SplatRenderer, scene) -> dict[str, dict[str, dict[str, float]]]:
+    """{work: {stage: {wall, gpu, host, submits}}} of one run of each piece of work (--stages)."""
+    out = {}
+    ctx = r.ctx
+    before, t0 = ctx.stats.snapshot(), time.perf_counter()
+    result = bake_probe(None, default_probe_position(scene), ProbeSettings(), renderer=r, host_splats=scene)
+    moved = ctx.stats.since(before)
+    out["default bake"] = {**stages(result.timings_ms), "all": {
+        "wall": (time.perf_counter() - t0) * 1e3, "gpu": moved["gpu_ms"], "submits": moved["submits"]}}
+    timings: dict[str, float] = {}
+    times = StageTimes(ctx, timings)
+    with times.stage("all"):
+        with times.stage("world probe"):
+            bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
+        with times.stage("measurement"):
+            pts = measure_points(PROBE - RADIUS, PROBE + RADIUS)
+            d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
+            choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
+        with times.stage("grid"):
+            if choice.kind == "grid":
+                spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
+                bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+    rows = stages(timings)
+    out["auto bake"] = {k: rows[k] for k in ("world probe", "measurement", "grid", "all")}
+    cam = np.eye(4)
+    cam[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]  # looking along +Y, Z up (Blender's front view turned round)
+    cam[:3, 3] = PROBE
+    timings = {}
+    with StageTimes(ctx, timings).stage("all"):
+        r.render_camera(ViewBatch.camera(cam, np.tan(np.radians(30)), np.tan(np.radians(30)) * 1080 / 1920,
+                                         1920, 1080))
+    out["camera 1080p"] = stages(timings)
+    return out
+
+
+def main_stages(a, r: SplatRenderer, scene, info: dict) -> None:
+    r.ctx.stamp_all = True  # every submission's GPU time is counted (TransferStats.gpu_ms)
+    stage_runs(r, scene)  # warm-up: pipelines, programs, first allocations
+    runs = [stage_runs(r, scene) for _ in range(a.repeats)]
+    rows = []
+    print(f"{'work':<14} {'stage':<18} {'wall ms':>9} {'GPU ms':>9} {'host ms':>9} {'submits':>8}")
+    for work, table in runs[0].items():
+        for stage in table:
+            med = {f: statistics.median(run[work][stage][f] for run in runs) for f in ("wall", "gpu", "submits")}
+            row = {"date": datetime.date.today().isoformat(), "device": info["device"], "driver": info["driver"],
+                   "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2), "repeats": a.repeats,
+                   "work": work, "stage": stage, "wall_ms": round(med["wall"], 2), "gpu_ms": round(med["gpu"], 2),
+                   "host_ms": round(max(0.0, med["wall"] - med["gpu"]), 2), "submits": int(med["submits"])}
+            rows.append(row)
+            print(f"{work:<14} {stage:<18} {row['wall_ms']:>9.2f} {row['gpu_ms']:>9.2f} {row['host_ms']:>9.2f} "
+                  f"{row['submits']:>8}")
+    append_csv(a.out or os.path.join(REPO, "docs", "bench", f"bake_stages_{device_label(info['device'])}.csv"), rows)
+
+
+def device_label(name: str) -> str:
+    name = name.lower()
+    return "lavapipe" if "llvmpipe" in name else "nvidia-h200" if "h200" in name else \
+        "nvidia-h100" if "h100" in name else name.split(" (")[0].replace(" ", "-")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--stages", action="store_true", help="per-stage wall beside GPU time (issue 38)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     keep = hold_gpu_clock()  # noqa: F841 (the context holds the clock while it lives)
@@ -78,6 +150,10 @@ def main() -> None:
         info["driver"] = pynvml.nvmlSystemGetDriverVersion()
     except Exception:
         pass
+    if a.stages:
+        main_stages(a, r, scene, info)
+        r.close()
+        return
     with tempfile.TemporaryDirectory() as tmp:
         auto_bake(r, scene, tmp)  # warm-up: pipelines, first allocations
         runs = [auto_bake(r, scene, tmp) for _ in range(a.repeats)]
@@ -88,9 +164,8 @@ def main() -> None:
            "choice": runs[0]["choice"], "faces": runs[0]["faces"],
            **{k: round(v, 4) for k, v in med.items()}}
     print(" ".join(f"{k}={v}" for k, v in row.items()))
-    name = info["device"].lower()
-    dev = "lavapipe" if "llvmpipe" in name else "nvidia-h200" if "h200" in name else name.replace(" ", "-")
-    append_csv(a.out or os.path.join(REPO, "docs", "bench", f"auto_bake_core_{dev}.csv"), [row])
+    append_csv(a.out or os.path.join(REPO, "docs", "bench", f"auto_bake_core_{device_label(info['device'])}.csv"),
+               [row])
 
 
 if __name__ == "__main__":

@@ -286,7 +286,8 @@ def cmd_bake(a) -> int:
     def preview(path: str) -> None:
         write_preview(result, path, title=title)
 
-    with _maybe(a.preview) as outside:
+    from .core.stage_times import StageTimes, stage_text
+    with StageTimes(None, result.timings_ms).stage("files"), _maybe(a.preview) as outside:
         if outside:
             preview(outside)
         written = write_probe(result, a.out, half=a.half, cube_faces=a.faces,
@@ -296,6 +297,7 @@ def cmd_bake(a) -> int:
     print(f"method {result.settings['method']} (asked: {a.method}), faces {result.settings['face_size']}^2, "
           f"irradiance {result.settings['irradiance_size']}^2, cubemap GPU {t.get('render_total', 0):.2f} ms, "
           f"filter {t.get('irradiance', 0):.2f} ms, device {result.device}")
+    print(stage_text(t))
     from .core.tolerance import plan_text
     line = plan_text(result.settings)
     if line:

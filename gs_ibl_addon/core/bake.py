@@ -29,6 +29,7 @@ from .cubemap import FACE_NAMES
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
+from .stage_times import StageTimes
 from .probe.reference import exact_irradiance_parts
 from .tolerance import ErrorModel, check_tolerance, choose_irradiance_size, relative_rms, search_face
 from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_HOLE_FILL, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD,
@@ -189,9 +190,25 @@ def choose_face(probe_at: Callable[[int, float], object], model, s: ProbeSetting
     return result, face, trials, plan, lod_k
 
 
+def irradiance_parts(change: np.ndarray, size: int, ctx=None) -> np.ndarray:
+    """probe/reference.py exact_irradiance_parts of a (6, n, n, 3) cube change: on a GPU the exact filter of six
+    cubes, each holding one face of the change (one submission; equal to the reference within float32 rounding,
+    1e-9 of a 3e-3 part), where numpy's (normals x texels) cosine blocks took 25-80 ms of the host per call (32^2
+    faces into 8^2-16^2); on a CPU device (ctx None or lavapipe) the reference itself, which runs there 3x faster
+    than the same integral as a filter."""
+    if ctx is None or ctx.is_cpu:
+        return exact_irradiance_parts(change, size)
+    from .probe.gpu_filters import filter_probes
+    n = change.shape[1]
+    one_face = np.zeros((6, 6, n, n, 3), np.float32)
+    for f in range(6):
+        one_face[f, f] = change[f, ..., :3]
+    return filter_probes(one_face, size, "exact", n, ctx=ctx).irradiance.astype(np.float64)
+
+
 def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], dict],
                       filter_cube: Callable[[np.ndarray], ProbeResult], model: ErrorModel, s: ProbeSettings,
-                      say: Callable[[str, float], None]) -> tuple[ProbeResult, list[int], list, dict]:
+                      say: Callable[[str, float], None], ctx=None) -> tuple[ProbeResult, list[int], list, dict]:
     """Face size 0: "model no more than the probe needs", per cube face.
 
     The probe is rendered at 32^2 and 64^2 and the change between them gives the error (tolerance.ErrorModel).
@@ -200,7 +217,8 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
     faces are rendered again one doubling finer, and their parts, and from the second on their fall per doubling,
     are measured again from what they changed.
     ``render_faces({face: size})`` returns {face: (size, size, 4) image}; ``filter_cube(cube)`` filters a host
-    cube. Returns (the probe, per-face sizes, trials, the tolerance plan)."""
+    cube; ``ctx``: the device that splits the change into faces' parts (irradiance_parts). Returns (the probe,
+    per-face sizes, trials, the tolerance plan)."""
     limit = int(s.max_face_size)
     cubes: dict[int, np.ndarray] = {}
 
@@ -220,7 +238,7 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
 
         faces = list(cubes[face])
         low = level(faces)
-        model.take_parts(exact_irradiance_parts(low - level(cubes[first]), m), [first] * 6, sizes,
+        model.take_parts(irradiance_parts(low - level(cubes[first]), m, ctx), [first] * 6, sizes,
                          result.irradiance)
         for _ in range(PER_FACE_ROUNDS):
             plan = model.next_sizes(s.tolerance, limit)
@@ -238,7 +256,7 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
             finer.radiance = cube
             change = float(np.max(model.change(result.irradiance, finer.irradiance)))
             finer_low = level(faces)
-            model.take_parts(exact_irradiance_parts(finer_low - low, m), before, sizes, finer.irradiance)
+            model.take_parts(irradiance_parts(finer_low - low, m, ctx), before, sizes, finer.irradiance)
             low = finer_low
             est = model.estimate_faces(sizes)
             trials.append({"face_size": max(sizes), "face_sizes": list(sizes), "change": change, "estimate": est})
@@ -266,9 +284,10 @@ def light_from_radiance(result: ProbeResult, s: ProbeSettings, colour_space: str
 def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: ProbeSettings, method: str,
                        say: Callable[[str, float], None],
                        hole_radiance: Callable[[np.ndarray], np.ndarray] | None = None,
-                       highlights_done: bool = False) -> ProbeResult:
+                       highlights_done: bool = False, times: StageTimes | None = None) -> ProbeResult:
     """Render (and, with face size 0, choose the face size), fill the holes, filter, and add the glossy maps when
-    asked."""
+    asked. ``times``: where each stage's wall and GPU time goes (core/stage_times.py)."""
+    times = times or StageTimes(r.ctx)
     # a renderer holding a level of detail draws from it when asked (one built without renders every splat)
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     m_search = int(s.irradiance_size) or DEFAULT_IRRADIANCE_SIZE  # the size 0 chooses from is picked at the end
@@ -317,37 +336,41 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     trials: list[dict] = []
     plan: dict = {}
     face_sizes = None
-    if s.face_size:
-        face = int(s.face_size)
-        say(f"rendering a {face}x{face} cubemap", 0.2)
-        result = probe_at(face)
-    elif lod_k == 0:
-        result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube, ErrorModel(),
-                                                             s, say)
-        face = min(max(face_sizes), RADIANCE_OUT_MAX) if result.radiance is not None else max(face_sizes)
-        for k, v in extra_ms.items():
-            result.timings_ms[k] = result.timings_ms.get(k, 0.0) + v
-    else:
-        result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
+    with times.stage("search" if not s.face_size else "render"):
+        if s.face_size:
+            face = int(s.face_size)
+            say(f"rendering a {face}x{face} cubemap", 0.2)
+            result = probe_at(face)
+        elif lod_k == 0:
+            result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube, ErrorModel(),
+                                                                 s, say, r.ctx)
+            face = min(max(face_sizes), RADIANCE_OUT_MAX) if result.radiance is not None else max(face_sizes)
+            for k, v in extra_ms.items():
+                result.timings_ms[k] = result.timings_ms.get(k, 0.0) + v
+        else:
+            result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
     frame = None
-    if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
-        frame = r.last_frame
-        result.radiance = frame.read_cube()
+    with times.stage("radiance readback"):
+        if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
+            frame = r.last_frame
+            result.radiance = frame.read_cube()
     # Holes are filled on the radiance read back (the search above compared the unfilled probes: a fill moves
     # every size alike) and the kept size is filtered again from it; a probe without holes pays nothing.
-    if light_from_radiance(result, s, r.colour_space, hole_radiance, highlights_done):
-        t0 = time.perf_counter()
-        filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
-                              sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
-        result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
-        result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
-        frame = None  # the glossy maps take the filled radiance
+    with times.stage("holes and lights"):
+        if light_from_radiance(result, s, r.colour_space, hole_radiance, highlights_done):
+            t0 = time.perf_counter()
+            filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
+                                  sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
+            result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
+            result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
+            frame = None  # the glossy maps take the filled radiance
     m = m_search
     if not s.irradiance_size:
-        m, result.irradiance, between = choose_irradiance_size(
-            lambda size: filter_probe(result.radiance[..., :3], irradiance_size=size, method=method, sh_order=2,
-                                      roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra).irradiance,
-            s.tolerance)
+        with times.stage("irradiance size"):
+            m, result.irradiance, between = choose_irradiance_size(
+                lambda size: filter_probe(result.radiance[..., :3], irradiance_size=size, method=method, sh_order=2,
+                                          roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra).irradiance,
+                s.tolerance)
         plan["irradiance_between_texels"] = {str(k): v for k, v in between.items()}
     if trials and result.sh_coefficients is not None:  # what 9 SH coefficients alone would give (probe.json has them)
         from .cubemap import face_directions
@@ -356,8 +379,9 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                                                       face_directions(m)), result.irradiance)
     if s.glossy:
         say("prefiltering glossy maps", 0.85)
-        result.prefiltered, ggx_ms = gpu_ggx_prefilter(frame if frame is not None else np.asarray(result.radiance),
-                                                       GLOSSY_ROUGHNESS, ctx=r.ctx)
+        with times.stage("glossy"):
+            result.prefiltered, ggx_ms = gpu_ggx_prefilter(
+                frame if frame is not None else np.asarray(result.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
         result.roughness = list(GLOSSY_ROUGHNESS)
         result.timings_ms["ggx"] = ggx_ms.get("total", 0.0)
     if trials:
@@ -401,18 +425,24 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     t0 = time.perf_counter()
     r = renderer
     highlights = None
+    stage_ms: dict[str, float] = {}  # each stage's wall and GPU time (core/stage_times.py), into the result's timings
+    times = StageTimes(renderer.ctx if renderer is not None else None, stage_ms)
     if scene is not None and renderer is None:  # clipped splats gained before upload (core/probe/highlights.py)
         scene, highlights = gain_clipped_splats(scene, s.highlight_gain)
     try:
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
-            r = SplatRenderer(scene, lod=s.lod == "auto")
+            with times.stage("upload"):
+                r = SplatRenderer(scene, lod=s.lod == "auto")
+            times.ctx = r.ctx
         host = scene if scene is not None else host_splats
-        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None)
+        result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None,
+                                    times)
         result.highlights = highlights or result.highlights
         result.settings["colour_space"] = r.colour_space  # the colour rule the light was made with (probe.json)
         if host is not None:
-            result.near_splats = near_splats(host, pos)
+            with times.stage("near splats"):
+                result.near_splats = near_splats(host, pos)
     except Exception as e:
         from .limits import out_of_memory_advice
         n = scene.count if scene is not None else r.scene_count
@@ -425,6 +455,7 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     finally:
         if renderer is None and r is not None:  # ours: give its GPU buffers back now, not whenever Python collects it
             r.close()
+    result.timings_ms.update(stage_ms)
     result.timings_ms["bake_wall"] = (time.perf_counter() - t0) * 1e3
     say("done", 1.0)
     return result

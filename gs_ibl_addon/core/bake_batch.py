@@ -29,6 +29,7 @@ from .probe.gpu_filters import BATCH_METHODS, filter_probes, gpu_ggx_prefilter
 from .render.renderer import SplatRenderer, largest_probe_face
 from .scene import SplatScene
 from .settings import AUTO_FIRST_FACE
+from .stage_times import StageTimes
 from .tolerance import ErrorModel, relative_rms
 from .vk import get_context
 
@@ -183,51 +184,61 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
     trials: list[dict] = []
     plan: dict = {}
     models = ProbeModels(n)
-    if s.face_size:
-        face = int(s.face_size)
-        say(f"rendering {n} probes at {face}x{face}", 0.1)
-        b = at(face, lod_k)
-    else:
-        b, face, trials, plan, lod_k = choose_face(at, models, s, lod_k, say, largest)
-        plan.update(face_size=face, irradiance_size=int(s.irradiance_size), method=method, sh_order=s.sh_order,
-                    lod="auto" if lod_k > 0 else "off", batch_estimated_error=plan["estimated_error"])
+    stage_ms: dict[str, float] = {}  # the batch's stages, wall and GPU (core/stage_times.py), on every probe
+    times = StageTimes(r.ctx, stage_ms)
+    with times.stage("render" if s.face_size else "search"):
+        if s.face_size:
+            face = int(s.face_size)
+            say(f"rendering {n} probes at {face}x{face}", 0.1)
+            b = at(face, lod_k)
+        else:
+            b, face, trials, plan, lod_k = choose_face(at, models, s, lod_k, say, largest)
+            plan.update(face_size=face, irradiance_size=int(s.irradiance_size), method=method,
+                        sh_order=s.sh_order, lod="auto" if lod_k > 0 else "off",
+                        batch_estimated_error=plan["estimated_error"])
     frame, sh, irr, holes, timings = b.frame, b.sh, b.irradiance, b.holes, b.timings
     on_cube = (s.highlight_gain != 1 and highlights is None) or s.lights > 0  # needs each probe's radiance
     fills = s.hole_fill != "black" and bool(np.any(holes > 0))
-    radiance = frame.read_probes() if (keep_radiance or s.glossy or fills or on_cube) else [None] * n
-    out, again = [], []
-    for k in range(n):
-        p = ProbeResult(radiance=radiance[k], irradiance=irr[k], sh_coefficients=sh[k], settings={},
-                        timings_ms={**timings, "gpu_per_probe": (timings.get("render_total", 0.0)
-                                                                 + timings.get("filter_total", 0.0)) / n},
-                        splat_count=r.scene_count, device=r.ctx.device_name, hole_fraction=float(holes[k]))
-        p.highlights = highlights
-        if radiance[k] is not None:
-            if light_from_radiance(p, s, r.colour_space, hole_radiance, highlights is not None):
-                again.append(p)
-        else:  # nothing to fill (no holes, or black): recorded as fill_holes would
-            p.hole_fill = {"method": s.hole_fill, "value": [0.0, 0.0, 0.0], "fraction": float(holes[k])}
-        mine = dict(plan)
-        if trials:  # this probe's own estimate at the shared face
-            mine.update(estimated_error=models.models[k].estimate(face),
-                        met=models.models[k].estimate(face) <= s.tolerance)
-        p.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
-                           "face_size_trials": trials, "converged": (not trials) or bool(plan.get("met")),
-                           "tolerance_plan": mine, "probe_position": [float(x) for x in pos[k]],
-                           "colour_space": r.colour_space, "batch": {"probes": n, "index": k}})
-        out.append(p)
-    # Probes whose radiance changed (holes filled, highlights, lights) are filtered again, all in one batch (as
-    # bake_probe does one).
-    if again:
-        t0 = time.perf_counter()
-        sh2, irr2, _, _ = _filter_cubes(np.stack([np.asarray(p.radiance)[..., :3] for p in again]), s, method, r.ctx)
-        for p, sh_k, irr_k in zip(again, sh2, irr2):
-            p.sh_coefficients, p.irradiance = sh_k, irr_k
-            p.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
+    with times.stage("radiance readback"):
+        radiance = frame.read_probes() if (keep_radiance or s.glossy or fills or on_cube) else [None] * n
+    with times.stage("holes and lights"):
+        out, again = [], []
+        for k in range(n):
+            p = ProbeResult(radiance=radiance[k], irradiance=irr[k], sh_coefficients=sh[k], settings={},
+                            timings_ms={**timings, "gpu_per_probe": (timings.get("render_total", 0.0)
+                                                                     + timings.get("filter_total", 0.0)) / n},
+                            splat_count=r.scene_count, device=r.ctx.device_name, hole_fraction=float(holes[k]))
+            p.highlights = highlights
+            if radiance[k] is not None:
+                if light_from_radiance(p, s, r.colour_space, hole_radiance, highlights is not None):
+                    again.append(p)
+            else:  # nothing to fill (no holes, or black): recorded as fill_holes would
+                p.hole_fill = {"method": s.hole_fill, "value": [0.0, 0.0, 0.0], "fraction": float(holes[k])}
+            mine = dict(plan)
+            if trials:  # this probe's own estimate at the shared face
+                mine.update(estimated_error=models.models[k].estimate(face),
+                            met=models.models[k].estimate(face) <= s.tolerance)
+            p.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
+                               "face_size_trials": trials, "converged": (not trials) or bool(plan.get("met")),
+                               "tolerance_plan": mine, "probe_position": [float(x) for x in pos[k]],
+                               "colour_space": r.colour_space, "batch": {"probes": n, "index": k}})
+            out.append(p)
+        # Probes whose radiance changed (holes filled, highlights, lights) are filtered again, all in one batch (as
+        # bake_probe does one).
+        if again:
+            t0 = time.perf_counter()
+            cubes = np.stack([np.asarray(p.radiance)[..., :3] for p in again])
+            sh2, irr2, _, _ = _filter_cubes(cubes, s, method, r.ctx)
+            for p, sh_k, irr_k in zip(again, sh2, irr2):
+                p.sh_coefficients, p.irradiance = sh_k, irr_k
+                p.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
     for p in out:
         if s.glossy:
-            p.prefiltered, _ = gpu_ggx_prefilter(np.asarray(p.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
+            with times.stage("glossy"):
+                p.prefiltered, _ = gpu_ggx_prefilter(np.asarray(p.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
             p.roughness = list(GLOSSY_ROUGHNESS)
         if not keep_radiance:
             p.radiance = None
+    for p in out:
+        p.timings_ms.update(stage_ms)
     return out
