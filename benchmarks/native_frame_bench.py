@@ -33,7 +33,9 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import os
+import shutil
 import statistics
 import sys
 import time
@@ -44,6 +46,11 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
+
+# tests/real_blender/blender_scene.py: here from the repository, in Blender copied beside this file
+sys.path.insert(0, os.path.join(ROOT, "tests", "real_blender"))
+import blender_scene as bs  # noqa: E402
+from blender_scene import MODULE  # noqa: E402
 
 REFS_DIR = os.path.join(ROOT, "docs", "bench", "native_frame_refs")
 FULL = (1920, 1080)
@@ -172,22 +179,371 @@ def save_sheet(path: str, title: str, arrays: dict) -> None:
     plt.close(fig)
 
 
+# ---------------------------------------------------------------------------------------------------- in Blender
+
+RESULT_TAG = "GSIBL-NATIVE-FRAME "
+
+
+def _in_blender(args: dict) -> dict:
+    """Per capture and view: the renders of args["methods"], each EXR saved as float16 .npy beside args.json, and
+    a row of its time and checks (stdout's RESULT_TAG line)."""
+    import importlib
+    import math
+
+    import bpy
+    from mathutils import Matrix
+
+    bs.enable_extension()
+    frame = importlib.import_module(f"{MODULE}.blender.render.frame")
+    compositor = importlib.import_module(f"{MODULE}.blender.render.compositor")
+    so = importlib.import_module(f"{MODULE}.blender.splats.object")
+    scene = bpy.context.scene
+    r = scene.render
+    r.resolution_percentage = 100
+    r.image_settings.file_format = "OPEN_EXR"
+    r.image_settings.color_depth = "32"
+    r.film_transparent = True
+    r.threads_mode, r.threads = "FIXED", args["threads"]
+    scene.view_settings.view_transform = "Standard"
+    c = scene.cycles
+    c.device = "CPU"
+    c.use_adaptive_sampling = False  # a fixed sample count: the samples named are the samples taken
+    eevee = bs.eevee_engine()
+    work = args["work"]
+    out = {"blender": bpy.app.version_string, "rows": [],
+           "cycles_defaults": {"transparent_max_bounces": c.transparent_max_bounces,
+                               "filter_width": r.filter_size, "denoiser": "OPENIMAGEDENOISE"}}
+
+    def render(method: dict, size: tuple[int, int]) -> tuple[np.ndarray, float]:
+        scene.gs_ibl_render.native_splats = method["choice"]
+        r.engine = "CYCLES" if method["engine"] == "cycles" else eevee
+        if method["engine"] == "cycles":
+            c.samples, c.use_denoising = method["samples"], method["denoise"]
+            if method["denoise"]:
+                c.denoiser = "OPENIMAGEDENOISE"
+        else:
+            scene.eevee.taa_render_samples = method["samples"]
+        r.resolution_x, r.resolution_y = size
+        r.filepath = os.path.join(work, "frame.exr")
+        t0 = time.perf_counter()
+        bpy.ops.render.render(write_still=True)
+        return bs.read_image(r.filepath), time.perf_counter() - t0
+
+    for cap in args["captures"]:
+        bs.clear("objects", "cameras")
+        bs.black_world()
+        assert bpy.ops.gs_ibl.import_splats(filepath=cap["path"]) == {"FINISHED"}
+        ob = bpy.context.active_object
+        assert so.is_native_splats(ob), f"{cap['name']}: not imported as Blender's splats"
+        to_world = Matrix(ob.matrix_world)
+        cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+        scene.collection.objects.link(cam)
+        scene.camera = cam
+        warmed = set()
+        for view in cap["views"]:
+            tan_x, tan_y, sx, sy = view["camera"][16:]
+            cam.matrix_world = to_world @ Matrix(np.array(view["camera"][:16]).reshape(4, 4).tolist())
+            cam.data.sensor_fit, cam.data.angle = "HORIZONTAL", 2 * math.atan(tan_x)
+            cam.data.shift_x, cam.data.shift_y = sx / (2 * tan_x), sy / (2 * tan_x)
+            cam.data.clip_start, cam.data.clip_end = args["near"], args["far"]
+            for method in args["methods"]:
+                for size in method["sizes"]:
+                    key = (method["engine"], method["choice"])
+                    if key not in warmed:  # kernels, shaders, the splats' first read: once per session
+                        r.resolution_percentage = 10
+                        _, warm_s = render({**method, "samples": 1}, tuple(size))
+                        r.resolution_percentage = 100
+                        warmed.add(key)
+                        out.setdefault("warm_up_s", {})[f"{cap['name']} {method['name']}"] = round(warm_s, 2)
+                    img, seconds = render(method, tuple(size))
+                    rec = frame.last_render(scene)["frames"].get(scene.frame_current, {})
+                    front = compositor.find_image(scene, scene.view_layers[0].name, compositor.FRONT_ROLE)
+                    drew = method["choice"] == "GSIBL" and rec.get("objects") == [ob.name]
+                    front_px = None
+                    if front is not None and drew and tuple(front.size) == tuple(size):
+                        front_px = np.empty(size[0] * size[1] * 4, np.float32)
+                        front.pixels.foreach_get(front_px)
+                        front_px = front_px.reshape(size[1], size[0], 4)[::-1]
+                    row = {"capture": cap["name"], "view": view["name"], "method": method["name"],
+                           "engine": method["engine"], "choice": method["choice"], "samples": method["samples"],
+                           "denoise": method["denoise"], "width": size[0], "height": size[1],
+                           "render_s": round(seconds, 3), "splats_ms": rec.get("ms", "") if drew else "",
+                           "ours_drew": bool(drew), "coverage": round(float(img[..., 3].mean()), 4),
+                           # the render is our FRONT alone (Blender drew nothing of the splats): want 0
+                           "render_minus_front": (round(float(np.abs(img - front_px).max()), 5)
+                                                  if front_px is not None else ""),
+                           "camera_icon_after": bool(ob.visible_camera), "messages": frame.last_render(scene)
+                           ["messages"][:3]}
+                    out["rows"].append(row)
+                    print(row, flush=True)
+                    if tuple(size) == tuple(args["size"]):
+                        np.save(os.path.join(work, f"{cap['name']}_{view['name']}_{method['name']}.npy"),
+                                img.astype(np.float16))
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------- the host
+
+def methods(args) -> list[dict]:
+    """The renders per view: native Cycles (no denoiser, then OIDN), native EEVEE, ours (Native Splats: GS-IBL, in
+    Cycles at one sample: the scene holds nothing else) at the comparison size and at 1920x1080."""
+    size = list(args.size_wh)
+    out = []
+    for n in args.cycles_samples:
+        out.append({"name": f"native-cycles-{n}", "engine": "cycles", "choice": "BLENDER", "samples": n,
+                    "denoise": False, "sizes": [size]})
+        if args.denoise:
+            out.append({"name": f"native-cycles-{n}-oidn", "engine": "cycles", "choice": "BLENDER", "samples": n,
+                        "denoise": True, "sizes": [size]})
+    for n in args.eevee_samples:
+        out.append({"name": f"native-eevee-{n}", "engine": "eevee", "choice": "BLENDER", "samples": n,
+                    "denoise": False, "sizes": [size]})
+    out.append({"name": "gs-ibl", "engine": "cycles", "choice": "GSIBL", "samples": 1, "denoise": False,
+                "sizes": [size] + ([list(FULL)] if args.full else [])})
+    out.append({"name": "gs-ibl-eevee", "engine": "eevee", "choice": "GSIBL", "samples": 1, "denoise": False,
+                "sizes": [size]})
+    return out
+
+
+def display(img: np.ndarray, space: str) -> np.ndarray:
+    """Blender's linear render as the capture's own values (what gsplat computes from its SH): sRGB-encoded for a
+    capture in sRGB (Blender's Standard view), as it is for a linear one."""
+    from gs_ibl_addon.core.colour import linear_to_srgb
+    img = img.astype(np.float32).copy()
+    if space == "srgb":
+        img[..., :3] = linear_to_srgb(np.clip(img[..., :3], 0, None))
+    return img
+
+
+def load_refs(args) -> dict:
+    """capture -> its refs npz (made here with --stand-in where the GPU machine's are missing)."""
+    out = {}
+    for name in args.captures.split(","):
+        path = os.path.join(args.refs, f"refs_{name}.npz")
+        if not os.path.exists(path):
+            if not args.stand_in:
+                sys.exit(f"{path} is missing: run benchmarks/gpu_run.sh refs on the GPU machine and put its files "
+                         "there, or pass --stand-in ours|numpy")
+            local = os.path.join(ROOT, "out", "bench", "native_frame_refs")
+            path = os.path.join(local, f"refs_{name}.npz")
+            if not os.path.exists(path) or np.load(path)["size"].tolist() != list(args.size_wh):
+                run_refs(argparse.Namespace(captures=name, views=args.views, size=args.size, fov=60.0,
+                                            near=args.near, far=args.far, peer=args.stand_in, rounds=1,
+                                            no_full=True, out=local))
+        out[name] = dict(np.load(path))
+        if out[name]["size"].tolist() != list(args.size_wh):
+            sys.exit(f"{path} holds {out[name]['size'].tolist()} images, not {args.size}")
+    return out
+
+
+def run_bench(args) -> None:
+    import fidelity_bench as fb
+    from bench_common import append_csv
+    from gs_ibl_addon.core.formats import read_scene
+    from native_bench import _device
+    sys.path.insert(0, os.path.join(ROOT, "tests", "real_blender"))
+    import test_matrix as matrix
+    matrix.TIMEOUT_S = 3 * 3600
+    entry = next(e for e in matrix.ENTRIES if e.name == "bpy-5.3")
+    if not matrix._ready(entry.root):
+        sys.exit(f"the bpy 5.3 root is not made: scripts/blender_roots.sh ensure {entry.root}")
+    args.size_wh = tuple(fb.parse_size(args.size))
+    refs = load_refs(args)
+    device = _device()
+    runner = matrix.Runner(entry, None)
+    date = datetime.date.today().isoformat()
+    try:
+        zip_path = matrix.built_zip()
+        shutil.copy(zip_path, runner.host / "gs_ibl.zip")
+        for f in (os.path.abspath(__file__), bs.__file__):
+            shutil.copy(f, runner.host / os.path.basename(f))
+        caps, spaces = [], {}
+        for name in args.captures.split(","):
+            _, path, _ = fb.parse_capture(name)
+            shutil.copy(path, runner.host / os.path.basename(path))
+            spaces[name] = read_scene(path).colour_space
+            views = [{"name": v, "camera": refs[name][f"camera_{v}"].tolist()} for v in args.views.split(",")]
+            caps.append({"name": name, "path": str(runner.inner / os.path.basename(path)), "views": views})
+        job = {"work": str(runner.inner), "threads": args.threads, "near": args.near, "far": args.far,
+               "size": list(args.size_wh), "captures": caps, "methods": methods(args)}
+        (runner.host / "args.json").write_text(json.dumps(job))
+        assert matrix._install(runner, str(runner.inner / "gs_ibl.zip")).returncode == 0, "install failed"
+        log(f"Blender 5.3 (bpy, {args.threads} threads), {len(caps)} captures x {len(caps[0]['views'])} views, "
+            f"{len(job['methods'])} methods; load {os.getloadavg()[0]:.1f}")
+        res = runner.run([runner.python(), str(runner.inner / "native_frame_bench.py"), "in-blender",
+                          str(runner.inner / "args.json")], "bench")
+        line = next((x for x in res.stdout.splitlines() if x.startswith(RESULT_TAG)), None)
+        if line is None:
+            sys.exit(f"no result (rc {res.returncode}):\n{res.stdout[-3000:]}\n{res.stderr[-3000:]}")
+        result = json.loads(line[len(RESULT_TAG):])
+        images = {}
+        for p in runner.host.glob("*.npy"):
+            images[p.stem] = np.load(p).astype(np.float32)
+    finally:
+        runner.close()
+    rows = []
+    for row in result["rows"]:
+        ref = refs[row["capture"]]
+        img = images.get(f"{row['capture']}_{row['view']}_{row['method']}")
+        small = (row["width"], row["height"]) == args.size_wh and img is not None
+        cmp = fb.compare(display(img, spaces[row["capture"]]), ref[f"gsplat_{row['view']}"].astype(np.float32)) \
+            if small else {}
+        rows.append({"date": date, "device": device, "blender": result["blender"],
+                     "reference": str(ref["reference"]), **{k: v for k, v in row.items() if k != "messages"},
+                     "psnr": cmp.get("psnr", ""), "psnr_alpha": cmp.get("psnr_alpha", ""),
+                     "px_over_1pct": cmp.get("px_over_1pct", ""), "load": round(os.getloadavg()[0], 1)})
+    if os.path.exists(args.csv):
+        os.remove(args.csv)  # one run per file: the chart is of one run
+    append_csv(args.csv, rows)
+    with open(os.path.splitext(args.csv)[0] + ".json", "w") as f:
+        json.dump({k: v for k, v in result.items() if k != "rows"}, f, indent=1)
+    print_table(rows)
+    plot(rows, args.png)
+    if args.sheet:
+        save_compare_sheet(args.sheet, rows, refs, images, spaces)
+    log(f"wrote {args.csv}, {args.png}" + (f", {args.sheet}" if args.sheet else ""))
+
+
+LABELS = {"native-cycles": "native Cycles", "native-eevee": "native EEVEE", "gs-ibl": "GS-IBL (F12, in Cycles)",
+          "gs-ibl-eevee": "GS-IBL (F12, in EEVEE)"}
+
+
+def label(row: dict) -> str:
+    m = row["method"]
+    if m.startswith("native-cycles"):
+        return f"native Cycles {row['samples']} spp" + (" + OIDN" if str(row["denoise"]) == "True" else "")
+    if m.startswith("native-eevee"):
+        return f"native EEVEE {row['samples']} spp"
+    return LABELS[m] + ("" if int(row["width"]) < FULL[0] else " 1920x1080")
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """Per capture and method: the median time per frame and PSNR over the views."""
+    out = {}
+    for r in rows:
+        out.setdefault((r["capture"], label(r)), []).append(r)
+    res = []
+    for (cap, lab), rs in out.items():
+        ps = [float(r["psnr"]) for r in rs if r["psnr"] != ""]
+        res.append({"capture": cap, "method": lab, "views": len(rs), "width": rs[0]["width"],
+                    "height": rs[0]["height"],
+                    "render_s": statistics.median(float(r["render_s"]) for r in rs),
+                    "splats_ms": statistics.median(float(r["splats_ms"]) for r in rs) if rs[0]["splats_ms"] != ""
+                    else "", "psnr": statistics.median(ps) if ps else "", "psnr_min": min(ps) if ps else ""})
+    return res
+
+
+def print_table(rows: list[dict]) -> None:
+    print("\n| capture | method | size | s per frame (median) | our splats' ms | PSNR dB (median, worst) |")
+    print("|---|---|---|---:|---:|---:|")
+    for s in summary(rows):
+        ps = f"{s['psnr']:.1f} ({s['psnr_min']:.1f})" if s["psnr"] != "" else "-"
+        ms = f"{s['splats_ms']:.0f}" if s["splats_ms"] != "" else "-"
+        print(f"| {s['capture']} | {s['method']} | {s['width']}x{s['height']} | {s['render_s']:.2f} | {ms} | {ps} |")
+
+
+def plot(rows: list[dict], png: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    sm = summary(rows)
+    caps = list(dict.fromkeys(s["capture"] for s in sm))
+    fig, axes = plt.subplots(1, len(caps), figsize=(6.2 * len(caps), 4.6), squeeze=False)
+    for ax, cap in zip(axes[0], caps):
+        ss = [s for s in sm if s["capture"] == cap and s["psnr"] != ""]
+        for s in ss:
+            colour = "tab:blue" if s["method"].startswith("GS-IBL") else (
+                "tab:red" if "Cycles" in s["method"] else "tab:green")
+            ax.scatter(s["render_s"], s["psnr"], color=colour, s=40, zorder=3)
+            ax.annotate(s["method"], (s["render_s"], s["psnr"]), textcoords="offset points", xytext=(5, 3),
+                        fontsize=7)
+        full = [s for s in sm if s["capture"] == cap and s["psnr"] == ""]
+        for s in full:  # 1080p: time only (no reference at that size here)
+            ax.axvline(s["render_s"], color="tab:blue", ls=":", lw=1)
+            ax.text(s["render_s"], ax.get_ylim()[0], f" {s['method']}", rotation=90, fontsize=6, va="bottom",
+                    color="tab:blue")
+        ax.set_xscale("log")
+        ax.set_xlabel(f"seconds per frame ({ss[0]['width']}x{ss[0]['height']} unless named)")
+        ax.set_ylabel("PSNR against gsplat classic, dB (median over views)")
+        ax.set_title(cap, fontsize=9)
+        ax.grid(True, which="both", alpha=0.3)
+    r0 = rows[0]
+    fig.suptitle(f"A capture in F12: Blender {r0['blender']}'s native splats against GS-IBL drawing them, "
+                 f"{r0['device']}, {r0['date']}; reference: {r0['reference']}", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+def save_compare_sheet(path: str, rows: list[dict], refs: dict, images: dict, spaces: dict) -> None:
+    """Per capture, its first view: the reference, each method's image (as compared) and its PSNR."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    caps = list(dict.fromkeys(r["capture"] for r in rows))
+    cols = list(dict.fromkeys(r["method"] for r in rows if r["psnr"] != ""))
+    fig, axes = plt.subplots(len(caps), len(cols) + 1, figsize=(2.6 * (len(cols) + 1), 1.8 * len(caps) + 0.4),
+                             squeeze=False)
+    for i, cap in enumerate(caps):
+        view = next(r["view"] for r in rows if r["capture"] == cap)
+        axes[i][0].imshow(to_8bit(refs[cap][f"gsplat_{view}"].astype(np.float32)))
+        axes[i][0].set_title(f"{cap} {view}: reference", fontsize=7)
+        for j, m in enumerate(cols):
+            row = next(r for r in rows if r["capture"] == cap and r["view"] == view and r["method"] == m
+                       and r["psnr"] != "")
+            axes[i][j + 1].imshow(to_8bit(display(images[f"{cap}_{view}_{m}"], spaces[cap])))
+            axes[i][j + 1].set_title(f"{label(row)}\n{row['psnr']:.1f} dB, {float(row['render_s']):.1f} s",
+                                     fontsize=7)
+        for ax in axes[i]:
+            ax.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def run_plot(args) -> None:
+    import csv
+    rows = list(csv.DictReader(open(args.csv)))
+    print_table(rows)
+    plot(rows, args.png)
+
+
 def main(argv=None) -> None:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv and argv[0] == "in-blender":
+        print(RESULT_TAG + json.dumps(_in_blender(json.load(open(argv[1])))), flush=True)
+        return
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("mode", choices=["refs"])
+    ap.add_argument("mode", choices=["refs", "bench", "plot"])
     ap.add_argument("--captures", default="guitar,room")
-    ap.add_argument("--views", default="", help="of v0..v7 (comma-separated; empty: all eight)")
+    ap.add_argument("--views", default="", help="of v0..v7 (comma-separated; refs: empty is all eight; bench: "
+                    "default v0,v4)")
     ap.add_argument("--size", default="480x270", help="the comparison size (native Cycles renders it on the CPU)")
     ap.add_argument("--fov", type=float, default=60.0)
     ap.add_argument("--near", type=float, default=0.1)
     ap.add_argument("--far", type=float, default=1000.0)
     ap.add_argument("--peer", choices=("auto", "gsplat", "numpy", "ours"), default="auto",
-                    help="the reference: gsplat on CUDA (auto falls back to the numpy port), the port, or ours")
+                    help="refs: gsplat on CUDA (auto falls back to the numpy port), the port, or ours")
     ap.add_argument("--rounds", type=int, default=5)
-    ap.add_argument("--no-full", action="store_true", help="skip the 1920x1080 times")
-    ap.add_argument("--out", default=REFS_DIR)
+    ap.add_argument("--no-full", action="store_true", help="refs: skip the 1920x1080 times")
+    ap.add_argument("--out", default=REFS_DIR, help="refs: where the references go")
+    ap.add_argument("--refs", default=REFS_DIR, help="bench: the GPU machine's references")
+    ap.add_argument("--stand-in", choices=("", "ours", "numpy"), default="",
+                    help="bench: where a reference is missing, make it here (our image, or the numpy port)")
+    ap.add_argument("--cycles-samples", type=lambda t: [int(x) for x in t.split(",") if x], default=[16, 64])
+    ap.add_argument("--no-denoise", dest="denoise", action="store_false", help="bench: no Cycles + OIDN rows")
+    ap.add_argument("--eevee-samples", type=lambda t: [int(x) for x in t.split(",") if x], default=[1, 16])
+    ap.add_argument("--no-full-frame", dest="full", action="store_false", help="bench: no 1920x1080 frame of ours")
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--csv", default=None)
+    ap.add_argument("--png", default=os.path.join(ROOT, "docs", "img", "native-frame-lavapipe.png"))
+    ap.add_argument("--sheet", default=os.path.join(ROOT, "docs", "img", "native-frame-views-lavapipe.png"),
+                    help="bench: the first view of each capture by every method (empty: none)")
     args = ap.parse_args(argv)
-    {"refs": run_refs}[args.mode](args)
+    if args.mode == "bench" and not args.views:
+        args.views = "v0,v4"
+    args.csv = args.csv or os.path.join(ROOT, "docs", "bench", "native_frame_lavapipe.csv")
+    {"refs": run_refs, "bench": run_bench, "plot": run_plot}[args.mode](args)
 
 
 if __name__ == "__main__":

@@ -12,9 +12,9 @@ from __future__ import annotations
 import bpy
 
 from ..splats import cache as splat_cache
-from ..splats.object import is_mesh_splats
+from ..splats.object import is_mesh_splats, is_native_splats
 from . import compositor
-from .splats import proxy_modifiers, render_visible
+from .splats import draws_native, proxy_modifiers, render_visible
 
 
 def settings(scene):
@@ -80,13 +80,14 @@ def describe(scene, view_layer=None) -> tuple[str, list[str]]:
 
 
 def on_depsgraph_update(scene, depsgraph) -> None:
-    """A splat object changed (a new import, its camera icon, ...): our nodes in place if it is now rendered
-    (frame.py calls this outside renders only)."""
+    """A splat object changed (a new import, its camera icon, ...): our nodes in place if it is now rendered (a
+    native one where Native Splats is GS-IBL; frame.py calls this outside renders only)."""
     if not enabled(scene):
         return
     for u in depsgraph.updates:
         idb = getattr(u.id, "original", u.id)
-        if isinstance(idb, bpy.types.Object) and is_mesh_splats(idb):
+        if isinstance(idb, bpy.types.Object) and (is_mesh_splats(idb)
+                                                  or (is_native_splats(idb) and draws_native(scene))):
             ensure(scene)
             return
 

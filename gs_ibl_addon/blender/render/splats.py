@@ -7,7 +7,12 @@ uploads nothing, a moving splat object uploads the scene again (its splats are r
 job and kept until the job ends).
 
 Which objects: our mesh splat objects the render depsgraph holds (their camera icon, hide_render, on; Object >
-Visibility > Camera on). Blender 5.3's native splat Point Clouds are left to Blender, which renders them itself.
+Visibility > Camera on). Blender 5.3's native splat Point Clouds are the user's choice (Scene.gs_ibl_render.
+native_splats): left to Blender, which renders them itself, or drawn by us with the rest (read as a bake reads them:
+splats/object.py read_steps). Then Blender must not draw them too: their copy in the render's depsgraph (evaluated,
+its camera visibility) is turned off for this render alone, after that depsgraph was evaluated for the frame and
+before the engine reads it (frame_change_post); the user's object is never written, so nothing needs restoring
+after the render, on Esc or on an undo.
 """
 from __future__ import annotations
 
@@ -28,13 +33,22 @@ from ..splats.object import (PROXY_TREE_ROLE, colour_space_of, is_mesh_splats, i
 KEEP = 2  # GPU scenes kept (two view layers with different objects alternate without uploads)
 _renderers: "OrderedDict[tuple, object]" = OrderedDict()
 _locals: dict[tuple, SplatScene] = {}  # geometry key -> the object's splats in object space, during a render job
+_hidden: set[str] = set()  # native objects we draw in this render job (their evaluated copies hidden from Blender)
 uploads = 0  # scenes uploaded so far (tests see when a frame re-used the GPU copy)
 
 
+def draws_native(scene) -> bool:
+    """Whether F12 draws Blender 5.3's native splat objects with our renderer (Native Splats: GS-IBL)."""
+    s = getattr(scene, "gs_ibl_render", None)
+    return getattr(s, "native_splats", "BLENDER") == "GSIBL"
+
+
 def collect(dg) -> tuple[list[tuple[object, np.ndarray]], list[str]]:
-    """(our splat objects the render sees, each (original object, world matrix at this frame): instances
-    included; names of native splat objects left to Blender)."""
+    """(splat objects we draw, each (original object, world matrix at this frame): instances included; names of
+    native splat objects left to Blender). With Native Splats: GS-IBL the native ones the camera sees are ours, and
+    their evaluated copies are hidden from the render's engine (module docstring)."""
     ours, native = [], []
+    with_native = draws_native(dg.scene)
     for inst in dg.object_instances:
         ob = inst.object
         orig = ob.original
@@ -42,17 +56,27 @@ def collect(dg) -> tuple[list[tuple[object, np.ndarray]], list[str]]:
             if getattr(ob, "visible_camera", True):
                 ours.append((orig, np.array(inst.matrix_world, np.float64)))
         elif is_native_splats(orig):
-            native.append(orig.name)
+            if not with_native:
+                native.append(orig.name)
+                continue
+            # one evaluated copy serves every instance of it, and a persistent render keeps it between frames:
+            # what we hid is known by name for the rest of the job
+            if getattr(ob, "visible_camera", True) or orig.name in _hidden:
+                ours.append((orig, np.array(inst.matrix_world, np.float64)))
+                _hidden.add(orig.name)
+                ob.visible_camera = False
     return ours, native
 
 
 def render_visible(scene, view_layer=None) -> tuple[list, list, list]:
-    """(ours that F12 draws, ours with the camera icon off, native ones Blender renders) among the scene's objects,
-    as the panel says it (no depsgraph: the objects as they are now)."""
+    """(splat objects that F12 draws with our renderer, ours with the camera icon off, native ones Blender renders)
+    among the scene's objects, as the panel says it (no depsgraph: the objects as they are now). Native ones are in
+    the first list with Native Splats: GS-IBL."""
     layer = view_layer or scene.view_layers[0]
+    with_native = draws_native(scene)
     drawn, hidden, native = [], [], []
     for ob in scene.objects:
-        if is_mesh_splats(ob):
+        if is_mesh_splats(ob) or (with_native and is_native_splats(ob)):
             visible = not ob.hide_render and ob.visible_camera and _in_layer(ob, layer)
             (drawn if visible else hidden).append(ob)
         elif is_native_splats(ob) and not ob.hide_render:
@@ -126,6 +150,7 @@ def renderer_for(items: list[tuple[object, np.ndarray]], near: float):
 def end_job() -> None:
     """A render job ended: the objects' splats read for it are let go (the GPU scenes stay for the next F12)."""
     _locals.clear()
+    _hidden.clear()
 
 
 def clear() -> None:

@@ -162,6 +162,10 @@ def _draw_render_settings(layout, context) -> None:
             row.prop(rs, "shadows", icon="LIGHT_SUN")
             if rs.shadows:
                 row.prop(rs, "shadow_strength", text="Strength", slider=True)
+        if hasattr(rs, "native_splats") and any(is_native_splats(o) for o in scene.objects):  # Blender 5.3+
+            row = col.row(align=True)
+            row.label(text="Native Splats")
+            row.prop(rs, "native_splats", expand=True)
     line, notes = render_setup.describe(scene, getattr(context, "view_layer", None))
     _label_block(col, context, line, icon="RENDER_STILL")
     for note in notes:

@@ -167,6 +167,14 @@ class GSIBL_RenderSettings(bpy.types.PropertyGroup):
                           description="Meshes darken the splats under them (shadows and contact darkening), lit "
                                       "from the baked probe whose World the scene uses; the same in Cycles and "
                                       "EEVEE. Needs a baked probe")
+    native_splats: EnumProperty(
+        name="Native Splats", default="GSIBL", update=_render_setting_changed,
+        items=(("BLENDER", "Blender", "Blender 5.3 renders its own Gaussian-splat objects (Cycles path-traces them: "
+                "they reflect and cast shadows, slowly and with noise; EEVEE rasterizes them)"),
+               ("GSIBL", "GS-IBL", "GS-IBL draws Blender's Gaussian-splat objects with the other splats, by depth "
+                "with the meshes, as 3D Gaussian Splatting's viewers show them; Blender leaves them out of that "
+                "render (the objects are not changed)")),
+        description="Who draws Blender 5.3's own Gaussian-splat objects in F12 renders")
     shadow_strength: FloatProperty(name="Shadow Strength", default=1.0, min=0.0, max=1.0, subtype="FACTOR",
                                    description="How much of the light the meshes block is taken from the splats "
                                                "(1: all of it, as a path tracer would)")
