@@ -43,6 +43,7 @@ BRIGHT_MAP = 256  # shadow map side (texels) for the bright part's and the light
 SKY_MAP = 128  # for the sky's: many soft overlapping shadows need less detail
 MAX_SIDE = 480  # receivers are computed on a grid no larger than this (the frame's larger side, in samples)
 MIN_ALPHA = 0.05  # pixels of less splat coverage are left as they are
+DEPTH_TOLERANCE = 0.03  # upsampling: a sample this much nearer or farther (relative) is on another surface
 
 
 @dataclass(frozen=True)
@@ -251,9 +252,14 @@ def visibility(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, direct
     return vis
 
 
-def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samples: LightSamples) -> np.ndarray:
+def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samples: LightSamples,
+                 chunk: int = 1 << 15) -> np.ndarray:
     """(N, 3) per RGB channel the share of the light reaching each point (N, 3) with normal (N, 3) that ``tris``
-    (m, 3, 3) leave: 1 where nothing blocks it; 1 for points without a normal (NaN)."""
+    (m, 3, 3) leave: 1 where nothing blocks it; 1 for points without a normal (NaN).
+
+    The light without meshes, sum_k max(0, n . l_k) L_k, is one matrix product; what the meshes block is looked up
+    only for the points whose way to a sample passes the meshes' bounding sphere (most points, for most samples,
+    are not in any shadow)."""
     pts = np.asarray(points, np.float64).reshape(-1, 3)
     nrm = np.asarray(normals, np.float64).reshape(-1, 3)
     ok = np.isfinite(pts).all(1) & np.isfinite(nrm).all(1)
@@ -262,49 +268,64 @@ def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samp
     if not len(tris) or not samples.count or not ok.any():
         return ratio
     p, n = pts[ok], nrm[ok]
-    num = np.zeros((len(p), 3))
-    den = np.zeros((len(p), 3))
-    for d, wgt, side in zip(samples.directions, samples.weights, samples.map_sides):
-        cos = n @ d
-        lit = cos > 0
-        if not lit.any():
+    dirs, weights = samples.directions, samples.weights
+    den = np.concatenate([np.maximum(n[i:i + chunk] @ dirs.T, 0.0) @ weights for i in range(0, len(n), chunk)])
+    verts = tris.reshape(-1, 3)
+    centre = 0.5 * (verts.min(0) + verts.max(0))
+    radius = float(np.sqrt(((verts - centre) ** 2).sum(1).max())) * 1.01 + 1e-6
+    v = centre - p
+    vv = (v * v).sum(1)
+    blocked = np.zeros((len(p), 3))
+    for d, wgt, side in zip(dirs, weights, samples.map_sides):
+        t = v @ d  # along the way to the light, to the sphere's centre
+        near = np.where(t > 0, vv - t * t, vv) < radius * radius
+        idx = np.nonzero(near)[0]
+        if not len(idx):
             continue
-        c = np.where(lit, cos, 0.0)
-        den += c[:, None] * wgt
-        v = np.ones(len(p))
-        v[lit] = visibility(p[lit], n[lit], tris, d, int(side))
-        num += (c * v)[:, None] * wgt
-    ratio[ok] = np.where(den > 0, num / np.where(den > 0, den, 1.0), 1.0)
+        cos = n[idx] @ d
+        idx, cos = idx[cos > 0], cos[cos > 0]
+        if not len(idx):
+            continue
+        vis = visibility(p[idx], n[idx], tris, d, int(side))
+        blocked[idx] += ((1.0 - vis) * cos)[:, None] * wgt
+    ratio[ok] = np.where(den > 0, 1.0 - blocked / np.where(den > 0, den, 1.0), 1.0)
     return np.clip(ratio, 0.0, 1.0)
 
 
 # ---- a frame ----
 
 def _upsample(ratio_lo: np.ndarray, z_lo: np.ndarray, z: np.ndarray, step: int) -> np.ndarray:
-    """Full-size (H, W, 3) ratio from the grid of every ``step``-th pixel (block centres): bilinear over the four
-    nearest grid samples, each weighted down by its depth's difference from the pixel's own (joint bilateral), so
-    a shadow on the floor does not bleed onto a nearer object; a pixel no sample matches takes the nearest."""
+    """Full-size (H, W, 3) ratio from the grid of every ``step``-th pixel (block middles): bilinear over the four
+    nearest grid samples, those whose depth is not within DEPTH_TOLERANCE of the pixel's own all but left out
+    (joint bilateral), so a shadow on the floor does not bleed onto a nearer object. Pixels of one phase (the same
+    place within their block) share their bilinear weights and their samples are shifted copies of the grid, so
+    the work is step^2 x 4 whole-grid array operations, no gathers."""
     h, w = z.shape
-    hl, wl = z_lo.shape
     off = (step - 1) // 2
-    gy = np.clip((np.arange(h) - off) / step, 0, hl - 1)
-    gx = np.clip((np.arange(w) - off) / step, 0, wl - 1)
-    y0 = np.minimum(np.floor(gy).astype(int), max(hl - 2, 0))
-    x0 = np.minimum(np.floor(gx).astype(int), max(wl - 2, 0))
-    fy, fx = gy - y0, gx - x0
-    zf = np.where(np.isfinite(z), z, np.nan)
-    acc = np.zeros((h, w, 3))
-    wsum = np.zeros((h, w))
-    for dy in (0, 1):
-        for dx in (0, 1):
-            yy, xx = np.minimum(y0 + dy, hl - 1), np.minimum(x0 + dx, wl - 1)
-            bil = (fy if dy else 1 - fy)[:, None] * (fx if dx else 1 - fx)[None, :]
-            zs = z_lo[yy][:, xx]
-            rel = np.abs(zs - zf) / np.maximum(np.abs(zf), 1e-9)
-            wgt = bil * np.exp(-np.square(np.nan_to_num(rel, nan=1.0) / 0.02)) + 1e-12 * bil
-            acc += wgt[..., None] * ratio_lo[yy][:, xx]
-            wsum += wgt
-    return acc / np.maximum(wsum, 1e-30)[..., None]
+    zp = np.pad(z_lo.astype(np.float32), 1, mode="edge")  # the grid's edge repeated: clamped taps
+    rp = np.pad(ratio_lo.astype(np.float32), ((1, 1), (1, 1), (0, 0)), mode="edge")
+    out = np.empty((h, w, 3), np.float32)
+    for a in range(min(step, h)):
+        ya = int(np.floor((a - off) / step))
+        fy = np.float32((a - off) / step - ya)
+        for b in range(min(step, w)):
+            xb = int(np.floor((b - off) / step))
+            fx = np.float32((b - off) / step - xb)
+            zf = z[a::step, b::step].astype(np.float32)
+            ka, kb = zf.shape
+            tol = np.float32(DEPTH_TOLERANCE) * np.abs(zf)
+            acc = np.zeros((ka, kb, 3), np.float32)
+            wsum = np.zeros((ka, kb), np.float32)
+            for dy in (0, 1):
+                for dx in (0, 1):
+                    y, x = 1 + ya + dy, 1 + xb + dx
+                    bil = (fy if dy else 1 - fy) * (fx if dx else 1 - fx)
+                    same = np.abs(zp[y:y + ka, x:x + kb] - zf) <= tol  # NaN (no surface) is never the same
+                    wgt = np.where(same, bil, np.float32(1e-6) * bil)
+                    acc += wgt[..., None] * rp[y:y + ka, x:x + kb]
+                    wsum += wgt
+            out[a::step, b::step] = acc / np.maximum(wsum, np.float32(1e-30))[..., None]
+    return out
 
 
 def frame_ratio(depth: np.ndarray, alpha: np.ndarray, tris, samples: LightSamples, cam_to_world, tan_x: float,
@@ -327,7 +348,7 @@ def frame_ratio(depth: np.ndarray, alpha: np.ndarray, tris, samples: LightSample
     rays, origin = camera_rays(cam_to_world, tan_x, tan_y, width, height, cx, cy, window, step)
     hl, wl = z_lo.shape
     p, n = surface_points(z_lo, rays, origin)
-    ratio = shadow_ratio(p.reshape(-1, 3), n.reshape(-1, 3), tris, samples).reshape(hl, wl, 3)
+    ratio = shadow_ratio(p.reshape(-1, 3), n.reshape(-1, 3), tris, samples).reshape(hl, wl, 3).astype(np.float32)
     if step > 1:
         ratio = _upsample(ratio, z_lo, z, step)
     return np.where(covered[..., None], ratio, 1.0).astype(np.float32)
