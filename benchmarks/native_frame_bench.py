@@ -70,8 +70,11 @@ class StandIn:
     """Our own image as the reference (no CUDA, no time for the numpy port): agreement with it is 'as ours'."""
     name = "gs-ibl (stand-in)"
 
-    def __init__(self, ours) -> None:
+    def __init__(self, ours, scene, near: float, far: float) -> None:
+        import fidelity_bench as fb
+        from dataclasses import replace
         self.ours = ours
+        self.srgb = fb.Ours(replace(scene, colour_space="srgb"), near, far, ours.r.ctx)
 
     def render(self, cv) -> np.ndarray:
         return self.ours.render(cv)
@@ -81,10 +84,39 @@ def make_reference(kind: str, scene, near: float, far: float, ours):
     """gsplat on CUDA (auto, gsplat), else the numpy port (numpy) or our own image (ours)."""
     import fidelity_bench as fb
     if kind == "ours":
-        return StandIn(ours)
+        return StandIn(ours, scene, near, far)
     if kind == "numpy":
         return fb.ClassicNumpy(scene, near, far)
     return fb.make_peer(kind, scene, near, far)
+
+
+def linear_rule(ref, scene, cv, space: str) -> np.ndarray | None:
+    """For a capture in sRGB: the reference's splats blended by Blender's rule (each splat's colour decoded to
+    linear light, blended, the result encoded again: what any Blender render of them shows in its Standard view),
+    where gsplat blends the sRGB values themselves. None for a linear capture (the rules agree) or a reference
+    without colour input (the numpy port)."""
+    import fidelity_bench as fb
+    from gs_ibl_addon.core.colour import linear_to_srgb, srgb_to_linear
+    from gs_ibl_addon.core.sh import eval_sh_color
+    if space != "srgb":
+        return None
+    if isinstance(ref, StandIn):
+        img = ref.srgb.render(cv)
+    elif isinstance(ref, fb.GsplatCuda):
+        torch = ref.torch
+        d = scene.positions.astype(np.float64) - cv.matrix[:3, 3]
+        rgb = srgb_to_linear(eval_sh_color(scene.sh, d / np.linalg.norm(d, axis=1, keepdims=True)))
+        colours = torch.from_numpy(np.ascontiguousarray(rgb, np.float32)).cuda()
+        vm, k = fb.opencv_camera(cv)
+        tt = lambda a: torch.tensor(np.array(a)[None], dtype=torch.float32, device="cuda")  # noqa: E731
+        c, a, _ = ref.raster(*ref.t[:4], colours, tt(vm), tt(k), cv.width, cv.height, sh_degree=None,
+                             near_plane=ref.near, far_plane=ref.far, rasterize_mode="classic", packed=True)
+        img = np.concatenate([c[0].float().cpu().numpy(), a[0].float().cpu().numpy()], -1)
+    else:
+        return None
+    img = img.astype(np.float32)
+    img[..., :3] = linear_to_srgb(np.clip(img[..., :3], 0, None))
+    return img
 
 
 def time_frames(step, rounds: int = 5) -> list[float]:
@@ -101,6 +133,7 @@ def time_frames(step, rounds: int = 5) -> list[float]:
 def run_refs(args) -> None:
     import fidelity_bench as fb
     from bench_common import append_csv, gpu_clock, hold_gpu_clock
+    from gs_ibl_addon.core.formats import read_scene
     from gs_ibl_addon.core.vk import get_context
     hold = hold_gpu_clock()  # noqa: F841 - the CUDA context holds the SM clock (shared/NOTES-vulkan-and-gpu.md)
     ctx = get_context()
@@ -113,6 +146,7 @@ def run_refs(args) -> None:
     for spec in [s for s in args.captures.split(",") if s]:
         name, path, up = fb.parse_capture(spec)
         scene = fb.load_capture(path)
+        space = read_scene(path).colour_space  # the file's own (load_capture reads its SH as linear values)
         ours = fb.Ours(scene, args.near, args.far, ctx)
         ref = make_reference(args.peer, scene, args.near, args.far, ours)
         log(f"{name}: {scene.count:,} splats, reference: {ref.name}, {ctx.device_name}")
@@ -125,6 +159,9 @@ def run_refs(args) -> None:
             a, b = ours.render(cv), ref.render(cv)
             arrays[f"ours_{cv.name}"], arrays[f"gsplat_{cv.name}"] = a.astype(np.float16), b.astype(np.float16)
             arrays[f"camera_{cv.name}"] = np.array([*cv.matrix.ravel(), cv.tan_x, cv.tan_y, *cv.shift])
+            lin = linear_rule(ref, scene, cv, space)
+            if lin is not None:
+                arrays[f"gsplat_lin_{cv.name}"] = lin.astype(np.float16)
             row = {"device": ctx.device_name, "reference": ref.name, "date": date, "capture": name,
                    "splats": scene.count, "view": cv.name, "core_radii": cv.factor, "width": w, "height": h,
                    "psnr_small": fb.compare(a, b)["psnr"]}
@@ -158,6 +195,8 @@ def run_refs(args) -> None:
         save_sheet(os.path.join(args.out, f"refs_{name}.png"), f"{name}: {ref.name} (top)\nand gs-ibl (bottom), "
                    f"{w}x{h}", arrays)
         ours.close()
+        if isinstance(ref, StandIn):
+            ref.srgb.close()
         del ref
     log(f"wrote {args.out}")
 
@@ -166,7 +205,7 @@ def save_sheet(path: str, title: str, arrays: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    views = sorted(k.split("_", 1)[1] for k in arrays if k.startswith("gsplat_"))
+    views = sorted(k.split("_", 1)[1] for k in arrays if k.startswith("ours_"))
     fig, axes = plt.subplots(2, len(views), figsize=(2.4 * len(views), 3.0), squeeze=False)
     for j, v in enumerate(views):
         for i, key in enumerate(("gsplat", "ours")):
