@@ -10,6 +10,8 @@ const uint SORT_BLOCK = 4096u;
 const float STRIP_PAD_REL = 0.001;
 const float STRIP_PAD_ABS = 4e-07;
 const float STRIP_MAX_COND = 10000.0;
+const uint SORT_RADIAL = 0u;
+const uint SORT_VIEW_DEPTH = 1u;
 struct View {  // VIEW_ROWS: the components each row holds
     vec4 right_tanx;  // right right right tan_x
     vec4 down_tany;  // down down down tan_y

@@ -32,6 +32,7 @@ layout(push_constant) uniform P {
     uint lod;  // 1: nodes of a level of detail, drawn where in the cut of threshold lod_tau
     float lod_tau; float lod_cell; float lod_ox; float lod_oy; float lod_oz;  // threshold, level-1 cell, grid corner
     uint srgb;  // the scene's colour space (core/colour.py): 1 "srgb" (trained on photos), 0 "linear"
+    uint sort_order;  // SORT_RADIAL or SORT_VIEW_DEPTH (constants.py): the batch's ViewBatch.sort
 } p;
 
 const uint LOD_NO_PARENT = 255u;  // render/lod.py NO_PARENT: no stored ancestor, its error is infinite
@@ -105,14 +106,14 @@ uint depth_sort_key(float dist) {
     return floatBitsToUint(dist) >> DEPTH_KEY_SHIFT;
 }
 
-// The sort depth (splat_math.depth_keys): a batch of one camera view (camera frames, the viewport; not one face of
-// a probe rendered alone, whose faces must share one order: energy_preserving tells them apart) sorts by depth along its
-// view axis, z = forward . mu, as 3DGS does, clamped to SORT_DEPTH_MIN (> 0: positive floats order as their bits)
-// so that a splat centred behind the camera plane comes first; probes (six faces) by distance from the origin,
-// one order for all their views. gs_raster.glsl's depth-cut skip relies on this order (dist_reach).
+// The sort depth (splat_math.depth_keys), as the batch says (ViewBatch.sort): SORT_VIEW_DEPTH (a camera view:
+// camera frames, the viewport) by depth along its view axis, z = forward . mu, as 3DGS does, clamped to
+// SORT_DEPTH_MIN (> 0: positive floats order as their bits) so that a splat centred behind the camera plane comes
+// first; SORT_RADIAL (probes, also one face of a probe rendered alone: its faces share one order) by distance from
+// the origin. gs_raster.glsl's depth-cut skip relies on this order (dist_reach).
 const float SORT_DEPTH_MIN = 1e-20;
 float sort_depth(vec3 mu, float dist) {
-    return p.n_views == 1u && p.energy_preserving == 0u ? max(dot(views[0].fwd.xyz, mu), SORT_DEPTH_MIN) : dist;
+    return p.sort_order == SORT_VIEW_DEPTH ? max(dot(views[0].fwd.xyz, mu), SORT_DEPTH_MIN) : dist;
 }
 
 void main() {

@@ -61,3 +61,30 @@ def test_one_view_sorts_by_view_depth_and_probes_by_distance():
     assert np.abs(img - r_img)[both].max() > 0.05  # the radial order would look different there
     # green B in front: greener and less red than A in front, wherever both cover a pixel
     assert np.all((img - r_img)[both][:, 1] > -TOL) and np.all((img - r_img)[both][:, 0] < TOL)
+
+
+def test_the_order_is_the_batch_s_field():
+    """ViewBatch.sort says the order (vk/constants.py, gs_preprocess's sort_order), whatever the batch's views:
+    a face taken out of a cube keeps the radial order, and a camera view asked to sort radially does, on the GPU as in
+    the numpy twin."""
+    from dataclasses import replace
+
+    import pytest
+
+    from gs_ibl_addon.core.vk.constants import SORT_RADIAL, SORT_VIEW_DEPTH
+    cube = ViewBatch.cubemap((0, 0, 0), 16)
+    assert cube.sort == SORT_RADIAL and ViewBatch.cubemaps(np.zeros((2, 3)), 16).sort == SORT_RADIAL
+    assert replace(cube, views=cube.views[2:3]).sort == SORT_RADIAL  # one face rendered alone (a big bake)
+    camera = ViewBatch.camera(CAM, 1.0, 0.75, W, H)
+    assert camera.sort == SORT_VIEW_DEPTH and ViewBatch.pinhole((0, 0, 0), (0, 1, 0), 60, W, H).sort == SORT_VIEW_DEPTH
+    # a batch built field by field (the viewport's): view depth for one 3DGS-look view, as before the field
+    assert ViewBatch(camera.origin, camera.views, camera.pixel_angle).sort == SORT_VIEW_DEPTH
+    with pytest.raises(ValueError, match="one view"):
+        replace(cube, sort=SORT_VIEW_DEPTH)
+    radial = replace(camera, sort=SORT_RADIAL)
+    scene = _pair()
+    with SplatRenderer(scene) as r:
+        img = r.render(radial).images[0]
+        _, order = r.read_depth_order(2)
+        assert list(order) == [0, 1]  # A, nearer the origin, first
+    np.testing.assert_allclose(img, render_reference(scene, radial)[0], atol=TOL)

@@ -881,8 +881,9 @@ class SplatRenderer:
         shape = self._shape(batch, lod_k, group)
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
         kernels = batch_kernels(self.ctx, batch, total_tiles, layers)
-        key = (shape, bool(batch.energy_preserving), bool(timestamps), bool(depth), self.capacity, self.cut_capacity,
-               caps, check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"], kernels["emit"], min_chunks)
+        key = (shape, bool(batch.energy_preserving), batch.sort, bool(timestamps), bool(depth), self.capacity,
+               self.cut_capacity, caps, check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"],
+               kernels["emit"], min_chunks)
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
@@ -1001,6 +1002,7 @@ class SplatRenderer:
                      (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
                      n=n, dilation_angle=batch.dilation, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
+                     sort_order=int(batch.sort),
                      **grid)
         stamp("preprocess")
         pairs = n * probes

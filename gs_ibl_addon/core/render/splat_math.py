@@ -31,7 +31,8 @@ from ..colour import splat_radiance
 from ..scene import SplatScene, quat_to_matrix
 from ..sh import eval_sh_color
 # shared with the GLSL
-from ..vk.constants import DEPTH_KEY_SHIFT, STRIP_MAX_COND, STRIP_PAD_ABS, STRIP_PAD_REL, TIE_BITS, TILE
+from ..vk.constants import (DEPTH_KEY_SHIFT, SORT_VIEW_DEPTH, STRIP_MAX_COND, STRIP_PAD_ABS, STRIP_PAD_REL, TIE_BITS,
+                            TILE)
 
 DILATION_PX2 = 0.3
 PROBE_DILATION_ANGLE = 2.0 / 1024  # a 1024^2 cube face's pixel: the truth every probe face size converges to
@@ -229,11 +230,10 @@ def sort_depths(scene: SplatScene, origin: np.ndarray, forward: np.ndarray | Non
 
 
 def batch_forward(batch) -> np.ndarray | None:
-    """The forward that orders a ViewBatch's splats (sort_depths): its view's for a batch of one camera view, None
-    for several views and for probe faces (energy-preserving), even one face rendered alone: a probe's faces share
-    one order (gs_preprocess.comp sort_depth)."""
-    camera = len(batch.views) == 1 and not batch.energy_preserving
-    return np.asarray(batch.views[0].forward, np.float64) if camera else None
+    """The forward that orders a ViewBatch's splats (sort_depths): its view's where the batch sorts by view depth
+    (ViewBatch.sort: camera views), None where it sorts by distance (probe faces, even one face rendered alone: a
+    probe's faces share one order) (gs_preprocess.comp sort_depth)."""
+    return np.asarray(batch.views[0].forward, np.float64) if batch.sort == SORT_VIEW_DEPTH else None
 
 
 def depth_keys(scene: SplatScene, origin: np.ndarray, forward: np.ndarray | None = None) -> np.ndarray:

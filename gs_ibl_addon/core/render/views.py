@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..cubemap import FACE_BASES
-from ..vk.constants import TILE
+from ..vk.constants import SORT_RADIAL, SORT_VIEW_DEPTH, TILE
 from .splat_math import PROBE_DILATION_ANGLE
 
 
@@ -72,6 +72,21 @@ class ViewBatch:
     # Several probes (ViewBatch.cubemaps): (N, 3) origins, each seeing ``views``; ``origin`` is the first.
     probe_origins: np.ndarray | None = None
     dilation_angle: float | None = None  # the anti-aliasing dilation's pixel angle; None: pixel_angle's
+    # The order splats composite in (vk/constants.py): SORT_RADIAL (probes: cubemap, cubemaps; a face taken out of
+    # a cube keeps it) or SORT_VIEW_DEPTH (camera views: camera, pinhole). None: view depth for a batch of one view
+    # that is not energy-preserving, radial otherwise (a batch built field by field, as the viewport's).
+    sort: int | None = None
+
+    def __post_init__(self) -> None:
+        if self.sort is None:
+            camera = len(self.views) == 1 and not self.energy_preserving
+            object.__setattr__(self, "sort", SORT_VIEW_DEPTH if camera else SORT_RADIAL)
+        if self.sort not in (SORT_RADIAL, SORT_VIEW_DEPTH):
+            raise ValueError(f"sort {self.sort!r} must be SORT_RADIAL ({SORT_RADIAL}) or SORT_VIEW_DEPTH "
+                             f"({SORT_VIEW_DEPTH})")
+        if self.sort == SORT_VIEW_DEPTH and len(self.views) != 1:
+            raise ValueError(f"a batch of {len(self.views)} views sorts by distance (SORT_RADIAL): depth along a "
+                             "view's axis orders one view")
 
     @property
     def dilation(self) -> float:
@@ -98,7 +113,7 @@ class ViewBatch:
         views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
                       for f in range(6))
         return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving,
-                         dilation_angle=PROBE_DILATION_ANGLE if energy_preserving else None)
+                         dilation_angle=PROBE_DILATION_ANGLE if energy_preserving else None, sort=SORT_RADIAL)
 
     @staticmethod
     def cubemaps(origins, face_size: int) -> "ViewBatch":
@@ -138,7 +153,8 @@ class ViewBatch:
             raise ValueError(f"field of view {fov_deg} degrees is outside (0, 179)")
         tx = float(np.tan(np.radians(fov_deg) / 2))
         ty = tx * height / width
-        return ViewBatch(o, (View(f, r, down, tx, ty, int(width), int(height)),), 2.0 * tx / width)
+        return ViewBatch(o, (View(f, r, down, tx, ty, int(width), int(height)),), 2.0 * tx / width,
+                         sort=SORT_VIEW_DEPTH)
 
     @staticmethod
     def camera(cam_to_world, tan_x: float, tan_y: float, width: int, height: int, shift=(0.0, 0.0),
@@ -183,4 +199,4 @@ class ViewBatch:
         r = r / np.linalg.norm(r)
         down = np.cross(f, r)  # -Y: Blender's camera is right-handed (X right, Y up, looking down -Z)
         view = View(f, r, down, tx, ty, x1 - x0, y1 - y0, cx, -cy, x0, y0, width, height)
-        return ViewBatch(m[:3, 3].copy(), (view,), 2.0 * tx / width)
+        return ViewBatch(m[:3, 3].copy(), (view,), 2.0 * tx / width, sort=SORT_VIEW_DEPTH)

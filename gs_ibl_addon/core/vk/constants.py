@@ -26,6 +26,12 @@ SORT_BLOCK = 4096  # keys per workgroup of the radix histogram and scatter passe
 STRIP_PAD_REL = 1e-3
 STRIP_PAD_ABS = 4e-7
 STRIP_MAX_COND = 1e4
+# The order a batch composites its splats in (ViewBatch.sort, gs_preprocess's push constant sort_order,
+# splat_math.batch_forward): SORT_RADIAL by distance from the origin, one order for all the batch's views (probe
+# faces, also one face of a probe rendered alone); SORT_VIEW_DEPTH by depth along its one view's axis, as 3DGS does
+# (camera frames, the viewport).
+SORT_RADIAL = 0
+SORT_VIEW_DEPTH = 1
 
 # The View struct every renderer shader reads (render/views.py View, one per view of a batch): rows of four 4-byte
 # components, each named for the value it holds ("-": unused; a vector's name repeats over its components). Written
@@ -44,7 +50,7 @@ VIEW_ROWS = (
 VIEW_BYTES = 16 * len(VIEW_ROWS)
 
 GLSL_CONSTANTS = ("TILE", "MAX_VIEWS", "PREP", "DEPTH_KEY_SHIFT", "SCAN_BLOCK", "SORT_BLOCK",
-                  "STRIP_PAD_REL", "STRIP_PAD_ABS", "STRIP_MAX_COND")
+                  "STRIP_PAD_REL", "STRIP_PAD_ABS", "STRIP_MAX_COND", "SORT_RADIAL", "SORT_VIEW_DEPTH")
 
 
 def glsl_source() -> str:
