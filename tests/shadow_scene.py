@@ -7,9 +7,9 @@ analytic sun-like sky (synthetic.BrightPatch: a gradient plus a 7-degree disc ab
 
 The measurement: ours is the splat floor's F12 colour with Shadows on Splats over the same with it off (the ratio
 the splats were multiplied by); Cycles' is a diffuse mesh plane of the splats' colour in place of the splat floor,
-path traced in the same World with the sphere over the same without it (direct light: the sphere's bounce light,
-which our shadows do not add, is left out; ``bounces`` puts it back). D = 1 - ratio on floor pixels the sphere
-does not cover.
+path traced in the same World with the sphere over the same without it (4 bounces: the light the grey sphere
+reflects into its own shadow is in it, as ours adds it from the sphere's material colour). D = 1 - ratio on floor
+pixels the sphere does not cover.
 """
 from __future__ import annotations
 
@@ -62,7 +62,8 @@ def _diffuse(bpy, name, rgb):
     return mat
 
 
-def build(bpy, width: int, height: int, samples: int = 16, bounces: int = 0, sky_n: int = 6000):
+def build(bpy, width: int, height: int, samples: int = 16, bounces: int = 4, sky_n: int = 6000,
+          sphere_albedo: float = 0.5):
     """The scene in the current (empty) file: splat floor and sky, sphere, camera, our World; Cycles on the CPU."""
     from gs_ibl_addon.blender.lighting import world as gw
     from gs_ibl_addon.blender.splats.object import create_splat_object
@@ -75,7 +76,7 @@ def build(bpy, width: int, height: int, samples: int = 16, bounces: int = 0, sky
     sphere = bpy.context.active_object
     sphere.name = "Sphere"
     bpy.ops.object.shade_smooth()
-    sphere.data.materials.append(_diffuse(bpy, "Grey", (0.5, 0.5, 0.5)))
+    sphere.data.materials.append(_diffuse(bpy, "Grey", (sphere_albedo,) * 3))
     cd = bpy.data.cameras.new("Cam")
     cd.lens, cd.sensor_width = 40.0, 36.0
     cam = bpy.data.objects.new("Cam", cd)

@@ -135,3 +135,18 @@ def test_apply_darkens_the_surface_layer_only():
     np.testing.assert_allclose(b[:, 1, :3], 0.1875)
     np.testing.assert_allclose(b[:, 0, :3], 0.25)
     np.testing.assert_allclose(f[..., 3], 0.5)  # coverage kept
+
+
+def test_a_meshs_reflected_light_fills_its_shadow():
+    """Uniform sky (radiance 1) over a point under a horizontal disc of albedo rho: the disc's underside sees the
+    lower sky (irradiance pi), so it shines rho back where it blocks 1: the loss is F (1 - rho), F its view
+    factor. The samples' solid angles add up to the sphere's."""
+    s = shadows.light_samples(np.ones((128, 256, 3)))
+    np.testing.assert_allclose(s.solid_angles.sum(), 4 * np.pi, rtol=1e-3)
+    sun = shadows.light_samples(SKY(cubemap.latlong_directions(512, 256)))
+    np.testing.assert_allclose(sun.solid_angles.sum(), 4 * np.pi, rtol=0.05)
+    a, h = 1.0, 1.0
+    f = a * a / (a * a + h * h)
+    for rho in (0.0, 0.5, 0.8):
+        r = shadows.shadow_ratio(np.zeros((1, 3)), np.array([[0, 0, 1.0]]), disc(a, h), s, albedo=(rho,) * 3)
+        assert abs(r[0, 0] - (1 - f * (1 - rho))) < 0.03, (rho, r[0, 0])

@@ -2,10 +2,10 @@
 
 The target, small: tests/shadow_scene.py's sphere over a splat floor under a sun-like splat sky, 80x60. Ours is
 the floor's F12 with the setting on over off; the reference is Cycles path tracing a diffuse plane of the splats'
-colour in the same World with the sphere over without it (64 spp, direct light). The darkening D = 1 - ratio must
-agree within 10 % of Cycles': over the shadowed region, over the whole floor, and per pixel (3x3 box filtered,
-median over the pixels ours darkens by more than 0.2). Measured here (2026-12-05): region 1.8 %, whole floor 1.9 %,
-per-pixel median 3.4 %; the full-size numbers are benchmarks/shadow_bench.py's.
+colour in the same World with the sphere over without it (64 spp, 4 bounces: the grey sphere's reflected light
+in its shadow, which ours adds from its material's colour). The darkening D = 1 - ratio must agree within 10 % of
+Cycles': over the shadowed region, over the whole floor, and per pixel (3x3 box filtered, median over the pixels
+ours darkens by more than 0.2). The full-size numbers are benchmarks/shadow_bench.py's.
 """
 from __future__ import annotations
 

@@ -110,10 +110,28 @@ def on_frame_change_post(scene, depsgraph=None) -> None:
         say(f"splats not drawn: {type(e).__name__}: {e}")
 
 
-def _mesh_triangles(dg) -> tuple[np.ndarray, np.ndarray]:
+def _albedo(ob) -> np.ndarray:
+    """The diffuse RGB a mesh reflects light with, as far as its active material says it plainly: a Principled or
+    Diffuse BSDF's colour where nothing is linked into it, else the material's viewport colour; without a
+    material Blender's default grey, 0.8."""
+    mat = getattr(ob, "active_material", None)
+    if mat is None:
+        return np.full(3, 0.8)
+    nt = getattr(mat, "node_tree", None)
+    for node in (nt.nodes if nt is not None else ()):
+        if node.bl_idname in ("ShaderNodeBsdfPrincipled", "ShaderNodeBsdfDiffuse"):
+            sock = node.inputs.get("Base Color") or node.inputs.get("Color")
+            if sock is not None and not sock.is_linked:
+                return np.array(sock.default_value[:3], np.float64)
+            break
+    return np.array(mat.diffuse_color[:3], np.float64)
+
+
+def _mesh_triangles(dg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World-space triangles (m, 3, 3) of the meshes the camera sees and of those that cast shadows (Object >
-    Visibility > Ray Visibility: Camera, Shadow; evaluated: modifiers, instances)."""
-    out, seen_by, casts = [], [], []
+    Visibility > Ray Visibility: Camera, Shadow; evaluated: modifiers, instances), and the casters' diffuse colour
+    (RGB, their mean by area)."""
+    out, seen_by, casts, albedo = [], [], [], []
     for inst in dg.object_instances:
         ob = inst.object
         seen, shadow = getattr(ob, "visible_camera", True), getattr(ob, "visible_shadow", True)
@@ -134,10 +152,14 @@ def _mesh_triangles(dg) -> tuple[np.ndarray, np.ndarray]:
         out.append(v[idx.reshape(-1, 3)])
         seen_by.append(np.full(len(tris), bool(seen)))
         casts.append(np.full(len(tris), bool(shadow)))
+        albedo.append(np.broadcast_to(_albedo(ob), (len(tris), 3)))
     if not out:
-        return np.zeros((0, 3, 3)), np.zeros((0, 3, 3))
+        return np.zeros((0, 3, 3)), np.zeros((0, 3, 3)), np.zeros(3)
     tri = np.concatenate(out)
-    return tri[np.concatenate(seen_by)], tri[np.concatenate(casts)]
+    cast = np.concatenate(casts)
+    area = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)[cast]
+    mean = (np.concatenate(albedo)[cast] * area[:, None]).sum(0) / max(area.sum(), 1e-30) if cast.any() else np.zeros(3)
+    return tri[np.concatenate(seen_by)], tri[cast], mean
 
 
 def check_fits(cam, splat_count: int, ctx) -> None:
@@ -201,7 +223,7 @@ def fill(scene, dg) -> None:
 def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
     """FRONT and BEHIND of the frame, the size of the compositor's images, rows top first."""
     t0 = time.perf_counter()
-    tris, casters = _mesh_triangles(dg)
+    tris, casters, albedo = _mesh_triangles(dg)
     rs = getattr(dg.scene_eval, "gs_ibl_render", None)
     shadowed = bool(getattr(rs, "shadows", False)) and len(casters) > 0
     z = mesh_depth(tris, cam.matrix, cam.tan_x, cam.tan_y, cam.width, cam.height, cam.cx, cam.cy, cam.window,
@@ -220,8 +242,8 @@ def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
                            "border)") from None
     t2 = time.perf_counter()
     if shadowed and depth and depth[0] is not None:
-        front, behind = _shadow(dg, cam, front, behind, depth[0], casters, no_mesh, float(rs.shadow_strength),
-                                record)
+        front, behind = _shadow(dg, cam, front, behind, depth[0], (casters, albedo), no_mesh,
+                                float(rs.shadow_strength), record)
     behind = np.where(no_mesh[..., None], 0.0, behind).astype(np.float32)
     record.update(splats=int(renderer.scene_count), triangles=int(len(tris)),
                   ms_mesh_depth=round(1e3 * (t1 - t0), 1), ms_splats=round(1e3 * (t2 - t1), 1))
@@ -262,7 +284,8 @@ def probe_light(scene) -> tuple[shadows.LightSamples | None, str | None]:
 
 
 def _shadow(dg, cam, front, behind, depth, casters, no_mesh, strength, record) -> tuple[np.ndarray, np.ndarray]:
-    """FRONT and BEHIND with the casters' shadows on the splat surface (core/render/shadows.py)."""
+    """FRONT and BEHIND with the shadows of ``casters`` (triangles, their diffuse colour) on the splat surface
+    (core/render/shadows.py)."""
     t0 = time.perf_counter()
     if "light" not in _job:  # once per render job: the World's image read, the light sampled
         _job["light"] = probe_light(dg.scene)
@@ -271,8 +294,9 @@ def _shadow(dg, cam, front, behind, depth, casters, no_mesh, strength, record) -
         say(why)
         return front, behind
     alpha = 1.0 - (1.0 - front[..., 3]) * (1.0 - behind[..., 3])
-    ratio = shadows.frame_ratio(depth, alpha, casters, samples, cam.matrix, cam.tan_x, cam.tan_y, cam.width,
-                                cam.height, cam.cx, cam.cy, cam.window)
+    tris, albedo = casters
+    ratio = shadows.frame_ratio(depth, alpha, tris, samples, cam.matrix, cam.tan_x, cam.tan_y, cam.width,
+                                cam.height, cam.cx, cam.cy, cam.window, albedo=albedo)
     front, behind = shadows.apply(front, behind, ratio, no_mesh, strength)
     record.update(ms_shadows=round(1e3 * (time.perf_counter() - t0), 1), light_samples=samples.count)
     return front, behind

@@ -49,10 +49,12 @@ DEPTH_TOLERANCE = 0.03  # upsampling: a sample this much nearer or farther (rela
 @dataclass(frozen=True)
 class LightSamples:
     """Directions toward the light (K, 3) unit, their RGB weights (K, 3) (irradiance at normal incidence each
-    carries) and the side of their shadow maps (K,)."""
+    carries), the side of their shadow maps (K,) and the solid angle each stands for (K,) (sr: what a mesh in
+    front of it replaces)."""
     directions: np.ndarray
     weights: np.ndarray
     map_sides: np.ndarray
+    solid_angles: np.ndarray
 
     @property
     def count(self) -> int:
@@ -110,10 +112,10 @@ def environment_samples(latlong: np.ndarray, bright_samples: int = BRIGHT_SAMPLE
     power = luma * omega
     total = float(power.sum())
     if total <= 0:
-        return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int))
+        return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int), np.zeros(0))
     bright = luma > BRIGHT_FACTOR * max(weighted_median(luma.ravel(), np.broadcast_to(omega, luma.shape).ravel()),
                                         1e-12)
-    dirs, weights, sides = [], [], []
+    dirs, weights, sides, omegas = [], [], [], []
     for mask, n, side in ((bright, bright_samples, BRIGHT_MAP), (~bright, sky_samples, SKY_MAP)):
         p = np.where(mask, power, 0.0)
         part = float(p.sum())
@@ -125,7 +127,8 @@ def environment_samples(latlong: np.ndarray, bright_samples: int = BRIGHT_SAMPLE
         dirs.append(_latlong_direction(rows, cols, h, w))
         weights.append(colour * (part / n))
         sides.append(np.full(n, side))
-    return LightSamples(np.concatenate(dirs), np.concatenate(weights), np.concatenate(sides))
+        omegas.append((part / n) / np.maximum(luma[texel], 1e-30))  # the sample's power over its radiance
+    return LightSamples(*(np.concatenate(x) for x in (dirs, weights, sides, omegas)))
 
 
 def _tangents(d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -150,7 +153,8 @@ def disc_samples(direction, irradiance, angle_deg: float, n: int = LIGHT_SAMPLES
     dirs = d + r[:, None] * (np.cos(a)[:, None] * t + np.sin(a)[:, None] * b)
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     w = np.tile(np.asarray(irradiance, np.float64) / n, (n, 1))
-    return LightSamples(dirs, w, np.full(n, BRIGHT_MAP))
+    omega = 2.0 * np.pi * (1.0 - np.cos(half)) / n
+    return LightSamples(dirs, w, np.full(n, BRIGHT_MAP), np.full(n, omega))
 
 
 def light_samples(latlong: np.ndarray | None, strength: float = 1.0, lights: list[dict] = ()) -> LightSamples:
@@ -160,13 +164,13 @@ def light_samples(latlong: np.ndarray | None, strength: float = 1.0, lights: lis
     parts = []
     if latlong is not None and strength > 0:
         env = environment_samples(latlong)
-        parts.append(LightSamples(env.directions, env.weights * strength, env.map_sides))
+        parts.append(LightSamples(env.directions, env.weights * strength, env.map_sides, env.solid_angles))
     parts += [disc_samples(li["direction"], li["irradiance"], li.get("angle", 0.0)) for li in lights]
     parts = [p for p in parts if p.count]
     if not parts:
-        return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int))
+        return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int), np.zeros(0))
     return LightSamples(*(np.concatenate([getattr(p, f) for p in parts]) for f in
-                          ("directions", "weights", "map_sides")))
+                          ("directions", "weights", "map_sides", "solid_angles")))
 
 
 # ---- receivers ----
@@ -252,10 +256,20 @@ def visibility(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, direct
     return vis
 
 
+def bounce(samples: LightSamples, albedo) -> np.ndarray:
+    """(K, 3) what a diffuse mesh of RGB ``albedo`` in front of each sample gives back instead of it: its radiance
+    albedo E(-l_k) / pi (its face toward the receiver lit by the probe's light, unshadowed) over the sample's solid
+    angle. Zero for a black mesh: then the shadow is the blocked light alone."""
+    a = np.asarray(albedo, np.float64)
+    irr = np.maximum(-samples.directions @ samples.directions.T, 0.0) @ samples.weights  # E(-l_k), (K, 3)
+    return a * irr / np.pi * samples.solid_angles[:, None]
+
+
 def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samples: LightSamples,
-                 chunk: int = 1 << 15) -> np.ndarray:
+                 albedo=(0.0, 0.0, 0.0), chunk: int = 1 << 15) -> np.ndarray:
     """(N, 3) per RGB channel the share of the light reaching each point (N, 3) with normal (N, 3) that ``tris``
-    (m, 3, 3) leave: 1 where nothing blocks it; 1 for points without a normal (NaN).
+    (m, 3, 3) leave: 1 where nothing blocks it; 1 for points without a normal (NaN). A blocked sample's light is
+    replaced by what the mesh reflects toward the point (``bounce``: diffuse, of RGB ``albedo``); never above 1.
 
     The light without meshes, sum_k max(0, n . l_k) L_k, is one matrix product; what the meshes block is looked up
     only for the points whose way to a sample passes the meshes' bounding sphere (most points, for most samples,
@@ -276,7 +290,8 @@ def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samp
     v = centre - p
     vv = (v * v).sum(1)
     blocked = np.zeros((len(p), 3))
-    for d, wgt, side in zip(dirs, weights, samples.map_sides):
+    lost = weights - bounce(samples, albedo)  # per sample: what a mesh in front of it takes
+    for d, wgt, side in zip(dirs, lost, samples.map_sides):
         t = v @ d  # along the way to the light, to the sphere's centre
         near = np.where(t > 0, vv - t * t, vv) < radius * radius
         idx = np.nonzero(near)[0]
@@ -330,10 +345,11 @@ def _upsample(ratio_lo: np.ndarray, z_lo: np.ndarray, z: np.ndarray, step: int) 
 
 def frame_ratio(depth: np.ndarray, alpha: np.ndarray, tris, samples: LightSamples, cam_to_world, tan_x: float,
                 tan_y: float, width: int, height: int, cx: float = 0.0, cy: float = 0.0, window=None,
-                max_side: int = MAX_SIDE) -> np.ndarray:
+                max_side: int = MAX_SIDE, albedo=(0.0, 0.0, 0.0)) -> np.ndarray:
     """(H, W, 3) the shadow ratio of a camera frame's splat pixels (the window's, as the renderer gave ``depth``
     and the splats' coverage ``alpha``): 1 where the coverage is under MIN_ALPHA, no mesh blocks the light, or no
-    light is given. Computed on every ``step``-th pixel where the window's larger side passes ``max_side``."""
+    light is given. Computed on every ``step``-th pixel where the window's larger side passes ``max_side``.
+    ``albedo``: the meshes' diffuse colour, for the light they reflect into their own shadow (shadow_ratio)."""
     depth = np.asarray(depth, np.float64)
     h, w = depth.shape
     ones = np.ones((h, w, 3), np.float32)
@@ -348,7 +364,8 @@ def frame_ratio(depth: np.ndarray, alpha: np.ndarray, tris, samples: LightSample
     rays, origin = camera_rays(cam_to_world, tan_x, tan_y, width, height, cx, cy, window, step)
     hl, wl = z_lo.shape
     p, n = surface_points(z_lo, rays, origin)
-    ratio = shadow_ratio(p.reshape(-1, 3), n.reshape(-1, 3), tris, samples).reshape(hl, wl, 3).astype(np.float32)
+    ratio = shadow_ratio(p.reshape(-1, 3), n.reshape(-1, 3), tris, samples, albedo).reshape(hl, wl, 3)
+    ratio = ratio.astype(np.float32)
     if step > 1:
         ratio = _upsample(ratio, z_lo, z, step)
     return np.where(covered[..., None], ratio, 1.0).astype(np.float32)
