@@ -63,9 +63,10 @@ def two_rooms(seed: int = 0) -> TwoRooms:
     return TwoRooms(scene, lo, lo + np.asarray(SIZE))
 
 
-# Nodes on both sides of the wall: x -0.5, 0.5, 1.5 (the cell from -0.5 to 0.5 spans the wall), 3 x 3 x 3.
-LEAK_SPEC = GridSpec((-0.5, -1.0, 0.4), (1.5, 1.0, 2.0), (3, 3, 3))
-SPHERE_CENTRE, SPHERE_RADIUS = (0.45, 0.0, 1.2), 0.25  # 0.15 m from the dark room's wall at its nearest
+# Nodes 0.4 m apart on both sides of the wall: x -0.5, -0.1 (the bright room), 0.3, 0.7, 1.1; the cell from -0.1 to
+# 0.3 spans the wall, and the sphere (x 0.2 to 0.7, 0.15 m from the dark room's wall at its nearest) reaches into it.
+LEAK_SPEC = GridSpec((-0.5, -0.4, 0.8), (1.1, 0.4, 1.6), (5, 3, 3))
+SPHERE_CENTRE, SPHERE_RADIUS = (0.45, 0.0, 1.2), 0.25
 
 
 def sphere_points(n: int = 400) -> tuple[np.ndarray, np.ndarray]:
