@@ -38,6 +38,13 @@
 #                                        Into $OUT: refs_guitar.npz, refs_room.npz, refs_guitar.png, refs_room.png,
 #                                        refs.csv, refs.log (and gsplat_cuda.so.xz); they belong in
 #                                        docs/bench/native_frame_refs/. Carry .gl and .whl
+#   bash benchmarks/gpu_run.sh stages    there, one call of about a minute (issue 38, a bake's wall beside its GPU
+#                                        time): auto_bake_core.py --stages in two processes (per stage wall, GPU,
+#                                        host = wall - GPU and submissions of the sample's default bake, Lighting
+#                                        Auto's bake of the sphere and a 1920x1080 camera frame, every recording
+#                                        timestamped; and a new process's context, upload and first bakes, the
+#                                        second process finding the first's pipeline cache on disk). Into $OUT:
+#                                        bake_stages.csv, stages.log. Carry .gl and .whl
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -57,7 +64,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full|final|refs)
+trials|grid|full|final|refs|stages)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -116,6 +123,20 @@ trials|grid|full|final|refs)
         || echo "[gpu_run] plot: exit $?"
       echo "[gpu_run] final: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = stages ]; then
+    # Two processes: the first makes every pipeline with an empty disk cache, the second finds it (the "new
+    # process" rows); each then times its warm bakes and frame. Deadlines: 150 s and 90 s; about a minute expected.
+    log="$out/stages.log"
+    (
+      set +e
+      export GS_IBL_CACHE_DIR=/tmp/gs-ibl-cache
+      rm -rf "$GS_IBL_CACHE_DIR"
+      timeout --signal=INT --kill-after=10 150 python3 benchmarks/auto_bake_core.py --stages --repeats 10 \
+        --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages: exit $?"
+      timeout --signal=INT --kill-after=10 90 python3 benchmarks/auto_bake_core.py --stages --repeats 3 \
+        --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages (cache on disk): exit $?"
+      echo "[gpu_run] stages: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = refs ]; then
     # Deadline: gsplat's ~55 s compile, then ~2 s a view; stopped at 300 s
     log="$out/refs.log"
@@ -143,7 +164,7 @@ trials|grid|full|final|refs)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages" >&2
   exit 2
   ;;
 esac
