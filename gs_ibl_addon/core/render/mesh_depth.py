@@ -15,6 +15,9 @@ and no more. Triangles are clipped at the near plane (one behind it gives two, t
 far plane are dropped, as the engines clip them. ``fill_edges`` is the prototype's edge fix: an anti-aliased mesh
 edge spreads its colour into pixels whose centre misses the mesh, so an empty pixel takes the depth of a covered
 4-neighbour (the nearest of them), else of a covered diagonal one.
+
+``rasterise_ortho`` is the same scanline for an orthographic view (depth affine in screen space, not its inverse):
+the shadow maps of core/render/shadows.py.
 """
 from __future__ import annotations
 

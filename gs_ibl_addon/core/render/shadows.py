@@ -9,7 +9,9 @@ splat pixel is multiplied by the share of its light that no mesh blocks:
 over light samples k (a direction l_k toward the light and its RGB weight L_k, irradiance at normal incidence),
 n the capture's surface normal there and V_k whether the meshes leave the way to the light open. It is 1 where no
 mesh is in the way, whatever the capture's colours or the light's strength, so the capture is never relit, only
-shadowed.
+shadowed. A mesh also reflects light into its own shadow: where it blocks sample k it gives back its own radiance,
+albedo x E(-l_k) / pi over the sample's solid angle (``bounce``: its face toward the receiver lit by the probe,
+diffuse, unshadowed), so a grey sphere's shadow is lighter than a black one's, as a path tracer has it.
 
 The light samples (``light_samples``) come from the probe: its environment (the lat-long the World shows), split
 into its bright compact part (a sun, a lamp, a window: texels over ``BRIGHT_FACTOR`` times the median, as the bake's
