@@ -159,7 +159,8 @@ trials|grid|full|final|refs|stages)
       --csv "$out/lod.csv"
   fi
   if [ -z "${GSPLAT_SO:-}" ]; then
-    so=$(find "$TORCH_EXTENSIONS_DIR" / -name "gsplat_cuda*.so" -path "*torch_extensions*" 2>/dev/null | head -1)
+    # find exits non-zero on unreadable places (/proc): under set -e and pipefail that ended the script here
+    so=$(find "$TORCH_EXTENSIONS_DIR" / -name "gsplat_cuda*.so" -path "*torch_extensions*" 2>/dev/null | head -1) || true
     [ -n "$so" ] && xz -1 -c "$so" > "$out/gsplat_cuda.so.xz"
   fi
   ;;
