@@ -150,3 +150,12 @@ def test_a_meshs_reflected_light_fills_its_shadow():
     for rho in (0.0, 0.5, 0.8):
         r = shadows.shadow_ratio(np.zeros((1, 3)), np.array([[0, 0, 1.0]]), disc(a, h), s, albedo=(rho,) * 3)
         assert abs(r[0, 0] - (1 - f * (1 - rho))) < 0.03, (rho, r[0, 0])
+
+
+def test_large_meshes_get_fewer_samples_with_the_same_light():
+    assert shadows.sample_scale(2000) == 1.0
+    assert shadows.sample_scale(10_000_000) == 0.125
+    env = SKY(cubemap.latlong_directions(256, 128))
+    full, few = shadows.light_samples(env), shadows.light_samples(env, scale=0.25)
+    assert few.count == 8 + 24
+    np.testing.assert_allclose(few.weights.sum(0), full.weights.sum(0), rtol=1e-3)

@@ -255,9 +255,9 @@ def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
     return front, behind
 
 
-def probe_light(scene) -> tuple[shadows.LightSamples | None, str | None]:
+def probe_light(scene, scale: float = 1.0) -> tuple[shadows.LightSamples | None, str | None]:
     """(the light samples of the probe whose World ``scene`` uses: the World's radiance image at its strength and
-    the suns the probe's bake split off, or None; why not, or None)."""
+    the suns the probe's bake split off, ``scale`` times the usual counts, or None; why not, or None)."""
     world = scene.world
     if world is None or world.get(MARKER) != "world" or world.node_tree is None:
         return None, "no shadows on the splats: the scene's World is not a baked probe's (bake a probe, or turn " \
@@ -280,21 +280,26 @@ def probe_light(scene) -> tuple[shadows.LightSamples | None, str | None]:
             irr = float(o.data.energy) * np.asarray(o.data.color, np.float64)
             lights.append({"direction": m[:3, 2] / np.linalg.norm(m[:3, 2]), "irradiance": irr,  # +Z: toward it
                            "angle": float(np.degrees(o.data.angle))})
-    return shadows.light_samples(latlong, strength, lights), None
+    return shadows.light_samples(latlong, strength, lights, scale), None
 
 
 def _shadow(dg, cam, front, behind, depth, casters, no_mesh, strength, record) -> tuple[np.ndarray, np.ndarray]:
     """FRONT and BEHIND with the shadows of ``casters`` (triangles, their diffuse colour) on the splat surface
     (core/render/shadows.py)."""
     t0 = time.perf_counter()
-    if "light" not in _job:  # once per render job: the World's image read, the light sampled
-        _job["light"] = probe_light(dg.scene)
-    samples, why = _job["light"]
+    tris, albedo = casters
+    scale = shadows.sample_scale(len(tris))
+    lights = _job.setdefault("light", {})
+    if scale not in lights:  # once per render job (and caster budget): the World's image read, the light sampled
+        lights[scale] = probe_light(dg.scene, scale)
+    samples, why = lights[scale]
     if samples is None:
         say(why)
         return front, behind
+    if scale < 1:
+        say(f"shadows on the splats from fewer light directions ({samples.count}) to keep the frame's time: the "
+            f"meshes have {len(tris):,} triangles (softer steps in the penumbrae)")
     alpha = 1.0 - (1.0 - front[..., 3]) * (1.0 - behind[..., 3])
-    tris, albedo = casters
     ratio = shadows.frame_ratio(depth, alpha, tris, samples, cam.matrix, cam.tan_x, cam.tan_y, cam.width,
                                 cam.height, cam.cx, cam.cy, cam.window, albedo=albedo)
     front, behind = shadows.apply(front, behind, ratio, no_mesh, strength)

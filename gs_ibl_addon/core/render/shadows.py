@@ -43,6 +43,7 @@ SKY_SAMPLES = 96  # directions over the rest (contact darkening)
 LIGHT_SAMPLES = 24  # directions over each disc of a split-off light
 BRIGHT_MAP = 256  # shadow map side (texels) for the bright part's and the lights' samples
 SKY_MAP = 128  # for the sky's: many soft overlapping shadows need less detail
+TRIANGLE_BUDGET = 5e6  # casters' triangles x light samples per frame before the counts shrink (sample_scale)
 MAX_SIDE = 480  # receivers are computed on a grid no larger than this (the frame's larger side, in samples)
 MIN_ALPHA = 0.05  # pixels of less splat coverage are left as they are
 DEPTH_TOLERANCE = 0.03  # upsampling: a sample this much nearer or farther (relative) is on another surface
@@ -159,15 +160,27 @@ def disc_samples(direction, irradiance, angle_deg: float, n: int = LIGHT_SAMPLES
     return LightSamples(dirs, w, np.full(n, BRIGHT_MAP), np.full(n, omega))
 
 
-def light_samples(latlong: np.ndarray | None, strength: float = 1.0, lights: list[dict] = ()) -> LightSamples:
+def sample_scale(triangles: int) -> float:
+    """The share of the full sample counts a frame with ``triangles`` casters affords: each sample rasterises
+    them all once (about 2 us a triangle in numpy), so past TRIANGLE_BUDGET triangle-maps the counts shrink, to
+    no fewer than an eighth: shadows stay, softer steps in their penumbrae."""
+    full = BRIGHT_SAMPLES + SKY_SAMPLES
+    return float(np.clip(TRIANGLE_BUDGET / max(triangles * full, 1), 0.125, 1.0))
+
+
+def light_samples(latlong: np.ndarray | None, strength: float = 1.0, lights: list[dict] = (),
+                  scale: float = 1.0) -> LightSamples:
     """The samples of a probe's light: its environment (``latlong`` times ``strength``; None: none) and the
     lights split off it (dicts with direction, irradiance, angle, as probe.json's "lights" and the suns a bake
-    makes)."""
+    makes); ``scale`` times the usual counts (sample_scale)."""
+    def n(count: int) -> int:
+        return max(4, int(round(count * scale)))
     parts = []
     if latlong is not None and strength > 0:
-        env = environment_samples(latlong)
+        env = environment_samples(latlong, n(BRIGHT_SAMPLES), n(SKY_SAMPLES))
         parts.append(LightSamples(env.directions, env.weights * strength, env.map_sides, env.solid_angles))
-    parts += [disc_samples(li["direction"], li["irradiance"], li.get("angle", 0.0)) for li in lights]
+    parts += [disc_samples(li["direction"], li["irradiance"], li.get("angle", 0.0), n(LIGHT_SAMPLES))
+              for li in lights]
     parts = [p for p in parts if p.count]
     if not parts:
         return LightSamples(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, int), np.zeros(0))
