@@ -82,6 +82,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
        (256,)),
     # probe filters (probe/gpu_filters.py)
     _k("probe_split_alpha", "Frame Omega Cube Partial", "n n_groups"),
+    _k("probe_fill_holes", "Frame Fill", "n per_probe"),
     _k("probe_sh_project", "Cube Omega Partial", "n n_groups"),
     _k("probe_sh_irradiance", "Coeffs Out", "m clamp_negative", (64,)),
     _k("probe_convolve", "Cube Out", "n m phi_steps theta_steps", (64,)),

@@ -1,0 +1,44 @@
+"""Holes of a batch of rendered probes filled on the GPU, by probe/holes.py's rule for a fill that is one colour over
+the sphere ("mean", "constant"): a batch that keeps only its SH and irradiance (a grid's nodes, Lighting Auto's
+measurement) then reads no cube back and uploads none again (core/bake_batch.py), where the host fill of 18 probes
+of 64^2 faces and their round trip cost ~130 ms of host time on lavapipe's machine.
+
+The mean fill needs no cube on the host either: the filter's SH DC term is sum(rgb dOmega) Y00 and its hole
+fraction h says sum(clamp(alpha) dOmega) = 4 pi (1 - h), so covered_mean = DC / (Y00 4 pi (1 - h)).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..vk import Recorder, groups, scratch
+from ..vk.kernels import KERNELS
+
+Y00 = 0.5 / math.sqrt(math.pi)
+
+
+def covered_means(sh: np.ndarray, holes: np.ndarray) -> np.ndarray:
+    """(N, 3) holes.covered_mean of each probe, from its (N, >=1, 3) radiance SH and (N,) hole fraction as the
+    filters give them (zeros where nothing is covered)."""
+    covered = 4.0 * np.pi * (1.0 - np.asarray(holes, np.float64))
+    dc = np.asarray(sh, np.float64)[:, 0, :3] / Y00
+    return np.where(covered[:, None] > 0, dc / np.maximum(covered, 1e-300)[:, None], 0.0)
+
+
+def fill_frame_holes(frame, fills: np.ndarray) -> None:
+    """Add (1 - alpha) x fills[probe] to the RGB of every texel of a render_probes frame, on the GPU (the frame's
+    image changes in place; alpha is kept, as holes.fill_holes keeps it)."""
+    frame.wait()
+    ctx, probes = frame.ctx, frame.probes
+    fill = np.zeros((probes, 4), np.float32)
+    fill[:, :3] = np.asarray(fills, np.float64).reshape(probes, 3)
+    total = frame.pixels
+    buf = scratch(ctx, fill.nbytes, "hole-fill")
+    try:
+        buf.write(fill)
+        with Recorder(ctx) as rec:
+            rec.dispatch(KERNELS["probe_fill_holes"], [frame.image, buf], groups(total, 256, ctx), n=total,
+                         per_probe=total // probes)
+    finally:
+        buf.close()

@@ -1,0 +1,54 @@
+"""Holes filled on the GPU (core/probe/gpu_holes.py) against probe/holes.py's host fill: the covered mean from the
+filter's SH and hole fraction, the filled frame texel by texel, and a batch bake that keeps only SH (a grid's
+nodes) against the same bake filled on the host."""
+from __future__ import annotations
+
+import numpy as np
+
+from gs_ibl_addon.core.bake import ProbeSettings
+from gs_ibl_addon.core.bake_batch import bake_probes
+from gs_ibl_addon.core.probe.gpu_filters import filter_probes
+from gs_ibl_addon.core.probe.gpu_holes import covered_means, fill_frame_holes
+from gs_ibl_addon.core.probe.holes import covered_mean, fill_holes
+from gs_ibl_addon.core.render.renderer import SplatRenderer
+from gs_ibl_addon.core.synthetic import random_scene
+
+ORIGINS = np.array([[0.0, 0.0, 0.0], [0.3, -0.2, 0.1], [5.0, 5.0, 5.0]])  # the last one outside: mostly holes
+
+
+def _scene():
+    return random_scene(1500, seed=11, sh_degree=1)
+
+
+def test_gpu_fill_equals_the_host_fill():
+    with SplatRenderer(_scene()) as r:
+        frame = r.render_probes(ORIGINS, 16, wait=False).frame
+        f = filter_probes(frame, 4, "sh")
+        cubes = frame.read_probes()
+        assert np.all(f.hole_fraction > 0)
+        want_means = np.stack([covered_mean(c) for c in cubes])
+        means = covered_means(f.sh_coefficients, f.hole_fraction)
+        np.testing.assert_allclose(means, want_means, rtol=1e-4, atol=1e-7)
+        fill_frame_holes(frame, means)
+        got = frame.read_probes()
+    for k, cube in enumerate(cubes):
+        want, record = fill_holes(cube, "constant", means[k])
+        np.testing.assert_allclose(got[k], want, rtol=0, atol=1e-6)
+        assert abs(record["fraction"] - f.hole_fraction[k]) < 1e-5
+
+
+def test_a_batch_keeping_sh_fills_on_the_gpu_as_on_the_host():
+    s = ProbeSettings(method="sh", face_size=16, irradiance_size=4, hole_fill="mean")
+    with SplatRenderer(_scene()) as r:
+        host = bake_probes(None, ORIGINS, s, renderer=r, keep_radiance=True)  # the host fill (radiance kept)
+        before = r.ctx.stats.snapshot()
+        gpu = bake_probes(None, ORIGINS, s, renderer=r, keep_radiance=False)
+        moved = r.ctx.stats.since(before)
+    assert moved["readback_bytes"] < 16 * 6 * 16 * 16 * len(ORIGINS)  # no cube came back
+    for a, b in zip(gpu, host):
+        assert b.hole_fill["method"] == a.hole_fill["method"] == "mean"
+        np.testing.assert_allclose(a.hole_fill["value"], b.hole_fill["value"], rtol=1e-4, atol=1e-7)
+        assert abs(a.hole_fill["fraction"] - b.hole_fill["fraction"]) < 1e-5
+        np.testing.assert_allclose(a.sh_coefficients, b.sh_coefficients, rtol=0,
+                                   atol=1e-5 * np.abs(b.sh_coefficients).max())
+        np.testing.assert_allclose(a.irradiance, b.irradiance, rtol=0, atol=1e-5 * np.abs(b.irradiance).max())
