@@ -159,3 +159,20 @@ def test_large_meshes_get_fewer_samples_with_the_same_light():
     full, few = shadows.light_samples(env), shadows.light_samples(env, scale=0.25)
     assert few.count == 8 + 24
     np.testing.assert_allclose(few.weights.sum(0), full.weights.sum(0), rtol=1e-3)
+
+
+def test_a_render_border_is_the_crop_of_the_full_frame():
+    w, h, tan = 90, 60, 0.5
+    cam = np.eye(4)
+    cam[:3, :3] = [[1, 0, 0], [0, 0.6, -0.8], [0, 0.8, 0.6]]
+    cam[:3, 3] = [0, -3.0, 2.5]
+    rays, o = shadows.camera_rays(cam, tan, tan * h / w, w, h, cx=0.05, cy=-0.03)
+    depth = (-o[2] / rays[..., 2]).astype(np.float32)
+    tris = uv_sphere((0.0, 0.3, 0.5), 0.4, 24, 12)
+    s = shadows.light_samples(SKY(cubemap.latlong_directions(256, 128)))
+    args = (tris, s, cam, tan, tan * h / w, w, h, 0.05, -0.03)
+    full = shadows.frame_ratio(depth, np.ones((h, w)), *args)
+    x0, y0, x1, y1 = 20, 10, 70, 45
+    part = shadows.frame_ratio(depth[y0:y1, x0:x1], np.ones((y1 - y0, x1 - x0)), *args, window=(x0, y0, x1, y1))
+    assert full.min() < 0.5
+    np.testing.assert_allclose(part, full[y0:y1, x0:x1], atol=0.02)
