@@ -23,6 +23,7 @@ from ..splats import cache as splat_cache
 from .stamps import BAKE_KEY, stamp
 from .stale import record_bake, record_meshes, refresh_notice
 from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
+from .volume import volume_light_steps
 from .object_probes import lit_meshes
 from . import local_light as ll
 from .sources import in_scene, require_splats
@@ -242,7 +243,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     # this bake makes it), the bake, writing, and Lighting Auto's probes for each mesh, which can take longer than
     # the bake (measured: 10 s after a 0.7 s bake for one mesh lit by a grid).
     scene, probe, splats = _named(scene_name, probe_name, splats_name)
-    meshes = probe.gs_ibl_probe.lighting == "AUTO" and bool(lit_meshes(scene, probe))
+    meshes = probe.gs_ibl_probe.lighting in ("AUTO", "VOLUME") and bool(lit_meshes(scene, probe))
     baked, written = ((0.05, 0.35), 0.4) if meshes else ((0.05, 0.95), 0.97)
     yield Step(f"reading {splat_count(splats):,} splats", 0.0)
     uploads = splat_cache.uploads
@@ -275,6 +276,13 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
         auto, choices = yield from within(relight_steps(scene, probe), written, 0.99)
         scene, probe, splats = _named(scene_name, probe_name, splats_name)
         t = lap("each mesh's light", t)
+    elif probe.gs_ibl_probe.lighting == "VOLUME":
+        yield Step("baking the light volume", written)
+        auto, lit = yield from within(volume_light_steps(scene, probe), written, 0.99)
+        choices = f"Volume: {len(lit['lit'])} mesh{'es' if len(lit['lit']) != 1 else ''}" + (
+            f", {len(lit['outside'])} outside (World)" if lit["outside"] else "")
+        scene, probe, splats = _named(scene_name, probe_name, splats_name)
+        t = lap("light volume", t)
     else:
         remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
     seconds = time.perf_counter() - t0
@@ -289,10 +297,12 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
 
 
 def lighting_choice(choices) -> str:
-    """How the bake lit meshes, in a few words: "World" or Lighting Auto's choices ("Auto: 3 meshes (2 World,
-    1 grid)")."""
+    """How the bake lit meshes, in a few words: "World", Lighting Auto's choices ("Auto: 3 meshes (2 World,
+    1 grid)") or Lighting Volume's (a line of its own, passed as text)."""
     if choices is None:
         return "lit by the World"
+    if isinstance(choices, str):
+        return choices
     if not choices:
         return "Auto: no mesh inside the splats"
     counts = {k: sum(c.kind == k for c in choices) for k in ("world", "probe", "grid")}

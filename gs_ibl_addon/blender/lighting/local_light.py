@@ -41,6 +41,7 @@ from ...core.probe.grid import COEFFS, GridSpec
 from ...core.probe.local_mix import EPS, eevee_world_order1
 from ..common.compat import node_tree
 from ..common.datablocks import MARKER, find_ours, is_ours
+from .node_math import NodeMath as _Nodes
 from .world import albedo_strength_inputs, latlong_lookup
 
 GROUP_NAME = "GS-IBL Local Light"
@@ -49,6 +50,8 @@ GRID_KEY = "gs_ibl_grid_key"  # object custom property: its tile of the atlas ("
 # what the shader reads of the object's grid: box corner, (n - 1) / span, n - 1, (1, first row in the atlas, 0)
 GRID_ATTRS = {"lo": "gs_ibl_grid_lo", "scale": "gs_ibl_grid_scale", "max": "gs_ibl_grid_max",
               "tile": "gs_ibl_grid_tile"}
+VOLUME_KEY = "volume"  # GRID_KEY of a mesh the file's light volume lights (blender/lighting/volume.py)
+VOLUME_ATTR = "gs_ibl_volume"  # object custom property read by the group: 1 where the light volume lights the mesh
 TILES = "gs_ibl_tiles"  # atlas custom property: JSON {key: {"lo", "hi", "shape", "row0"}}
 WORLD_COEFFS = "gs_ibl_world"  # atlas custom property: JSON (9, 3) monomial coefficients of the World probe's light
 WORLD_IRRADIANCE = "gs_ibl_world_irradiance"  # atlas custom property: the World probe's irradiance image (E/pi)
@@ -60,19 +63,26 @@ DEFAULT_MATERIAL_ROLE = "local_material"
 
 
 def set_object_grid(obj: bpy.types.Object, key: str | None) -> None:
-    """Light ``obj`` by the atlas's tile ``key`` (its numbers are written by store_grids), or by none (None)."""
-    if key is None:
+    """Light ``obj`` by the atlas's tile ``key`` (its numbers are written by store_grids), by the file's light
+    volume (VOLUME_KEY), or by none (None)."""
+    if key is None or key == VOLUME_KEY:
         for name in (GRID_KEY, *GRID_ATTRS.values()):
             obj.pop(name, None)
-    else:
+    obj.pop(VOLUME_ATTR, None)
+    if key == VOLUME_KEY:
+        obj[VOLUME_ATTR] = 1.0
+    if key is not None:
         obj[GRID_KEY] = key
+    obj.update_tag()
 
 
 def has_local_light(obj: bpy.types.Object) -> str | None:
-    """"probe" (its own probe), "grid" or None: what of ours lights ``obj``."""
+    """"probe" (its own probe), "grid", "volume" or None: what of ours lights ``obj``."""
     key = obj.get(GRID_KEY)
     if not isinstance(key, str):
         return None
+    if key == VOLUME_KEY:
+        return "volume"
     return "probe" if key.startswith("probe:") else "grid"
 
 
@@ -121,7 +131,7 @@ def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray
         row += px.shape[0]
     old_world = img.get(WORLD_COEFFS) if img is not None else None
     old_irr = img.get(WORLD_IRRADIANCE) if img is not None else None
-    img = _atlas_image(atlas, img)
+    img = atlas_image(atlas, img)
     img[TILES] = json.dumps(tiles)
     if world is not None:
         img[WORLD_COEFFS] = json.dumps(np.asarray(world, np.float64).reshape(COEFFS, 3).tolist())
@@ -144,16 +154,30 @@ def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray
     return img
 
 
-def _atlas_image(pixels: np.ndarray, image: bpy.types.Image | None) -> bpy.types.Image:
-    """Our packed float atlas (H, W, 3; row 0 at the bottom), updated in place when the size allows."""
+def prune_atlas() -> bool:
+    """Drop the grid atlas when no object points at any of its tiles (a file lit by the light volume alone), so the
+    group is built without the grid's lookups: Cycles' shader stack holds the grid's or the volume's, not both
+    ("out of SVM stack space", the mesh black; blender/lighting/volume_nodes.py). True if it was dropped."""
+    img, tiles = _atlas()
+    used = {o.get(GRID_KEY) for o in bpy.data.objects}
+    if img is None or used & set(tiles):
+        return False
+    bpy.data.images.remove(img)
+    return True
+
+
+def atlas_image(pixels: np.ndarray, image: bpy.types.Image | None, role: str = "grid",
+                 name: str = GRID_IMAGE) -> bpy.types.Image:
+    """Our packed float atlas (H, W, 3; row 0 at the bottom), updated in place when the size allows: the grid's,
+    or another ``role`` of ours (the light volume's images)."""
     px = np.asarray(pixels, np.float32)
     h, w = px.shape[:2]
-    img = image if is_ours(image, "grid") else None
+    img = image if is_ours(image, role) else None
     if img is not None and (tuple(img.size) != (w, h) or not img.is_float):
         img.scale(w, h)  # same datablock: the group's texture nodes keep pointing at it
     if img is None:
-        img = bpy.data.images.new(GRID_IMAGE, w, h, alpha=False, float_buffer=True)
-        img[MARKER] = "grid"
+        img = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
+        img[MARKER] = role
         # data, not colour: no view transform may touch the coefficients (set before the pixels: setting the
         # colour space afterwards empties the buffer, blender/world.py _save_exr)
         img.colorspace_settings.is_data = True
@@ -166,8 +190,14 @@ def _atlas_image(pixels: np.ndarray, image: bpy.types.Image | None) -> bpy.types
     return img
 
 
-def local_light_group(atlas: bpy.types.Image | None = None) -> bpy.types.ShaderNodeTree:
-    """The file's local-light group; rebuilt to read ``atlas`` (our grid image) when given."""
+def rebuild_group() -> bpy.types.ShaderNodeTree:
+    """The file's local-light group rebuilt for what the file holds now: its grid atlas and its light volume."""
+    return local_light_group(_atlas()[0], rebuild=True)
+
+
+def local_light_group(atlas: bpy.types.Image | None = None, rebuild: bool = False) -> bpy.types.ShaderNodeTree:
+    """The file's local-light group; rebuilt to read ``atlas`` (our grid image) when given (and the file's light
+    volume, where it has one), or with ``rebuild``."""
     tree = find_ours(bpy.data.node_groups, ROLE)
     if tree is None:
         tree = bpy.data.node_groups.new(GROUP_NAME, "ShaderNodeTree")
@@ -177,7 +207,7 @@ def local_light_group(atlas: bpy.types.Image | None = None) -> bpy.types.ShaderN
     elif "EEVEE" not in tree.interface.items_tree:  # a file from before the EEVEE output
         tree.interface.new_socket("EEVEE", in_out="OUTPUT", socket_type="NodeSocketShader")
         _build(tree, None)
-    if atlas is not None:
+    if atlas is not None or rebuild:
         _build(tree, atlas)
     return tree
 
@@ -196,69 +226,24 @@ def _world_coefficients(atlas) -> np.ndarray:
     return np.asarray(json.loads(raw), np.float64) if raw else np.zeros((COEFFS, 3))
 
 
-class _Nodes:
-    """Small helpers that add math nodes to a tree, each returning the output socket."""
-
-    def __init__(self, tree):
-        self.tree, self.N, self.L = tree, tree.nodes, tree.links
-
-    def _set(self, node, inputs):
-        for i, v in enumerate(inputs):
-            if v is None:
-                continue
-            if isinstance(v, (int, float, tuple)):
-                node.inputs[i].default_value = v
-            else:
-                self.L.new(v, node.inputs[i])
-        return node.outputs[0]
-
-    def math(self, op, *inputs):
-        m = self.N.new("ShaderNodeMath")
-        m.operation = op
-        return self._set(m, inputs)
-
-    def vec(self, op, *inputs):
-        m = self.N.new("ShaderNodeVectorMath")
-        m.operation = op
-        self._set(m, inputs)
-        return m.outputs["Vector"]
-
-    def scale(self, v, s):
-        m = self.N.new("ShaderNodeVectorMath")
-        m.operation = "SCALE"
-        self._set(m, (v,))
-        self.L.new(s, m.inputs["Scale"])
-        return m.outputs["Vector"]
-
-    def separate(self, v):
-        sep = self.N.new("ShaderNodeSeparateXYZ")
-        self.L.new(v, sep.inputs[0])
-        return sep.outputs["X"], sep.outputs["Y"], sep.outputs["Z"]
-
-    def const(self, v):
-        c = self.N.new("ShaderNodeCombineXYZ")
-        for i, x in enumerate(v):
-            c.inputs[i].default_value = float(x)
-        return c.outputs[0]
-
-    def attribute(self, name):
-        a = self.N.new("ShaderNodeAttribute")
-        a.attribute_type, a.attribute_name = "OBJECT", name
-        return a.outputs["Vector"]
-
-
 def _build(tree, atlas) -> None:
     """(Re)build the group's nodes (core/probe/local_mix.py in nodes): per engine s x shader + Emission(albedo x
     strength x (H - s B)) (Cycles: s x shader + (1 - s) x Diffuse(albedo) + Emission(albedo x strength x (H - B))),
     with w D = w sum_k c_k(P) P_k(n) the mesh's difference. Cycles: H = E + w D over B = E,
     E the World probe's irradiance image along n (what Cycles' diffuse gets from that World; its order-2
-    coefficients W where the atlas names no image). EEVEE: H = W + w D over B = EEVEE's order-1 part of W. Without
-    an atlas both outputs pass the shader through."""
+    coefficients W where the atlas names no image). EEVEE: H = W + w D over B = EEVEE's order-1 part of W. A mesh
+    the light volume lights (VOLUME_ATTR 1) has H = V, the volume's light at its position and normal
+    (blender/lighting/volume_nodes.py), in both engines, fading to the World's where it leaves the volume. Without
+    an atlas or a volume both outputs pass the shader through. The World's numbers are kept on the atlas, or on the
+    volume's image where there is no atlas."""
+    from . import volume_nodes
     tree.nodes.clear()
     b = _Nodes(tree)
     N, L = b.N, b.L
     gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
-    if atlas is None:
+    volume = {"Shader": volume_nodes.volume_group("CYCLES"), "EEVEE": volume_nodes.volume_group("EEVEE")}
+    world_at = atlas if atlas is not None else volume_nodes.volume_image()
+    if world_at is None:
         L.new(gin.outputs["Shader"], gout.inputs["Shader"])
         L.new(gin.outputs["Shader"], gout.inputs["EEVEE"])
         return
@@ -274,18 +259,31 @@ def _build(tree, atlas) -> None:
             term = c if poly[k] is None else b.scale(c, poly[k])
             total = term if total is None else b.vec("ADD", total, term)
         return total
-    coeffs, weight = _grid_lookups(b, geo.outputs["Position"], atlas)
-    world = _world_coefficients(atlas)
+    world = _world_coefficients(world_at)
     w_sh = poly_sum([b.const(c) for c in world])
-    irr = atlas.get(WORLD_IRRADIANCE)
+    irr = world_at.get(WORLD_IRRADIANCE)
     if isinstance(irr, bpy.types.Image):
         w_image = latlong_lookup(tree, geo.outputs["Normal"], irr, name="GS-IBL World Irradiance")
     else:
         w_image = w_sh
-    delta = b.scale(poly_sum(coeffs), weight)
+    here = {"Shader": w_image, "EEVEE": w_sh}
+    if atlas is not None:
+        coeffs, weight = _grid_lookups(b, geo.outputs["Position"], atlas)
+        delta = b.scale(poly_sum(coeffs), weight)
+        here = {k: b.vec("ADD", h, delta) for k, h in here.items()}
+    if volume["Shader"] is not None:  # H + w (V - H): V where the volume lights the mesh, fading out at its edge
+        lit = b.attribute(VOLUME_ATTR, "Fac")
+        for k, h in list(here.items()):  # each engine its own group (volume_nodes.py says why)
+            vol = N.new("ShaderNodeGroup")
+            vol.node_tree = volume[k]
+            L.new(geo.outputs["Position"], vol.inputs["Position"])
+            L.new(geo.outputs["Normal"], vol.inputs["Normal"])
+            w_vol = b.math("MULTIPLY", lit, vol.outputs["Inside"])
+            here[k] = b.vec("MULTIPLY_ADD", b.vec("SUBTRACT", vol.outputs["Irradiance"], h),
+                            b.combine(w_vol, w_vol, w_vol), h)
     # (H, B) per output: Cycles E + D over E; EEVEE W + D over its order-1 World (core/probe/local_mix.py says why)
-    paths = {"Shader": (b.vec("ADD", w_image, delta), w_image),
-             "EEVEE": (b.vec("ADD", w_sh, delta),
+    paths = {"Shader": (here["Shader"], w_image),
+             "EEVEE": (here["EEVEE"],
                        b.vec("MAXIMUM", poly_sum([b.const(c) for c in eevee_world_order1(world)]), (0.0, 0.0, 0.0)))}
     # the emission is light the engine does not trace: its own mesh's occlusion of it (Only Local AO) stands in
     # for the shadows the user's shader gets from the World (a convex mesh: 1)

@@ -1,0 +1,202 @@
+"""Lighting "Volume": one light volume over every lit mesh, shared by all of them (issue 37).
+
+After the World probe's bake, the region every lit mesh occupies over the scene's frame range (each mesh's box at
+sampled frames, when anything is animated) is handed to the core (core/probe/volume_region.py ``choose_volume``:
+a coarse measurement of the light chooses the spacing, within a probe budget), the volume is baked from every
+visible splat object (core/probe/volume_bake.py, on a worker), and its two atlases, packed into the file, are read
+by the volume group (volume_nodes.py) inside the local-light group (local_light.py) of every lit mesh: the same
+insertion into the user's material and the same per-engine emission difference as a per-object probe or a grid,
+with H the volume's light at the shading point. A mesh is lit where it stands in every frame and while dragged
+(the lookup is all in the shader); one that leaves the volume's box fades to the World probe's light within one
+node spacing. Nothing is written into Blender before the worker's bake is done.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import bpy
+import numpy as np
+
+from ...core.probe import volume as pv
+from . import local_light as ll
+from . import volume_nodes as vn
+from ..common.jobs import Job, Step, Work
+from ..splats.object import is_splat_object
+from .auto_light import AUTO_KEY
+from .object_probes import is_lit_mesh, point_coefficients, probe_renderer_steps, world_box
+from .sources import require_splats, scene_splats
+
+REPORT_PREFIX = "Light volume: "
+MAX_FRAMES = 48  # frames of an animation whose boxes the region covers (evenly over the range, both ends in)
+
+
+def _animated(obj: bpy.types.Object) -> bool:
+    """Whether ``obj`` (or a parent) has keyframes, drivers or constraints: its box may change with the frame."""
+    while obj is not None:
+        ad = obj.animation_data
+        if (ad is not None and (ad.action is not None or len(ad.drivers) or len(ad.nla_tracks))) or len(
+                obj.constraints):
+            return True
+        obj = obj.parent
+    return False
+
+
+def sampled_frames(scene: bpy.types.Scene) -> list[int]:
+    """The frames whose boxes the region covers: up to MAX_FRAMES over the scene's range, both ends included."""
+    a, b = int(scene.frame_start), int(scene.frame_end)
+    if b <= a:
+        return [a]
+    return sorted({int(round(f)) for f in np.linspace(a, b, min(MAX_FRAMES, b - a + 1))})
+
+
+def _box_of(objects: list[bpy.types.Object]) -> tuple[np.ndarray, np.ndarray]:
+    boxes = [world_box(o) for o in objects]
+    return np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
+
+
+def visible_splats(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[bpy.types.Object]:
+    """Every splat object that lights the volume: the probe's own (require_splats: refused with the reason when
+    there is none) and every other one shown in renders."""
+    own = require_splats(scene, probe)
+    return [own] + [o for o in scene_splats(scene) if o != own and is_splat_object(o) and not o.hide_render]
+
+
+def volume_boxes(scene: bpy.types.Scene, splats: list[bpy.types.Object]):
+    """(lit mesh names, one (lo, hi) box per lit mesh and sampled frame, the splats' box, names of the meshes
+    outside it): a mesh is lit when its box centre lies inside the splats' box in any sampled frame. The scene is
+    put back on its frame."""
+    meshes = [o for o in scene.objects if is_lit_mesh(o)]
+    frames = sampled_frames(scene) if any(_animated(o) for o in meshes + splats) else [scene.frame_current]
+    current, sub = scene.frame_current, scene.frame_subframe
+    boxes: dict[str, list] = {o.name: [] for o in meshes}
+    lit: set[str] = set()
+    within = None
+    try:
+        for f in frames:
+            if len(frames) > 1:
+                scene.frame_set(f)
+            slo, shi = _box_of(splats)
+            within = (slo, shi) if within is None else (np.minimum(within[0], slo), np.maximum(within[1], shi))
+            for o in meshes:
+                lo, hi = world_box(o)
+                boxes[o.name].append((lo, hi))
+                c = 0.5 * (lo + hi)
+                if np.all(c >= slo) and np.all(c <= shi):
+                    lit.add(o.name)
+    finally:
+        if len(frames) > 1:
+            scene.frame_set(current, subframe=sub)
+    names = [o.name for o in meshes if o.name in lit]
+    outside = [o.name for o in meshes if o.name not in lit]
+    return names, [b for n in names for b in boxes[n]], within, outside
+
+
+def _merged_renderer(locals_, progress):
+    """A renderer holding several splat objects in world space, sorted together (the worker's part)."""
+    from ...core.render.renderer import SplatRenderer
+    from ...core.synthetic import concat
+    from ..splats.object import to_world
+    progress(f"merging {len(locals_)} splat objects", 0.0)
+    scenes = [to_world(*x) for x in locals_]
+    spaces = {s.colour_space for s in scenes}
+    if len(spaces) > 1:
+        names = ", ".join(x[2] for x in locals_)
+        raise ValueError(f"splat objects {names} differ in colour space ({', '.join(sorted(spaces))}): set them "
+                         "alike (GS-IBL panel, Colour Space) to light meshes with all of them")
+    return SplatRenderer(replace(concat(scenes, "+".join(x[2] for x in locals_)), colour_space=spaces.pop()))
+
+
+def _bake(renderer, boxes, within, where, face_size, progress):
+    """The worker's part: the World probe's SH at its place (the EEVEE output's World light), the region's plan and
+    the volume, packed. Returns (plan, volume, atlases, World coefficients)."""
+    from ...core.probe.volume_bake import bake_volume
+    from ...core.probe.volume_region import choose_volume
+    try:
+        progress("measuring how fast the light changes", 0.0)
+        plan, _coarse = choose_volume(renderer, boxes, within=within)
+        vol = bake_volume(renderer, plan.spec, face_size=face_size, progress=lambda done, total: progress(
+            f"baking {done} of {total} light volume probes", 0.1 + 0.85 * done / max(total, 1)))
+        world = point_coefficients(renderer, np.asarray(where, np.float64)[None])[0]
+        return plan, vol, pv.pack_atlas(vol), world
+    finally:
+        renderer.trim()
+
+
+def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
+    """Lighting Volume as a job (blender/jobs.py): boxes read now, the volume baked by a worker, written at the end.
+    Its result: (report line, {"lit": names, "outside": names, "probes": count})."""
+    from ...core.probe.volume_bake import DEFAULT_FACE
+    splats = visible_splats(scene, probe)
+    names, boxes, within, outside = volume_boxes(scene, splats)
+    if not names:
+        return f"{REPORT_PREFIX}no lit mesh inside the splats: every mesh keeps the World probe", {
+            "lit": [], "outside": outside, "probes": 0}
+    scene_name, probe_name = scene.name, probe.name
+    if len(splats) == 1:
+        r = yield from probe_renderer_steps(scene, probe, need_world=True)
+        own = None
+    else:
+        if probe.gs_ibl_probe.world is None:
+            raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
+        from ..splats.object import read_steps
+        locals_ = []
+        for o in splats:
+            yield Step(f"reading {o.name}", None)
+            locals_.append((*(yield from read_steps(o)), o.name))
+        r = own = yield Work(_merged_renderer, locals_, span=(0.0, 0.1))
+    where = np.array(probe.matrix_world.translation, np.float64)
+    try:
+        plan, vol, (irr, vis), world = yield Work(_bake, r, boxes, within, where, DEFAULT_FACE, span=(0.1, 0.97))
+    finally:
+        if own is not None:
+            own.close()
+    scene = bpy.data.scenes.get(scene_name)  # after the worker: by name (see blender/bake.py _named)
+    probe = scene.objects.get(probe_name) if scene is not None else None
+    if probe is None:
+        raise ValueError(f"{probe_name!r} was deleted while its light volume was baked: nothing was written")
+    s = probe.gs_ibl_probe
+    lit = [scene.objects[n] for n in names if n in scene.objects]  # deleted meanwhile: skipped
+    for obj in lit:
+        ll.set_object_grid(obj, ll.VOLUME_KEY)
+    ll.prune_atlas()  # before the group is rebuilt: tiles nobody reads any more (volume_nodes.py says why)
+    store_volume(irr, vis, vol.spec, world, s.irradiance_image)
+    for obj in lit:
+        ll.light_object(obj, float(s.strength))
+        obj[AUTO_KEY] = probe.name
+    for n in outside:  # light this probe gave before, now outside the splats: the World's again
+        obj = scene.objects.get(n)
+        if obj is not None and obj.get(AUTO_KEY) == probe.name:
+            ll.unlight_object(obj)
+            del obj[AUTO_KEY]
+    lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {vol.spec.count} probes "
+             f"({' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart), from "
+             f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
+    lines += plan.messages + vol.report
+    if outside:
+        lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
+                     + (", ..." if len(outside) > 6 else ""))
+    lines.append("a mesh moved out of the volume's box fades to the World probe's light; re-bake to cover it")
+    s.local_report = "\n".join(lines)
+    return lines[0], {"lit": [o.name for o in lit], "outside": outside, "probes": vol.spec.count}
+
+
+def store_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, spec, world=None,
+                 irradiance: bpy.types.Image | None = None) -> dict:
+    """Write the volume's two atlases (pack_atlas's) into the file's packed images (in place where they exist: the
+    groups' texture nodes keep pointing at them), the spec and the World's numbers beside them, and rebuild the
+    volume groups and the local-light group; returns the volume groups {engine: group}. ``world``: (9, 3)
+    monomial coefficients of the World probe's light; ``irradiance``: its irradiance image (local_light's
+    WORLD_COEFFS / WORLD_IRRADIANCE)."""
+    irr = ll.atlas_image(irr_atlas, vn.volume_image(), vn.IRRADIANCE_ROLE, vn.IRRADIANCE_IMAGE)
+    vis = ll.atlas_image(vis_atlas, vn.visibility_image(), vn.VISIBILITY_ROLE, vn.VISIBILITY_IMAGE)
+    irr[vn.SPEC] = json.dumps({"lo": list(map(float, spec.lo)), "hi": list(map(float, spec.hi)),
+                               "shape": [int(x) for x in spec.shape]})
+    if world is not None:
+        irr[ll.WORLD_COEFFS] = json.dumps(np.asarray(world, np.float64).reshape(-1, 3).tolist())
+    if isinstance(irradiance, bpy.types.Image):
+        irr[ll.WORLD_IRRADIANCE] = irradiance
+    trees = vn.build_groups(irr, vis, spec)
+    ll.rebuild_group()
+    return trees
+

@@ -1,0 +1,219 @@
+"""The light volume's node group: core/probe/volume.py ``sample_packed`` in shader nodes, for EEVEE and Cycles.
+
+One group per file, "GS-IBL Light Volume", made by Python from the core's numbers (``shader_constants``: box,
+shape, tile counts, map sizes, biases) and its two packed float images (irradiance and visibility atlases, Closest
+texels blended here: EEVEE's Linear filter reads a coarser mip level wherever the coordinates jump between
+neighbouring pixels, as they do at a cell's boundary when the corner probes change). Inputs: Position and Normal
+(world space); outputs: Irradiance (E/pi, the core's sample_packed term for term: normal bias, eight corners'
+trilinear x Chebyshev weights with DDGI's crush, octahedral lookups with the atlas's borders) and
+Inside: 1 inside the volume's box, falling linearly to 0 one node spacing outside it, where the local-light group
+(blender/lighting/local_light.py) hands the mesh back to the World's light.
+
+Of the core's formula, two terms are written in a form that nodes have: ``w < CRUSH ? w^3 / CRUSH^2 : w`` is
+``min(w, w^3 / CRUSH^2)`` (the same number: w^3 / CRUSH^2 < w exactly where w < CRUSH), and the Chebyshev test's
+``r <= m ? 1 : ...`` is ``max(..., 1 - (r > m))``. A bilinear lookup's fraction is the same in every tile (tile
+origins are whole texels), so the normal's is computed once for the eight irradiance lookups.
+
+The images and the group's numbers live in datablocks (the images packed, the spec as JSON on the irradiance
+image), so the group follows undo and save/reload like the local-light group.
+"""
+from __future__ import annotations
+
+import json
+
+import bpy
+import numpy as np
+
+from ...core.probe import volume as pv
+from ...core.probe.grid import GridSpec
+from ..common.datablocks import MARKER, find_ours
+from .node_math import NodeMath
+
+# one group per engine: Cycles reads Linear texels (Closest texels blended in nodes overflowed its shader stack, the
+# visibility's lookups most: "out of SVM stack space" at eight corners, and the shader rendered black), EEVEE reads
+# Closest texels blended in nodes (its Linear filter: 5% at the 95th percentile, 20% at worst, a coarser mip level
+# where the corner probes change between neighbouring pixels; Closest: 0.4%, 3.3%)
+GROUPS = {"CYCLES": ("GS-IBL Light Volume", "light_volume", True),
+          "EEVEE": ("GS-IBL Light Volume EEVEE", "light_volume_eevee", False)}
+IRRADIANCE_ROLE, VISIBILITY_ROLE = "volume_irradiance", "volume_visibility"
+IRRADIANCE_IMAGE, VISIBILITY_IMAGE = "GS-IBL Volume Irradiance", "GS-IBL Volume Visibility"
+SPEC = "gs_ibl_volume_spec"  # irradiance image custom property: JSON {"lo", "hi", "shape"}
+
+
+def volume_image() -> bpy.types.Image | None:
+    """The file's volume irradiance atlas (its custom properties hold the spec and the World's numbers)."""
+    return find_ours(bpy.data.images, IRRADIANCE_ROLE)
+
+
+def visibility_image() -> bpy.types.Image | None:
+    return find_ours(bpy.data.images, VISIBILITY_ROLE)
+
+
+def volume_spec(image: bpy.types.Image | None = None) -> GridSpec | None:
+    """The GridSpec the file's volume was baked on (None: no volume)."""
+    img = image if image is not None else volume_image()
+    raw = img.get(SPEC) if img is not None else None
+    if not raw:
+        return None
+    d = json.loads(raw)
+    return GridSpec(tuple(d["lo"]), tuple(d["hi"]), tuple(d["shape"]))
+
+
+def volume_group(engine: str = "CYCLES") -> bpy.types.ShaderNodeTree | None:
+    """The file's volume group for ``engine`` ("CYCLES" or "EEVEE"), built for its images when missing (None: the
+    file has no volume)."""
+    tree = find_ours(bpy.data.node_groups, GROUPS[engine][1])
+    if tree is not None:
+        return tree
+    irr, vis, spec = volume_image(), visibility_image(), volume_spec()
+    if irr is None or vis is None or spec is None:
+        return None
+    return build_groups(irr, vis, spec)[engine]
+
+
+def build_groups(irr: bpy.types.Image, vis: bpy.types.Image, spec: GridSpec) -> dict:
+    """(Re)build the file's volume groups {engine: group} to read ``irr`` and ``vis`` (pack_atlas's) on ``spec``."""
+    return {engine: _group(engine, irr, vis, spec) for engine in GROUPS}
+
+
+def _group(engine: str, irr, vis, spec: GridSpec) -> bpy.types.ShaderNodeTree:
+    name, role, linear = GROUPS[engine]
+    tree = find_ours(bpy.data.node_groups, role)
+    if tree is None:
+        tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
+        tree[MARKER] = role
+        iface = tree.interface
+        iface.new_socket("Position", in_out="INPUT", socket_type="NodeSocketVector")
+        iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
+        iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketVector")
+        iface.new_socket("Inside", in_out="OUTPUT", socket_type="NodeSocketFloat")
+    _build(tree, irr, vis, spec, linear)
+    return tree
+
+
+def _oct_uv(b: NodeMath, d):
+    """(u, v) in 0..1 of oct_encode(d) * 0.5 + 0.5 (two sockets)."""
+    a = b.vval("DOT_PRODUCT", b.vec("ABSOLUTE", d), (1.0, 1.0, 1.0))
+    x, y, z = b.separate(d)
+    px, py = b.math("DIVIDE", x, a), b.math("DIVIDE", y, a)
+
+    def sign(v):  # +1 at 0, as the core's
+        return b.math("MULTIPLY_ADD", b.math("LESS_THAN", v, 0.0), -2.0, 1.0)
+    fx = b.math("MULTIPLY", b.math("SUBTRACT", 1.0, b.math("ABSOLUTE", py)), sign(px))
+    fy = b.math("MULTIPLY", b.math("SUBTRACT", 1.0, b.math("ABSOLUTE", px)), sign(py))
+    below = b.math("LESS_THAN", z, 0.0)
+    u = b.math("MULTIPLY_ADD", b.math("SUBTRACT", fx, px), below, px)
+    v = b.math("MULTIPLY_ADD", b.math("SUBTRACT", fy, py), below, py)
+    return b.math("MULTIPLY_ADD", u, 0.5, 0.5), b.math("MULTIPLY_ADD", v, 0.5, 0.5)
+
+
+def _in_tile(b: NodeMath, uv, size: int):
+    """Within a tile's interior of ``size`` texels: (the lower texel column and row left of and below the lookup,
+    counted from the tile's corner, border included; the bilinear fractions)."""
+    out = []
+    for c in uv:
+        x = b.math("MULTIPLY_ADD", c, float(size), 0.5)  # 1 + c size - 0.5: continuous, texel centres at whole
+        x0 = b.math("FLOOR", x)
+        out.append((x0, b.math("SUBTRACT", x, x0)))
+    return out
+
+
+def _bilinear(b: NodeMath, image, origin, local, width: int, height: int, linear: bool):
+    """The bilinear lookup at the tile ``origin`` (column, row sockets) + ``local``: one Linear texture node
+    (``linear``), or four Closest texels blended here."""
+    (x0, fx), (y0, fy) = local
+    ox, oy = origin
+    if linear:  # pixel / size with the texel centres at +0.5, as the core's _bilinear
+        u = b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), b.math("ADD", fx, 0.5)), 1.0 / width)
+        v = b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), b.math("ADD", fy, 0.5)), 1.0 / height)
+        uv = b.combine(u, v)  # before the texture node (node_math.py says why)
+        tex = b.N.new("ShaderNodeTexImage")
+        tex.image = image
+        tex.interpolation = "Linear"
+        tex.extension = "EXTEND"
+        b.L.new(uv, tex.inputs["Vector"])
+        return tex.outputs["Color"]
+    xs = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), 0.5 + k), 1.0 / width) for k in (0, 1)]
+    ys = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), 0.5 + k), 1.0 / height) for k in (0, 1)]
+    t = {(i, j): b.texel(image, xs[i], ys[j]) for i in (0, 1) for j in (0, 1)}
+
+    def lerp(a, c, f):
+        return b.vec("MULTIPLY_ADD", b.vec("SUBTRACT", c, a), b.combine(f, f, f), a)
+    return lerp(lerp(t[0, 0], t[1, 0], fx), lerp(t[0, 1], t[1, 1], fx), fy)
+
+
+def _build(tree, irr, vis, spec: GridSpec, linear: bool) -> None:
+    """The nodes of sample_packed (the module docstring says which terms take another form)."""
+    tree.nodes.clear()
+    k = pv.shader_constants(spec)
+    b = NodeMath(tree)
+    gin, gout = b.N.new("NodeGroupInput"), b.N.new("NodeGroupOutput")
+    lo, hi = np.asarray(k["lo"], np.float64), np.asarray(k["hi"], np.float64)
+    shape = np.asarray(k["shape"], np.float64)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    top = shape - 1
+    # probe positions per axis: lo + i (hi - lo) / (n - 1); one node: the box's middle
+    base = np.where(shape > 1, lo, (lo + hi) / 2)
+    step = np.where(shape > 1, (hi - lo) / np.maximum(top, 1), 0.0)
+    cols = float(k["cols"])
+    iw, ih = k["irradiance_size"]
+    vw, vh = k["visibility_size"]
+    for img, size, role in ((irr, (iw, ih), "irradiance"), (vis, (vw, vh), "visibility")):
+        if tuple(img.size) != tuple(size):
+            raise ValueError(f"{img.name!r} is {tuple(img.size)} pixels; the volume's {role} atlas must be {size}")
+
+    n = b.vec("NORMALIZE", gin.outputs["Normal"])
+    p = b.vec("MULTIPLY_ADD", n, b.const([k["normal_bias"]] * 3), gin.outputs["Position"])
+    g = b.vec("MINIMUM", b.vec("MAXIMUM", b.vec("MULTIPLY", b.vec("SUBTRACT", p, b.const(lo)),
+                                                     b.const(top / span)), (0.0, 0.0, 0.0)), b.const(top))
+    i0 = b.vec("MINIMUM", b.vec("FLOOR", g), b.const(top))
+    i1 = b.vec("MINIMUM", b.vec("ADD", i0, (1.0, 1.0, 1.0)), b.const(top))
+    f = b.vec("SUBTRACT", g, i0)
+    i0s, i1s, fs = b.separate(i0), b.separate(i1), b.separate(f)
+    one_minus = [b.math("SUBTRACT", 1.0, fa) for fa in fs]
+    irr_local = _in_tile(b, _oct_uv(b, n), pv.IRR)
+    num, den = None, None
+    for c in range(8):
+        bits = [(c >> a) & 1 for a in range(3)]
+        idx = [i1s[a] if bits[a] else i0s[a] for a in range(3)]
+        tri = b.math("MULTIPLY", b.math("MULTIPLY", *[fs[a] if bits[a] else one_minus[a] for a in range(2)]),
+                     fs[2] if bits[2] else one_minus[2])
+        q = b.combine(*[b.math("MULTIPLY_ADD", idx[a], float(step[a]), float(base[a])) for a in range(3)])
+        # i = ix + nx (iy + ny iz); its tile's column and row
+        i = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", idx[2], float(shape[1]), idx[1]), float(shape[0]), idx[0])
+        row = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", i, 0.5), 1.0 / cols))
+        col = b.math("MULTIPLY_ADD", row, -cols, i)
+        away = b.vec("SUBTRACT", p, q)
+        r = b.vval("LENGTH", away)
+        # the moments along probe -> point (+Z where they coincide, as the core's _away)
+        away = b.vec("ADD", away, b.combine(0.0, 0.0, b.math("LESS_THAN", r, 1e-12)))
+        vt = float(pv.VIS + 2)
+        mom = _bilinear(b, vis, (b.math("MULTIPLY", col, vt), b.math("MULTIPLY", row, vt)),
+                        _in_tile(b, _oct_uv(b, away), pv.VIS), vw, vh, linear)
+        m, m2, _ = b.separate(mom)
+        var = b.math("MAXIMUM", b.math("SUBTRACT", m2, b.math("MULTIPLY", m, m)),
+                     b.math("POWER", b.math("MULTIPLY", m, k["variance_floor"]), 2.0))
+        beyond = b.math("MAXIMUM", b.math("SUBTRACT", r, m), 0.0)
+        ratio = b.math("DIVIDE", var, b.math("MAXIMUM", b.math("MULTIPLY_ADD", beyond, beyond, var), 1e-30))
+        cheb = b.math("MAXIMUM", b.math("POWER", ratio, 3.0), b.math("SUBTRACT", 1.0, b.math("GREATER_THAN", r, m)))
+        w = b.math("MAXIMUM", cheb, k["min_weight"])
+        w = b.math("MINIMUM", w, b.math("MULTIPLY", b.math("POWER", w, 3.0), 1.0 / k["crush"] ** 2))
+        w = b.math("MULTIPLY", w, tri)
+        it = float(pv.IRR + 2)
+        e = _bilinear(b, irr, (b.math("MULTIPLY", col, it), b.math("MULTIPLY", row, it)), irr_local, iw, ih, linear)
+        term = b.scale(e, w)
+        num = term if num is None else b.vec("ADD", num, term)
+        den = w if den is None else b.math("ADD", den, w)
+    b.L.new(b.vec("DIVIDE", num, b.combine(den, den, den)), gout.inputs["Irradiance"])
+    # Inside: 1 in the box, 0 one spacing out (the unbiased position: where the mesh is)
+    pos = gin.outputs["Position"]
+    out = b.vec("MAXIMUM", b.vec("MAXIMUM", b.vec("SUBTRACT", b.const(lo), pos), b.vec("SUBTRACT", pos, b.const(hi))),
+                (0.0, 0.0, 0.0))
+    ox, oy, oz = b.separate(out)
+    far = b.math("MAXIMUM", b.math("MAXIMUM", ox, oy), oz)
+    inside = b.math("MULTIPLY_ADD", far, -1.0 / pv.spec_spacing(spec), 1.0)
+    inside.node.use_clamp = True
+    b.L.new(inside, gout.inputs["Inside"])
+    for j, node in enumerate(b.N):  # a column per creation order: readable enough, not needed to work
+        node.location = (200 * (j // 20), -150 * (j % 20))
+
