@@ -169,8 +169,8 @@ class GSIBL_RenderSettings(bpy.types.PropertyGroup):
                                       "EEVEE. Needs a baked probe")
     native_splats: EnumProperty(
         name="Native Splats", default="GSIBL", update=_render_setting_changed,
-        items=(("BLENDER", "Blender", "Blender 5.3 renders its own Gaussian-splat objects (Cycles path-traces them: "
-                "they reflect and cast shadows, slowly and with noise; EEVEE rasterizes them)"),
+        items=(("BLENDER", "Blender", "Cycles or EEVEE renders Blender's Gaussian-splat objects itself: seen in "
+                "reflections, casting Cycles shadows, at many times the time per frame and with sampling noise"),
                ("GSIBL", "GS-IBL", "GS-IBL draws Blender's Gaussian-splat objects with the other splats, by depth "
                 "with the meshes, as 3D Gaussian Splatting's viewers show them; Blender leaves them out of that "
                 "render (the objects are not changed)")),
