@@ -93,8 +93,7 @@ def make_reference(kind: str, scene, near: float, far: float, ours):
 def linear_rule(ref, scene, cv, space: str) -> np.ndarray | None:
     """For a capture in sRGB: the reference's splats blended by Blender's rule (each splat's colour decoded to
     linear light, blended, the result encoded again: what any Blender render of them shows in its Standard view),
-    where gsplat blends the sRGB values themselves. None for a linear capture (the rules agree) or a reference
-    without colour input (the numpy port)."""
+    where gsplat blends the sRGB values themselves. None for a linear capture (the rules agree)."""
     import fidelity_bench as fb
     from gs_ibl_addon.core.colour import linear_to_srgb, srgb_to_linear
     from gs_ibl_addon.core.sh import eval_sh_color
@@ -112,6 +111,13 @@ def linear_rule(ref, scene, cv, space: str) -> np.ndarray | None:
         c, a, _ = ref.raster(*ref.t[:4], colours, tt(vm), tt(k), cv.width, cv.height, sh_degree=None,
                              near_plane=ref.near, far_plane=ref.far, rasterize_mode="classic", packed=True)
         img = np.concatenate([c[0].float().cpu().numpy(), a[0].float().cpu().numpy()], -1)
+    elif isinstance(ref, fb.ClassicNumpy):
+        class Decoded(fb.ClassicNumpy):
+            def project(self, cv):
+                p = super().project(cv)
+                p["color"] = srgb_to_linear(p["color"])
+                return p
+        img = Decoded(scene, ref.near, ref.far).render(cv)
     else:
         return None
     img = img.astype(np.float32)
@@ -331,7 +337,7 @@ def methods(args) -> list[dict]:
     for n in args.cycles_samples:
         out.append({"name": f"native-cycles-{n}", "engine": "cycles", "choice": "BLENDER", "samples": n,
                     "denoise": False, "sizes": [size]})
-        if args.denoise:
+        if n in args.denoise_samples:
             out.append({"name": f"native-cycles-{n}-oidn", "engine": "cycles", "choice": "BLENDER", "samples": n,
                         "denoise": True, "sizes": [size]})
     for n in args.eevee_samples:
@@ -425,11 +431,14 @@ def run_bench(args) -> None:
         ref = refs[row["capture"]]
         img = images.get(f"{row['capture']}_{row['view']}_{row['method']}")
         small = (row["width"], row["height"]) == args.size_wh and img is not None
-        cmp = fb.compare(display(img, spaces[row["capture"]]), ref[f"gsplat_{row['view']}"].astype(np.float32)) \
-            if small else {}
+        shown = display(img, spaces[row["capture"]]) if small else None
+        cmp = fb.compare(shown, ref[f"gsplat_{row['view']}"].astype(np.float32)) if small else {}
+        lin = ref.get(f"gsplat_lin_{row['view']}")
+        cmp_lin = fb.compare(shown, lin.astype(np.float32)) if small and lin is not None else {}
         rows.append({"date": date, "device": device, "blender": result["blender"],
                      "reference": str(ref["reference"]), **{k: v for k, v in row.items() if k != "messages"},
                      "psnr": cmp.get("psnr", ""), "psnr_alpha": cmp.get("psnr_alpha", ""),
+                     "psnr_blender_rule": cmp_lin.get("psnr", ""),
                      "px_over_1pct": cmp.get("px_over_1pct", ""), "load": round(os.getloadavg()[0], 1)})
     if os.path.exists(args.csv):
         os.remove(args.csv)  # one run per file: the chart is of one run
@@ -464,52 +473,71 @@ def summary(rows: list[dict]) -> list[dict]:
     res = []
     for (cap, lab), rs in out.items():
         ps = [float(r["psnr"]) for r in rs if r["psnr"] != ""]
+        pl = [float(r["psnr_blender_rule"]) for r in rs if r.get("psnr_blender_rule", "") != ""]
         res.append({"capture": cap, "method": lab, "views": len(rs), "width": rs[0]["width"],
                     "height": rs[0]["height"],
                     "render_s": statistics.median(float(r["render_s"]) for r in rs),
                     "splats_ms": statistics.median(float(r["splats_ms"]) for r in rs) if rs[0]["splats_ms"] != ""
-                    else "", "psnr": statistics.median(ps) if ps else "", "psnr_min": min(ps) if ps else ""})
+                    else "", "psnr": statistics.median(ps) if ps else "", "psnr_min": min(ps) if ps else "",
+                    "psnr_rule": statistics.median(pl) if pl else ""})
     return res
 
 
 def print_table(rows: list[dict]) -> None:
-    print("\n| capture | method | size | s per frame (median) | our splats' ms | PSNR dB (median, worst) |")
-    print("|---|---|---|---:|---:|---:|")
+    print("\n| capture | method | size | s per frame (median) | our splats' ms | PSNR dB (median, worst) | "
+          "PSNR dB, Blender's colour rule |")
+    print("|---|---|---|---:|---:|---:|---:|")
     for s in summary(rows):
         ps = f"{s['psnr']:.1f} ({s['psnr_min']:.1f})" if s["psnr"] != "" else "-"
         ms = f"{s['splats_ms']:.0f}" if s["splats_ms"] != "" else "-"
-        print(f"| {s['capture']} | {s['method']} | {s['width']}x{s['height']} | {s['render_s']:.2f} | {ms} | {ps} |")
+        rule = f"{s['psnr_rule']:.1f}" if s["psnr_rule"] != "" else "-"
+        print(f"| {s['capture']} | {s['method']} | {s['width']}x{s['height']} | {s['render_s']:.2f} | {ms} | {ps} | "
+              f"{rule} |")
 
 
 def plot(rows: list[dict], png: str) -> None:
+    """Per capture: each view's frames, time against PSNR (filled: against gsplat's image; hollow: against gsplat's
+    splats blended by Blender's colour rule, for an sRGB capture); our 1920x1080 frame's time as a dotted line."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    sm = summary(rows)
-    caps = list(dict.fromkeys(s["capture"] for s in sm))
-    fig, axes = plt.subplots(1, len(caps), figsize=(6.2 * len(caps), 4.6), squeeze=False)
+    caps = list(dict.fromkeys(r["capture"] for r in rows))
+    views = list(dict.fromkeys(r["view"] for r in rows))
+    shapes = dict(zip(views, "osD^v<>p"))
+    fig, axes = plt.subplots(1, len(caps), figsize=(6.4 * len(caps), 5.0), squeeze=False)
     for ax, cap in zip(axes[0], caps):
-        ss = [s for s in sm if s["capture"] == cap and s["psnr"] != ""]
-        for s in ss:
-            colour = "tab:blue" if s["method"].startswith("GS-IBL") else (
-                "tab:red" if "Cycles" in s["method"] else "tab:green")
-            ax.scatter(s["render_s"], s["psnr"], color=colour, s=40, zorder=3)
-            ax.annotate(s["method"], (s["render_s"], s["psnr"]), textcoords="offset points", xytext=(5, 3),
-                        fontsize=7)
-        full = [s for s in sm if s["capture"] == cap and s["psnr"] == ""]
-        for s in full:  # 1080p: time only (no reference at that size here)
-            ax.axvline(s["render_s"], color="tab:blue", ls=":", lw=1)
-            ax.text(s["render_s"], ax.get_ylim()[0], f" {s['method']}", rotation=90, fontsize=6, va="bottom",
-                    color="tab:blue")
+        rs = [r for r in rows if r["capture"] == cap and r["psnr"] != ""]
+        for r in rs:
+            lab = label(r)
+            colour = "tab:blue" if lab.startswith("GS-IBL") else ("tab:red" if "Cycles" in lab else "tab:green")
+            t = float(r["render_s"])
+            ax.scatter(t, float(r["psnr"]), color=colour, marker=shapes[r["view"]], s=36, zorder=3)
+            if r.get("psnr_blender_rule", "") != "":
+                ax.scatter(t, float(r["psnr_blender_rule"]), facecolors="none", edgecolors=colour,
+                           marker=shapes[r["view"]], s=36, zorder=3)
+            if r["view"] == views[0]:
+                ax.annotate(lab, (t, float(r["psnr"])), textcoords="offset points", xytext=(5, 3), fontsize=6)
+        lo = min(float(r["psnr"]) for r in rs)
+        for r in rows:  # our 1920x1080 frames: time only (the references are at the comparison size)
+            if r["capture"] == cap and r["psnr"] == "":
+                ax.axvline(float(r["render_s"]), color="tab:blue", ls=":", lw=1)
+                ax.text(float(r["render_s"]), lo, f" GS-IBL 1920x1080, {r['view']}", rotation=90, fontsize=6,
+                        va="bottom", color="tab:blue")
+        for v in views:
+            ax.scatter([], [], color="grey", marker=shapes[v], label=f"view {v}")
+        if any(r.get("psnr_blender_rule", "") != "" for r in rs):
+            ax.scatter([], [], facecolors="none", edgecolors="grey", label="against gsplat by Blender's colour rule")
+        ax.legend(fontsize=7, loc="best")
         ax.set_xscale("log")
-        ax.set_xlabel(f"seconds per frame ({ss[0]['width']}x{ss[0]['height']} unless named)")
-        ax.set_ylabel("PSNR against gsplat classic, dB (median over views)")
+        ax.set_xlabel(f"seconds per frame ({rs[0]['width']}x{rs[0]['height']} unless named)")
+        ax.set_ylabel("PSNR against gsplat classic, dB")
         ax.set_title(cap, fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
     r0 = rows[0]
-    fig.suptitle(f"A capture in F12: Blender {r0['blender']}'s native splats against GS-IBL drawing them, "
-                 f"{r0['device']}, {r0['date']}; reference: {r0['reference']}", fontsize=8)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    fig.suptitle(f"A capture in F12: Blender {r0['blender']}'s native splats (red Cycles, green EEVEE) against GS-IBL "
+                 f"drawing them (blue), {r0['device']}, load {r0.get('load', '?')} on 2 cores, {r0['date']};\n"
+                 f"reference: {r0['reference']}", fontsize=8)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     fig.savefig(png, dpi=110)
     plt.close(fig)
 
@@ -569,8 +597,9 @@ def main(argv=None) -> None:
     ap.add_argument("--refs", default=REFS_DIR, help="bench: the GPU machine's references")
     ap.add_argument("--stand-in", choices=("", "ours", "numpy"), default="",
                     help="bench: where a reference is missing, make it here (our image, or the numpy port)")
-    ap.add_argument("--cycles-samples", type=lambda t: [int(x) for x in t.split(",") if x], default=[16, 64])
-    ap.add_argument("--no-denoise", dest="denoise", action="store_false", help="bench: no Cycles + OIDN rows")
+    ap.add_argument("--cycles-samples", type=lambda t: [int(x) for x in t.split(",") if x], default=[16])
+    ap.add_argument("--denoise-samples", type=lambda t: [int(x) for x in t.split(",") if x], default=[16],
+                    help="bench: Cycles sample counts also rendered with the OIDN denoiser")
     ap.add_argument("--eevee-samples", type=lambda t: [int(x) for x in t.split(",") if x], default=[1, 16])
     ap.add_argument("--no-full-frame", dest="full", action="store_false", help="bench: no 1920x1080 frame of ours")
     ap.add_argument("--threads", type=int, default=2)
