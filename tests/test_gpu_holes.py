@@ -37,10 +37,16 @@ def test_gpu_fill_equals_the_host_fill():
         assert abs(record["fraction"] - f.hole_fraction[k]) < 1e-5
 
 
-def test_a_batch_keeping_sh_fills_on_the_gpu_as_on_the_host():
+def test_a_batch_fills_on_the_gpu_as_on_the_host(monkeypatch):
+    from gs_ibl_addon.core import bake_batch
     s = ProbeSettings(method="sh", face_size=16, irradiance_size=4, hole_fill="mean")
     with SplatRenderer(_scene()) as r:
-        host = bake_probes(None, ORIGINS, s, renderer=r, keep_radiance=True)  # the host fill (radiance kept)
+        with monkeypatch.context() as m:
+            m.setattr(bake_batch, "GPU_FILLS", ())  # the host fill
+            host = bake_probes(None, ORIGINS, s, renderer=r, keep_radiance=True)
+        kept = bake_probes(None, ORIGINS, s, renderer=r, keep_radiance=True)  # filled on the GPU, then read
+        for a, b in zip(kept, host):
+            np.testing.assert_allclose(a.radiance, b.radiance, rtol=0, atol=1e-5 * np.abs(b.radiance).max())
         before = r.ctx.stats.snapshot()
         gpu = bake_probes(None, ORIGINS, s, renderer=r, keep_radiance=False)
         moved = r.ctx.stats.since(before)
@@ -52,3 +58,25 @@ def test_a_batch_keeping_sh_fills_on_the_gpu_as_on_the_host():
         np.testing.assert_allclose(a.sh_coefficients, b.sh_coefficients, rtol=0,
                                    atol=1e-5 * np.abs(b.sh_coefficients).max())
         np.testing.assert_allclose(a.irradiance, b.irradiance, rtol=0, atol=1e-5 * np.abs(b.irradiance).max())
+
+
+def test_a_probe_fills_on_the_gpu_as_on_the_host(monkeypatch):
+    from gs_ibl_addon.core import bake
+    from gs_ibl_addon.core.bake import bake_probe
+    scene = _scene()
+    for fill in ("mean", "constant"):
+        s = ProbeSettings(face_size=16, irradiance_size=8, hole_fill=fill, hole_colour=(0.2, 0.3, 0.4),
+                          glossy=True)
+        with SplatRenderer(scene) as r:
+            gpu = bake_probe(None, ORIGINS[1], s, renderer=r)
+            with monkeypatch.context() as m:
+                m.setattr(bake, "GPU_FILLS", ())  # the host fill
+                host = bake_probe(None, ORIGINS[1], s, renderer=r)
+        assert gpu.hole_fraction > 0 and gpu.hole_fill["method"] == host.hole_fill["method"] == fill
+        np.testing.assert_allclose(gpu.hole_fill["value"], host.hole_fill["value"], rtol=1e-4, atol=1e-7)
+        assert abs(gpu.hole_fill["fraction"] - host.hole_fill["fraction"]) < 1e-5
+        for name in ("radiance", "irradiance", "sh_coefficients"):
+            a, b = np.asarray(getattr(gpu, name)), np.asarray(getattr(host, name))
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-5 * np.abs(b).max(), err_msg=name)
+        for a, b in zip(gpu.prefiltered, host.prefiltered):  # the glossy maps take the filled radiance
+            np.testing.assert_allclose(a, b, rtol=0, atol=1e-5 * np.abs(b).max())

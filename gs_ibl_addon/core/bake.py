@@ -20,6 +20,7 @@ import numpy as np
 from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import gpu_ggx_prefilter
+from .probe.gpu_holes import GPU_FILLS, covered_means, fill_frame_holes
 from .probe.highlights import gain_clipped_splats, recover_highlights
 from .probe.holes import fill_holes
 from .probe.lights import extract_lights
@@ -350,14 +351,31 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
         else:
             result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
     frame = None
+    # Holes are filled on the kept probe (the search above compared the unfilled probes: a fill moves every size
+    # alike) and it is filtered again; a probe without holes pays nothing. A one-colour fill of a probe whose frame
+    # is still on the GPU, with nothing else to change on its cube, is filled there (probe/gpu_holes.py) and its
+    # recorded filter runs again: no cube filled in numpy and uploaded again.
+    if (result.radiance is None and s.hole_fill in GPU_FILLS and result.hole_fraction > 0 and s.lights == 0
+            and (s.highlight_gain == 1 or highlights_done) and s.sh_order == 2):
+        with times.stage("holes and lights"):
+            t0 = time.perf_counter()
+            frame = r.last_frame
+            value = (covered_means(np.asarray(result.sh_coefficients)[None], [result.hole_fraction])[0]
+                     if s.hole_fill == "mean" else np.asarray(s.hole_colour, np.float64))
+            fill_frame_holes(frame, value[None])
+            filled = filter_probe(frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
+                                  roughness=None, read_radiance=False, **s.extra)
+            result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
+            result.hole_fill = {"method": s.hole_fill, "value": [float(v) for v in value],
+                                "fraction": float(result.hole_fraction)}
+            result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
     with times.stage("radiance readback"):
         if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
             frame = r.last_frame
             result.radiance = frame.read_cube()
-    # Holes are filled on the radiance read back (the search above compared the unfilled probes: a fill moves
-    # every size alike) and the kept size is filtered again from it; a probe without holes pays nothing.
     with times.stage("holes and lights"):
-        if light_from_radiance(result, s, r.colour_space, hole_radiance, highlights_done):
+        if result.hole_fill is None and light_from_radiance(result, s, r.colour_space, hole_radiance,
+                                                            highlights_done):
             t0 = time.perf_counter()
             filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
                                   sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)

@@ -26,15 +26,13 @@ from .probe import ProbeResult, filter_probe
 from .probe.highlights import gain_clipped_splats
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import BATCH_METHODS, filter_probes, gpu_ggx_prefilter
-from .probe.gpu_holes import covered_means, fill_frame_holes
+from .probe.gpu_holes import GPU_FILLS, covered_means, fill_frame_holes
 from .render.renderer import SplatRenderer, largest_probe_face
 from .scene import SplatScene
 from .settings import AUTO_FIRST_FACE
 from .stage_times import StageTimes
 from .tolerance import ErrorModel, relative_rms
 from .vk import get_context
-
-GPU_FILLS = ("mean", "constant")  # hole fills of one colour over the sphere: probe/gpu_holes.py fills them
 
 
 class ProbeModels:
@@ -202,13 +200,10 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
     frame, sh, irr, holes, timings = b.frame, b.sh, b.irradiance, b.holes, b.timings
     on_cube = (s.highlight_gain != 1 and highlights is None) or s.lights > 0  # needs each probe's radiance
     fills = s.hole_fill != "black" and bool(np.any(holes > 0))
-    # A batch that keeps only SH and irradiance fills a one-colour fill on the GPU (probe/gpu_holes.py): no cube
-    # read back, filled on the host and uploaded again
-    fill_on_gpu = (fills and s.hole_fill in GPU_FILLS and method in BATCH_METHODS
-                   and not (keep_radiance or s.glossy or on_cube))
-    with times.stage("radiance readback"):
-        read = keep_radiance or s.glossy or (fills and not fill_on_gpu) or on_cube
-        radiance = frame.read_probes() if read else [None] * n
+    # A one-colour fill (mean, constant) of a batch with nothing else to change on its cubes is filled on the GPU
+    # (probe/gpu_holes.py) before any cube is read: none is filled in numpy and uploaded again, and a batch that
+    # keeps only SH and irradiance (a grid's nodes, Lighting Auto's measurement) reads none back
+    fill_on_gpu = fills and s.hole_fill in GPU_FILLS and method in BATCH_METHODS and not on_cube
     with times.stage("holes and lights"):
         if fill_on_gpu:
             t0 = time.perf_counter()
@@ -217,6 +212,10 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
             fill_frame_holes(frame, fill_values)
             sh, irr, _, _ = _filter_batch(frame, s, method)
             fill_ms = (time.perf_counter() - t0) * 1e3
+    with times.stage("radiance readback"):
+        read = keep_radiance or s.glossy or (fills and not fill_on_gpu) or on_cube
+        radiance = frame.read_probes() if read else [None] * n
+    with times.stage("holes and lights"):
         out, again = [], []
         for k in range(n):
             p = ProbeResult(radiance=radiance[k], irradiance=irr[k], sh_coefficients=sh[k], settings={},
@@ -224,13 +223,13 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
                                                                      + timings.get("filter_total", 0.0)) / n},
                             splat_count=r.scene_count, device=r.ctx.device_name, hole_fraction=float(holes[k]))
             p.highlights = highlights
-            if radiance[k] is not None:
-                if light_from_radiance(p, s, r.colour_space, hole_radiance, highlights is not None):
-                    again.append(p)
-            elif fill_on_gpu:  # filled above: recorded as fill_holes would
+            if fill_on_gpu:  # filled above: recorded as fill_holes would
                 p.hole_fill = {"method": s.hole_fill, "value": [float(v) for v in fill_values[k]],
                                "fraction": float(holes[k])}
                 p.timings_ms["hole_fill"] = fill_ms
+            elif radiance[k] is not None:
+                if light_from_radiance(p, s, r.colour_space, hole_radiance, highlights is not None):
+                    again.append(p)
             else:  # nothing to fill (no holes, or black): recorded as fill_holes would
                 p.hole_fill = {"method": s.hole_fill, "value": [0.0, 0.0, 0.0], "fraction": float(holes[k])}
             mine = dict(plan)

@@ -16,6 +16,7 @@ from ..vk import Recorder, groups, scratch
 from ..vk.kernels import KERNELS
 
 Y00 = 0.5 / math.sqrt(math.pi)
+GPU_FILLS = ("mean", "constant")  # holes.py's fills of one colour over the sphere: the ones filled here
 
 
 def covered_means(sh: np.ndarray, holes: np.ndarray) -> np.ndarray:
