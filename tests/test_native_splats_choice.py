@@ -40,13 +40,24 @@ def test_gs_ibl_draws_them_and_hides_only_the_render_copy():
     orig, ev = native("guitar")
     ours, left = splats.collect(depsgraph("GSIBL", ev))
     assert [o for o, _ in ours] == [orig] and left == []
+    splats.hide_taken()  # render_layers: their frame is drawn
     assert ev.visible_camera is False, "Blender's engine would draw it too"
     assert orig.visible_camera is True, "the user's object must not be written"
+
+
+def test_a_frame_we_cannot_draw_leaves_them_to_blender():
+    _orig, ev = native("guitar")
+    splats.collect(depsgraph("GSIBL", ev))  # then the frame is refused before render_layers
+    assert ev.visible_camera is True
+    splats.collect(depsgraph("GSIBL"))  # the next view layer's frame holds none: nothing of the last is hidden
+    splats.hide_taken()
+    assert ev.visible_camera is True
 
 
 def test_the_next_frame_of_a_persistent_render_still_draws_them():
     orig, ev = native("guitar")
     splats.collect(depsgraph("GSIBL", ev))
+    splats.hide_taken()
     ours, _ = splats.collect(depsgraph("GSIBL", ev))  # the same evaluated copy, hidden by the first frame
     assert [o for o, _ in ours] == [orig]
     splats.end_job()

@@ -10,9 +10,10 @@ Which objects: our mesh splat objects the render depsgraph holds (their camera i
 Visibility > Camera on). Blender 5.3's native splat Point Clouds are the user's choice (Scene.gs_ibl_render.
 native_splats): left to Blender, which renders them itself, or drawn by us with the rest (read as a bake reads them:
 splats/object.py read_steps). Then Blender must not draw them too: their copy in the render's depsgraph (evaluated,
-its camera visibility) is turned off for this render alone, after that depsgraph was evaluated for the frame and
-before the engine reads it (frame_change_post); the user's object is never written, so nothing needs restoring
-after the render, on Esc or on an undo.
+its camera visibility) is turned off for this render alone, once we drew their frame, after that depsgraph was
+evaluated for the frame and before the engine reads it (frame_change_post); the user's object is never written,
+so nothing needs restoring after the render, on Esc or on an undo, and a frame we cannot draw leaves them to
+Blender.
 """
 from __future__ import annotations
 
@@ -34,6 +35,7 @@ KEEP = 2  # GPU scenes kept (two view layers with different objects alternate wi
 _renderers: "OrderedDict[tuple, object]" = OrderedDict()
 _locals: dict[tuple, SplatScene] = {}  # geometry key -> the object's splats in object space, during a render job
 _hidden: set[str] = set()  # native objects we draw in this render job (their evaluated copies hidden from Blender)
+_taken: list = []  # evaluated copies of the native objects the frame being drawn holds (hide_taken)
 uploads = 0  # scenes uploaded so far (tests see when a frame re-used the GPU copy)
 
 
@@ -46,8 +48,9 @@ def draws_native(scene) -> bool:
 def collect(dg) -> tuple[list[tuple[object, np.ndarray]], list[str]]:
     """(splat objects we draw, each (original object, world matrix at this frame): instances included; names of
     native splat objects left to Blender). With Native Splats: GS-IBL the native ones the camera sees are ours, and
-    their evaluated copies are hidden from the render's engine (module docstring)."""
+    their evaluated copies are hidden from the render's engine once drawn (hide_taken; module docstring)."""
     ours, native = [], []
+    _taken.clear()
     with_native = draws_native(dg.scene)
     for inst in dg.object_instances:
         ob = inst.object
@@ -63,9 +66,18 @@ def collect(dg) -> tuple[list[tuple[object, np.ndarray]], list[str]]:
             # what we hid is known by name for the rest of the job
             if getattr(ob, "visible_camera", True) or orig.name in _hidden:
                 ours.append((orig, np.array(inst.matrix_world, np.float64)))
-                _hidden.add(orig.name)
-                ob.visible_camera = False
+                _taken.append(ob)
     return ours, native
+
+
+def hide_taken() -> None:
+    """The native objects of the last collect() hidden from Blender's engine in this render (their evaluated copies'
+    camera visibility): render_layers calls it once their frame is drawn, so a frame we cannot draw (too large for
+    the device, an error) leaves them to Blender."""
+    for ob in _taken:
+        ob.visible_camera = False
+        _hidden.add(ob.original.name)
+    _taken.clear()
 
 
 def render_visible(scene, view_layer=None) -> tuple[list, list, list]:
@@ -151,6 +163,7 @@ def end_job() -> None:
     """A render job ended: the objects' splats read for it are let go (the GPU scenes stay for the next F12)."""
     _locals.clear()
     _hidden.clear()
+    _taken.clear()
 
 
 def clear() -> None:
@@ -174,7 +187,14 @@ def render_layers(renderer, cam, cut: np.ndarray, depth: list | None = None) -> 
 
     Without the core's depth cut (has_depth_cut), the plain frame is FRONT and BEHIND is zero: splats always in
     front of meshes. ``depth``: a list that gets the splats' (H, W) depth of FRONT over BEHIND appended (the
-    shadows' receivers, core/render/shadows.py), or None where the core gives none."""
+    shadows' receivers, core/render/shadows.py), or None where the core gives none. Once drawn, the native objects
+    among them are hidden from Blender's engine (hide_taken)."""
+    layers = _layers(renderer, cam, cut, depth)
+    hide_taken()
+    return layers
+
+
+def _layers(renderer, cam, cut: np.ndarray, depth: list | None) -> tuple[np.ndarray, np.ndarray]:
     from ...core.render.views import ViewBatch
     window = cam.window
     if has_depth_cut():
