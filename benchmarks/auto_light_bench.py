@@ -60,6 +60,7 @@ PLACES = {
 }
 MESHES = ("sphere", "suzanne")
 ENGINES = ("cycles", "eevee")
+LIGHTS = ("auto", "world", "volume")  # Lighting Auto, World Probe, Volume (issue 37; --steps ...,volume)
 PROBE = [0.0, 0.0, 1.2]
 
 
@@ -72,7 +73,7 @@ def cells(arrays: dict, result: dict, places, meshes) -> list[dict]:
             if native is None:
                 continue
             for engine in ENGINES:
-                for light in ("auto", "world"):
+                for light in LIGHTS:
                     got = arrays.get(f"{light}_{engine}_{key}")
                     if got is None:
                         continue
@@ -101,7 +102,8 @@ def plot(rows: list[dict], path: Path, title: str) -> None:
     for ax, engine in zip(axes, ENGINES):
         ax.axhspan(1 - TOL, 1 + TOL, color="tab:green", alpha=0.18, lw=0, label="±3%")
         ax.axhline(1.0, color="k", lw=0.6)
-        for dx, light, colour in ((-0.19, "auto", "tab:blue"), (0.19, "world", "tab:gray")):
+        for dx, light, colour in ((-0.26, "auto", "tab:blue"), (0.0, "volume", "tab:orange"),
+                                  (0.26, "world", "tab:gray")):
             vals, lo, hi = [], [], []
             for p, m in groups:
                 r = next((r for r in rows if (r["place"], r["mesh"], r["engine"], r["lighting"]) ==
@@ -110,8 +112,11 @@ def plot(rows: list[dict], path: Path, title: str) -> None:
                 vals.append(np.mean(ch))
                 lo.append(np.mean(ch) - min(ch))
                 hi.append(max(ch) - np.mean(ch))
-            ax.bar(x + dx, np.asarray(vals) - 1.0, 0.36, bottom=1.0, color=colour, yerr=[lo, hi], capsize=2,
-                   error_kw={"lw": 0.8}, label={"auto": "Lighting Auto", "world": "World Probe (one probe)"}[light])
+            if not np.isfinite(vals).any():
+                continue
+            ax.bar(x + dx, np.asarray(vals) - 1.0, 0.25, bottom=1.0, color=colour, yerr=[lo, hi], capsize=2,
+                   error_kw={"lw": 0.8}, label={"auto": "Lighting Auto", "world": "World Probe (one probe)",
+                                                     "volume": "Lighting Volume"}[light])
             for xi, v in zip(x + dx, vals):
                 if np.isfinite(v):
                     ax.annotate(f"{v:.2f}", (xi, v), textcoords="offset points", xytext=(0, 3 if v >= 1 else -9),
@@ -167,23 +172,30 @@ def report(rows: list[dict], result: dict, args: dict) -> str:
              f"World report: {result.get('world_report')}", f"Auto report: {result.get('auto_report')}",
              *[f"  {x}" for x in result.get("local_report", [])],
              f"after a World Probe re-bake, local light left on: {result.get('after_world_rebake')}",
-             "", "| place | mesh | Auto chose | Cycles Auto | Cycles World | EEVEE Auto | EEVEE World |",
-             "|---|---|---|---|---|---|---|"]
+             f"Volume bake {t.get('volume_bake_s', 0):.1f} s: {result.get('volume_report')}",
+             *[f"  {x}" for x in result.get("volume_local_report", [])],
+             "", "| place | mesh | Auto chose | Cycles Auto | Cycles Volume | Cycles World | EEVEE Auto | EEVEE Volume "
+                 "| EEVEE World |",
+             "|---|---|---|---|---|---|---|---|---|"]
 
     def cell(p, m, e, light):
         r = next((r for r in rows if (r["place"], r["mesh"], r["engine"], r["lighting"]) == (p, m, e, light)), None)
         if r is None:
             return "–"
         s = f"{r['ratio_r']:.3f} / {r['ratio_g']:.3f} / {r['ratio_b']:.3f}"
-        return f"**{s}**" if light == "auto" and r["within_3pct"] else s
+        return f"**{s}**" if light != "world" and r["within_3pct"] else s
     for p in PLACES:
         for m in MESHES:
             choice = result.get("choice", {}).get(f"{m}_{p}", "")
             if any(r["place"] == p and r["mesh"] == m for r in rows):
                 lines.append(f"| {p} | {m} | {choice} | " + " | ".join(cell(p, m, e, lt) for e in ENGINES
-                                                                         for lt in ("auto", "world")) + " |")
-    auto = [r for r in rows if r["lighting"] == "auto"]
-    lines.append(f"\nAuto within 3% (every channel): {sum(r['within_3pct'] for r in auto)} of {len(auto)} cells")
+                                                                         for lt in ("auto", "volume", "world")) + " |")
+    for light in ("auto", "volume"):
+        for e in ENGINES:
+            got = [r for r in rows if r["lighting"] == light and r["engine"] == e]
+            if got:
+                lines.append(f"{light} {e} within 3% (every channel): {sum(r['within_3pct'] for r in got)} of "
+                             f"{len(got)} cells")
     return "\n".join(lines)
 
 
@@ -242,7 +254,8 @@ def _finish(run: Path, write: bool) -> None:
                         f"native Cycles {args['native_samples']} spp (denoiser off), per-channel range as ticks\n"
                         f"probe at the room's centre, panel defaults; ours: Cycles {args['samples']} spp, EEVEE "
                         f"{args['eevee_samples']} samples; Blender {result['blender']}, 2-core CPU, {date}; bakes: "
-                        f"World {t.get('world_bake_s', 0):.0f} s, Auto {t.get('auto_bake_s', 0):.0f} s")
+                        f"World {t.get('world_bake_s', 0):.0f} s, Auto {t.get('auto_bake_s', 0):.0f} s, Volume "
+                        f"{t.get('volume_bake_s', 0):.0f} s")
         montage(run, args["places"], args["meshes"], RENDERS)
         print(f"\n{CSV}\n{PNG}\n{RENDERS}")
 

@@ -127,7 +127,7 @@ def main() -> dict:
         if "native" in steps:
             _each(meshes, lambda k: times.__setitem__(name("native", k), _render(name("native", k), "CYCLES",
                                                                                  ARGS["native_samples"])))
-        if "world" not in steps and "auto" not in steps:
+        if not {"world", "auto", "volume"} & set(steps):
             rec["ok"] = True
             return rec
         probe = bs.add_probe(ARGS["probe"], splats, "GS-IBL Probe", keep_background=False)  # panel's defaults else
@@ -161,6 +161,16 @@ def main() -> dict:
             ours("auto")
             # the EEVEE warm-up compiled the World Probe's material; Auto's adds the local-light group: its
             # first frame compiles again, so the first auto EEVEE frame's time holds that
+        if "volume" in steps:  # Lighting Volume (issue 37): one volume over every mesh, shared
+            s.lighting = "VOLUME"
+            t0 = time.perf_counter()
+            _, rec["volume_report"], rec["volume_warning"] = gb.bake_into_world(bpy.context.scene, probe)
+            times["volume_bake_s"] = time.perf_counter() - t0
+            splats.visible_camera = False
+            rec["volume_local_report"] = s.local_report.splitlines()
+            rec["volume_choice"] = {f"{k[0]}_{k[1]}": ll.has_local_light(o) or "world" for k, o in meshes.items()}
+            ours("volume")
+        if "auto" in steps:
             # Lighting back to World Probe and baked again (warm): what stays on the meshes?
             s.lighting = "WORLD"
             t0 = time.perf_counter()

@@ -29,6 +29,10 @@ from .sources import require_splats, scene_splats
 
 REPORT_PREFIX = "Light volume: "
 MAX_FRAMES = 48  # frames of an animation whose boxes the region covers (evenly over the range, both ends in)
+# The volume's probe budget and cube face: None takes the core's (volume_region.DEFAULT_BUDGET, volume_bake.
+# DEFAULT_FACE); benchmarks/volume_light_bench.py sets them for its trials.
+BUDGET: int | None = None
+FACE: int | None = None
 
 
 def _animated(obj: bpy.types.Object) -> bool:
@@ -107,14 +111,14 @@ def _merged_renderer(locals_, progress):
     return SplatRenderer(replace(concat(scenes, "+".join(x[2] for x in locals_)), colour_space=spaces.pop()))
 
 
-def _bake(renderer, boxes, within, where, face_size, progress):
+def _bake(renderer, boxes, within, where, budget, face_size, progress):
     """The worker's part: the World probe's SH at its place (the EEVEE output's World light), the region's plan and
     the volume, packed. Returns (plan, volume, atlases, World coefficients)."""
     from ...core.probe.volume_bake import bake_volume
     from ...core.probe.volume_region import choose_volume
     try:
         progress("measuring how fast the light changes", 0.0)
-        plan, _coarse = choose_volume(renderer, boxes, within=within)
+        plan, _coarse = choose_volume(renderer, boxes, budget=budget, within=within)
         vol = bake_volume(renderer, plan.spec, face_size=face_size, progress=lambda done, total: progress(
             f"baking {done} of {total} light volume probes", 0.1 + 0.85 * done / max(total, 1)))
         world = point_coefficients(renderer, np.asarray(where, np.float64)[None])[0]
@@ -127,6 +131,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
     """Lighting Volume as a job (blender/jobs.py): boxes read now, the volume baked by a worker, written at the end.
     Its result: (report line, {"lit": names, "outside": names, "probes": count})."""
     from ...core.probe.volume_bake import DEFAULT_FACE
+    from ...core.probe.volume_region import DEFAULT_BUDGET
     splats = visible_splats(scene, probe)
     names, boxes, within, outside = volume_boxes(scene, splats)
     if not names:
@@ -147,7 +152,8 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         r = own = yield Work(_merged_renderer, locals_, span=(0.0, 0.1))
     where = np.array(probe.matrix_world.translation, np.float64)
     try:
-        plan, vol, (irr, vis), world = yield Work(_bake, r, boxes, within, where, DEFAULT_FACE, span=(0.1, 0.97))
+        plan, vol, (irr, vis), world = yield Work(_bake, r, boxes, within, where, BUDGET or DEFAULT_BUDGET,
+                                                   FACE or DEFAULT_FACE, span=(0.1, 0.97))
     finally:
         if own is not None:
             own.close()
