@@ -46,6 +46,7 @@ SKY_MAP = 128  # for the sky's: many soft overlapping shadows need less detail
 TRIANGLE_BUDGET = 5e6  # casters' triangles x light samples per frame before the counts shrink (sample_scale)
 MAX_SIDE = 480  # receivers are computed on a grid no larger than this (the frame's larger side, in samples)
 MIN_ALPHA = 0.05  # pixels of less splat coverage are left as they are
+SOFT_FROM = 4.0  # texels: a sample's shadow is spread over its patch once that is wider (visibility)
 DEPTH_TOLERANCE = 0.03  # upsampling: a sample this much nearer or farther (relative) is on another surface
 
 
@@ -231,18 +232,29 @@ def surface_points(depth: np.ndarray, rays: np.ndarray, origin: np.ndarray) -> t
 # ---- visibility ----
 
 def visibility(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, direction: np.ndarray,
-               side: int) -> np.ndarray:
-    """(N,) in [0, 1]: how open the way from each point (N, 3) along ``direction`` is past ``tris`` (a shadow map
-    of ``side`` texels over where the meshes' and the points' footprints along the light overlap, 2x2 percentage-
-    closer filtered; each point moved one texel along its normal first)."""
+               side: int, spread: float = 0.0) -> np.ndarray:
+    """(N,) in [0, 1]: how open the way from each point (N, 3) along ``direction`` is past ``tris``: a shadow map
+    of ``side`` texels over where the meshes' and the points' footprints along the light overlap (each point moved
+    one texel along its normal first).
+
+    ``spread``: the sample's angular radius (radians; a sky sample stands for a patch of sky, not a point). A point
+    beyond every mesh along the light sees the meshes' coverage averaged over a square of the patch's area at its
+    distance past the meshes' far end, read from a summed-area table, once that square is wider than SOFT_FROM
+    texels: its shadow softens with distance as the patch's would, and far receivers get one soft shadow per sample
+    instead of a sharp copy each. Points among or near the meshes (contact) take the 2x2 percentage-closer filter
+    of the depth comparison."""
     fwd = -np.asarray(direction, np.float64)
     t, b = _tangents(fwd)
     basis = np.stack([t, b, fwd])
     vis = np.ones(len(points))
-    uv_m = tris.reshape(-1, 3) @ basis[:2].T
+    verts = tris.reshape(-1, 3) @ basis.T
+    z_hi = verts[:, 2].max()  # the meshes' end farthest along the light
+    tan = np.tan(min(max(spread, 0.0), 1.2)) * 0.5 * np.sqrt(np.pi)  # a square of the patch's disc's area
+    d_all = points @ basis[2]
+    reach = max(float((d_all.max() - z_hi) * tan), 0.0)  # the widest soft square's half-width
     uv_p = points @ basis[:2].T
-    lo = np.maximum(uv_m.min(0), uv_p.min(0))
-    hi = np.minimum(uv_m.max(0), uv_p.max(0))
+    lo = np.maximum(verts[:, :2].min(0), uv_p.min(0) - reach)
+    hi = np.minimum(verts[:, :2].max(0), uv_p.max(0) + reach)
     if np.any(hi < lo):  # no point in the meshes' shadow
         return vis
     size = np.maximum(hi - lo, 1e-9)
@@ -255,19 +267,35 @@ def visibility(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, direct
     x = (q @ basis[0] - u0) / texel - 0.5  # continuous texel coordinates (centres at integers)
     y = (v1 - q @ basis[1]) / texel - 0.5
     d = q @ basis[2]
-    inside = (x > -1) & (x < w) & (y > -1) & (y < h)
-    if not inside.any():
-        return vis
-    xi, yi, di = x[inside], y[inside], d[inside]
-    fx, fy = np.floor(xi), np.floor(yi)
-    ax, ay = xi - fx, yi - fy
-    pad = np.pad(zmap, 1, constant_values=np.inf)
     bias = 2.0 * texel
-    out = np.zeros(len(xi))
-    for dx, dy, wgt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)), (0, 1, (1 - ax) * ay), (1, 1, ax * ay)):
-        zz = pad[(fy + dy).astype(int) + 1, (fx + dx).astype(int) + 1]
-        out += wgt * (zz >= di - bias)
-    vis[inside] = out
+    half = np.maximum(d - z_hi, 0.0) * tan / texel  # the soft square's half-width, texels (from the meshes' end
+    # nearest the point: the least blur a point behind them all can have)
+    soft = (d > z_hi + bias) & (half > SOFT_FROM)
+    inside = (x > -1 - half) & (x < w + half) & (y > -1 - half) & (y < h + half)
+    hard = inside & ~soft
+    if hard.any():
+        xi, yi, di = x[hard], y[hard], d[hard]
+        fx, fy = np.floor(xi), np.floor(yi)
+        ax, ay = xi - fx, yi - fy
+        pad = np.pad(zmap, 1, constant_values=np.inf)
+        out = np.zeros(len(xi))
+        for dx, dy, wgt in ((0, 0, (1 - ax) * (1 - ay)), (1, 0, ax * (1 - ay)), (0, 1, (1 - ax) * ay),
+                            (1, 1, ax * ay)):
+            zz = pad[np.clip((fy + dy).astype(int) + 1, 0, h + 1), np.clip((fx + dx).astype(int) + 1, 0, w + 1)]
+            out += wgt * (zz >= di - bias)
+        vis[hard] = out
+    soft &= inside
+    if soft.any():  # behind every mesh: all of their texels occlude, so the coverage's box mean is the shadow
+        sat = np.zeros((h + 1, w + 1))
+        sat[1:, 1:] = np.isfinite(zmap).cumsum(0).cumsum(1)
+        xs, ys, r = x[soft] + 0.5, y[soft] + 0.5, half[soft]  # texel edges at integers
+
+        def at(yy, xx):
+            return sat[np.clip(np.rint(yy), 0, h).astype(int), np.clip(np.rint(xx), 0, w).astype(int)]
+        y0, y1, x0, x1 = ys - r, ys + r, xs - r, xs + r
+        area = (2 * r) ** 2
+        covered = at(y1, x1) - at(y0, x1) - at(y1, x0) + at(y0, x0)
+        vis[soft] = 1.0 - np.clip(covered / area, 0.0, 1.0)
     return vis
 
 
@@ -308,9 +336,11 @@ def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samp
     vv = (v * v).sum(1)
     blocked = np.zeros((len(p), 3))
     lost = weights - bounce(samples, albedo)  # per sample: what a mesh in front of it takes
-    for d, wgt, side in zip(dirs, lost, samples.map_sides):
+    spreads = np.sqrt(samples.solid_angles / np.pi)  # each sample's patch as a disc: its angular radius
+    for d, wgt, side, spread in zip(dirs, lost, samples.map_sides, spreads):
         t = v @ d  # along the way to the light, to the sphere's centre
-        near = np.where(t > 0, vv - t * t, vv) < radius * radius
+        r = radius + np.maximum(t, 0.0) * np.tan(min(spread, 1.2)) * 1.26  # the soft square's corner (visibility)
+        near = np.where(t > 0, vv - t * t, vv) < r * r
         idx = np.nonzero(near)[0]
         if not len(idx):
             continue
@@ -318,7 +348,7 @@ def shadow_ratio(points: np.ndarray, normals: np.ndarray, tris: np.ndarray, samp
         idx, cos = idx[cos > 0], cos[cos > 0]
         if not len(idx):
             continue
-        vis = visibility(p[idx], n[idx], tris, d, int(side))
+        vis = visibility(p[idx], n[idx], tris, d, int(side), float(spread))
         blocked[idx] += ((1.0 - vis) * cos)[:, None] * wgt
     ratio[ok] = np.where(den > 0, 1.0 - blocked / np.where(den > 0, den, 1.0), 1.0)
     return np.clip(ratio, 0.0, 1.0)
