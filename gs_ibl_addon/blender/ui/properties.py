@@ -83,6 +83,9 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
         name="Lighting", default="AUTO",
         items=[("AUTO", "Auto", "Each lit mesh (inside the splats' bounds) gets the light it needs, measured at every "
                 "bake and when it moves: this probe's World, a probe of its own, or a grid over it"),
+               ("VOLUME", "Volume", "One light volume over the region every lit mesh occupies over the frame "
+                "range, shared by all of them and read where each one stands (moving meshes included, no re-bake); "
+                "a mesh outside it keeps this probe's World"),
                ("WORLD", "World Probe", "Every mesh is lit by this probe through the World; per-object probes and "
                 "grids only where asked (More Than One Probe)")],
         description="How lit meshes get their diffuse light")
