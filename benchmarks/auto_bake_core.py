@@ -2,7 +2,7 @@
 costs (issue 22, goal 3).
 
 Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
-     python benchmarks/auto_bake_core.py --stages [--repeats 5] [--out CSV]
+     python benchmarks/auto_bake_core.py --stages [--ab] [--repeats 5] [--out CSV]
 
 The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3: blender_scene.ROOM_SPHERE), the panel's
 defaults and Lighting Auto's work as blender/lighting/bake.py bake_into_world and blender/lighting/auto_light.py do
@@ -12,17 +12,21 @@ sphere's grid the measurement did not place (18 of 3 x 3 x 3, 116 of 5 x 5 x 5),
 time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA context:
 bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv).
 
-``--stages`` (issue 38: a bake whose wall time is its GPU time): per stage, wall time beside the GPU time of the
+``--stages [--ab]`` (issue 38: a bake whose wall time is its GPU time): per stage, wall time beside the GPU time of the
 submissions it waited for (every recording timestamped: the context's stamp_all) and the submissions it made, host
 = wall - GPU, for three pieces of work on the one uploaded renderer: the sample's default bake (the command line's:
 face size and irradiance size from the tolerance, the probe at the splats' centre; its stages as bake_probe reports
 them, core/stage_times.py), Lighting Auto's bake of the sphere (the World probe, the measurement, the grid nodes;
 each a stage) and a 1920x1080 camera frame from the World probe's place (render_camera, depth on, no cut). Medians
-of --repeats after one warm-up. Prints a table; appends to --out (default docs/bench/bake_stages_<device>.csv).
+of --repeats after one warm-up. With --ab every run is also made with the host work the issue moved put back
+(host_paths: holes filled in numpy, numpy per-face parts, the enclosure masks made anew), the two alternating, so
+"before" and "after" share the machine's load. Prints a table; appends to --out (default
+docs/bench/bake_stages_<device>.csv).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import os
 import statistics
@@ -110,9 +114,28 @@ def stage_runs(r: SplatRenderer, scene) -> dict[str, dict[str, dict[str, float]]
     return out
 
 
+@contextlib.contextmanager
+def host_paths():
+    """--ab's "before": the host work issue 38 moved, put back for a peer in the same run: holes filled in numpy
+    and uploaded again, the search's per-face parts in numpy on every device, the enclosure check's half-sphere
+    masks made on every bake."""
+    from gs_ibl_addon.core import bake, bake_batch
+    from gs_ibl_addon.core.probe import near
+    from gs_ibl_addon.core.probe.reference import exact_irradiance_parts
+    saved = (bake.GPU_FILLS, bake_batch.GPU_FILLS, bake.irradiance_parts, near._halves)
+    bake.GPU_FILLS = bake_batch.GPU_FILLS = ()
+    bake.irradiance_parts = lambda change, size, ctx=None: exact_irradiance_parts(change, size)
+    near._halves = near._halves.__wrapped__
+    try:
+        yield
+    finally:
+        bake.GPU_FILLS, bake_batch.GPU_FILLS, bake.irradiance_parts, near._halves = saved
+
+
 def main_stages(a, info: dict) -> None:
     """--stages: a new process's first costs (the context, reading and upload, the first bake with its pipelines;
-    pipeline_cache_bytes: what the disk cache gave the driver), then medians of the warm runs."""
+    pipeline_cache_bytes: what the disk cache gave the driver), then medians of the warm runs; with --ab each warm
+    run also with the host paths the issue replaced (host_paths), the two alternating."""
     t0 = time.perf_counter()
     ctx = get_context()
     ctx.stamp_all = True  # every submission's GPU time is counted (TransferStats.gpu_ms)
@@ -125,23 +148,29 @@ def main_stages(a, info: dict) -> None:
     process = {"context": {"wall": (t1 - t0) * 1e3, "gpu": 0.0, "submits": 0},
                "read and upload": {"wall": (t2 - t1) * 1e3, "gpu": 0.0, "submits": 0},
                "first default bake": first["default bake"]["all"], "first auto bake": first["auto bake"]["all"]}
-    runs = [stage_runs(r, scene) for _ in range(a.repeats)]
-    for run in [first] + runs:
-        run["new process"] = process
+    configs = {"after": [], "before": []} if a.ab else {"": []}
+    for _ in range(a.repeats):
+        for config, runs in configs.items():
+            with host_paths() if config == "before" else contextlib.nullcontext():
+                runs.append(stage_runs(r, scene))
     r.close()
     rows = []
-    print(f"{'work':<14} {'stage':<20} {'wall ms':>9} {'GPU ms':>9} {'host ms':>9} {'submits':>8}")
-    for work, table in {"new process": process, **runs[0]}.items():
-        for stage in table:
-            med = {f: statistics.median(run[work][stage][f] for run in runs) for f in ("wall", "gpu", "submits")}
-            row = {"date": datetime.date.today().isoformat(), "device": info["device"], "driver": info["driver"],
-                   "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2), "repeats": a.repeats,
-                   "pipeline_cache_bytes": ctx.pipeline_cache.loaded_bytes,
-                   "work": work, "stage": stage, "wall_ms": round(med["wall"], 2), "gpu_ms": round(med["gpu"], 2),
-                   "host_ms": round(max(0.0, med["wall"] - med["gpu"]), 2), "submits": int(med["submits"])}
-            rows.append(row)
-            print(f"{work:<14} {stage:<20} {row['wall_ms']:>9.2f} {row['gpu_ms']:>9.2f} {row['host_ms']:>9.2f} "
-                  f"{row['submits']:>8}")
+    print(f"{'config':<7} {'work':<14} {'stage':<20} {'wall ms':>9} {'GPU ms':>9} {'host ms':>9} {'submits':>8}")
+    for config, runs in configs.items():
+        for run in runs:
+            run["new process"] = process
+        for work, table in {"new process": process, **runs[0]}.items():
+            for stage in table:
+                med = {f: statistics.median(run[work][stage][f] for run in runs) for f in ("wall", "gpu", "submits")}
+                row = {"date": datetime.date.today().isoformat(), "device": info["device"],
+                       "driver": info["driver"], "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2),
+                       "repeats": a.repeats, "pipeline_cache_bytes": ctx.pipeline_cache.loaded_bytes,
+                       "config": config, "work": work, "stage": stage, "wall_ms": round(med["wall"], 2),
+                       "gpu_ms": round(med["gpu"], 2), "host_ms": round(max(0.0, med["wall"] - med["gpu"]), 2),
+                       "submits": int(med["submits"])}
+                rows.append(row)
+                print(f"{config:<7} {work:<14} {stage:<20} {row['wall_ms']:>9.2f} {row['gpu_ms']:>9.2f} "
+                      f"{row['host_ms']:>9.2f} {row['submits']:>8}")
     append_csv(a.out or os.path.join(REPO, "docs", "bench", f"bake_stages_{device_label(info['device'])}.csv"), rows)
 
 
@@ -155,6 +184,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--stages", action="store_true", help="per-stage wall beside GPU time (issue 38)")
+    ap.add_argument("--ab", action="store_true", help="with --stages: each run also with the host paths issue 38 "
+                                                      "replaced (before), alternating")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     keep = hold_gpu_clock()  # noqa: F841 (the context holds the clock while it lives)

@@ -40,6 +40,7 @@
 #                                        docs/bench/native_frame_refs/. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh stages    there, one call of about a minute (issue 38, a bake's wall beside its GPU
 #                                        time): auto_bake_core.py --stages in two processes (per stage wall, GPU,
+#                                        the first with --ab: before/after the issue's host work, alternating;
 #                                        host = wall - GPU and submissions of the sample's default bake, Lighting
 #                                        Auto's bake of the sphere and a 1920x1080 camera frame, every recording
 #                                        timestamped; and a new process's context, upload and first bakes, the
@@ -131,7 +132,7 @@ trials|grid|full|final|refs|stages)
       set +e
       export GS_IBL_CACHE_DIR=/tmp/gs-ibl-cache
       rm -rf "$GS_IBL_CACHE_DIR"
-      timeout --signal=INT --kill-after=10 150 python3 benchmarks/auto_bake_core.py --stages --repeats 10 \
+      timeout --signal=INT --kill-after=10 150 python3 benchmarks/auto_bake_core.py --stages --ab --repeats 10 \
         --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages: exit $?"
       timeout --signal=INT --kill-after=10 90 python3 benchmarks/auto_bake_core.py --stages --repeats 3 \
         --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages (cache on disk): exit $?"
