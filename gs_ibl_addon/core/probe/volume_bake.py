@@ -131,9 +131,11 @@ def far_distance(spec: GridSpec) -> float:
 
 def bake_volume(renderer, spec: GridSpec, face_size: int = DEFAULT_FACE,
                 progress: Callable[[int, int], None] | None = None, hole_colour=(0.0, 0.0, 0.0),
-                inside_test: bool = True) -> LightVolume:
+                inside_test: bool = True, lod_k: float = 0.0) -> LightVolume:
     """The light volume of the splats ``renderer`` holds (world space), probes on ``spec``; ``face_size``^2 cube
-    faces; ``progress(done, total)`` after each submission. Timings (ms): render (GPU and read-back), maps (numpy)."""
+    faces; ``progress(done, total)`` after each submission; ``lod_k`` > 0 (a renderer built with a level of detail):
+    merged splats where a probe's pixel allows (SplatRenderer.render's). Timings (ms): render (GPU and read-back),
+    maps (numpy)."""
     from ..render.views import ViewBatch
     face = int(face_size)
     if face < 4 or face & (face - 1):
@@ -151,7 +153,7 @@ def bake_volume(renderer, spec: GridSpec, face_size: int = DEFAULT_FACE,
     for start in range(0, n, chunk):
         t0 = time.perf_counter()
         part = pos[start:start + chunk]
-        res = renderer.render(ViewBatch.cubemaps(part, face), depth=True)
+        res = renderer.render(ViewBatch.cubemaps(part, face), depth=True, lod_k=lod_k)
         rgba = res.frame.read_probes()
         depth = res.frame.depth.read(np.float32, len(part) * 6 * face * face).reshape(len(part), 6, face, face)
         t1 = time.perf_counter()
@@ -176,5 +178,5 @@ def bake_volume(renderer, spec: GridSpec, face_size: int = DEFAULT_FACE,
                       f"{tuple(map(float, hole_colour))}")
     return LightVolume(spec, grid_maps(irr, spec.shape), grid_maps(mom, spec.shape),
                        timings={"render": 1e3 * t_render, "maps": 1e3 * t_maps, "probes": n, "face": face,
-                                "per_submission": chunk},
+                                "per_submission": chunk, "lod_k": float(lod_k)},
                        report=report)

@@ -1,0 +1,278 @@
+"""The light volume's accuracy and cost in core, without Blender (issue 37 item 5).
+
+Run:  .venv/bin/python benchmarks/volume_bench.py [--points 48] [--configs 0.6:16:0,0.6:16:1,0.4:16:0,0.6:32:0]
+      [--out-csv docs/bench/volume_lavapipe.csv] [--png docs/img/volume_bench.png]
+
+The sample room (samples/room.ply) with white spheres (r 0.25) at auto_light_bench.py's five places. At --points
+shading points on each sphere (Fibonacci, normals outward) the reference is a dense per-point probe: the point's own
+32^2 cube (every splat) and the exact cosine integral of its texels at the point's normal. Against it, per point:
+- world: the World probe (order-2 SH at auto_light_bench's PROBE, 64^2) for every point;
+- auto: Lighting Auto of today: the 9-point measurement with the World probe's place, then the World probe, the mesh's
+  own probe or its order-2 SH grid (3^3 or 5^3), as auto_bake_core.py / blender/lighting do;
+- volume S:F:K: one light volume over all five spheres (volume_region.plan_volume, spacing S m), F^2 faces,
+  level of detail k = K (0: every splat), read by volume.sample.
+Numbers per place and method: the per-point luminance error relative to the reference (mean, 95th percentile) and
+the mean of the camera-facing half's RGB, ours / reference (auto_light_bench's cell: within 3% in all channels).
+
+Cost: the World probe's bake as the panel's Bake does it (bake_probe with the panel's defaults, warm), and the
+volume's bake (bake_volume, default configuration) over 3 meshes (centre, window, table) and 10 meshes (the five
+places and five more about the room); ratio = (World + volume) / World, issue 37's target <= 2x and <= 4x. Also
+Lighting Auto's measurement + grids for the same 3 meshes. All on one renderer built with a level of detail (the
+World probe renders every splat of it). The load average is on every row: timings on a shared CPU are noisy; the
+ratios are measured in the same run.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import datetime
+import os
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(HERE)
+sys.path.insert(0, REPO)
+sys.path.insert(0, HERE)
+from auto_light_bench import PLACES, PROBE  # noqa: E402
+from gs_ibl_addon.core import cubemap  # noqa: E402
+from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
+from gs_ibl_addon.core.formats import read_scene  # noqa: E402
+from gs_ibl_addon.core.probe import volume as vol  # noqa: E402
+from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
+                                                measured_nodes, mesh_grid)
+from gs_ibl_addon.core.probe.grid import (bake_sh_points, eval_irradiance, interpolate,  # noqa: E402
+                                          monomial_coefficients)
+from gs_ibl_addon.core.probe.variation import LUMINANCE  # noqa: E402
+from gs_ibl_addon.core.probe.volume_bake import bake_volume  # noqa: E402
+from gs_ibl_addon.core.probe.volume_region import plan_volume  # noqa: E402
+from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
+from gs_ibl_addon.core.synthetic import fibonacci_sphere  # noqa: E402
+
+RADIUS = 0.25
+REF_FACE = 32
+TOLERANCE = 0.05  # the panel's Variation Tolerance (Auto)
+DEFAULT = (0.6, 16, 0.0)  # spacing, face, lod k: the default configuration timed for the cost rows
+MORE_PLACES = [(-1.5, 1.5, 1.0), (1.5, 1.0, 1.0), (0.8, -1.8, 1.2), (-2.0, -1.8, 1.5), (2.0, -0.8, 0.6)]
+COST_SETS = {"3 meshes": ["centre", "window", "table"], "10 meshes": list(PLACES) + MORE_PLACES}
+
+
+def centre(place: str) -> np.ndarray:
+    p = PLACES[place]
+    c = np.array(p["centre"], np.float64)
+    if p.get("rest_on") is not None:  # resting on the table top, as auto_light_scene.py places it
+        c[2] = p["rest_on"] + 0.005 + RADIUS
+    return c
+
+
+def sphere_points(place: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(points, normals, camera-facing mask) on the sphere at ``place``."""
+    d = fibonacci_sphere(n)
+    c = centre(place)
+    facing = d @ (np.asarray(PLACES[place]["camera"]) - c) > 0
+    return c + RADIUS * d, d, facing
+
+
+def reference(r: SplatRenderer, pts: np.ndarray, nrm: np.ndarray, chunk: int = 24) -> np.ndarray:
+    """E/pi at each point and normal: the point's own cube, integrated exactly against the cosine lobe."""
+    w = cubemap.face_directions(REF_FACE).reshape(-1, 3)
+    sa = np.broadcast_to(cubemap.texel_solid_angles(REF_FACE), (6, REF_FACE, REF_FACE)).reshape(-1)
+    out = np.empty((len(pts), 3))
+    for s in range(0, len(pts), chunk):
+        cubes = r.render_probes(pts[s:s + chunk], REF_FACE).frame.read_probes()[..., :3].reshape(-1, len(w), 3)
+        lobe = np.maximum(nrm[s:s + chunk] @ w.T, 0.0) * sa / np.pi
+        out[s:s + chunk] = np.einsum("pk,pkc->pc", lobe, cubes.astype(np.float64))
+    return out
+
+
+def auto_today(r: SplatRenderer, place: str, pts: np.ndarray, nrm: np.ndarray, d_world: np.ndarray):
+    """(E/pi at the points from Lighting Auto's choice, the choice)."""
+    c = centre(place)
+    lo, hi = c - RADIUS, c + RADIUS
+    mp = measure_points(lo, hi)
+    d = monomial_coefficients(bake_sh_points(r, mp, MEASURE_FACE))
+    choice = choose_light(place, d_world, d, TOLERANCE)
+    if choice.kind == "world":
+        return eval_irradiance(d_world, nrm), choice.kind
+    if choice.kind == "probe":
+        return eval_irradiance(d[0], nrm), choice.kind
+    spec = mesh_grid(lo, hi, choice.variation)
+    nodes = spec.points().reshape(-1, 3)
+    have = measured_nodes(spec, mp)
+    dn = np.empty((len(nodes), 9, 3))
+    dn[have >= 0] = d[have[have >= 0]]
+    dn[have < 0] = monomial_coefficients(bake_sh_points(r, nodes[have < 0], MEASURE_FACE))
+    return eval_irradiance(interpolate(dn.reshape(*spec.shape, 9, 3), spec, pts), nrm), f"grid {spec.shape[0]}^3"
+
+
+def errors(got: np.ndarray, want: np.ndarray, facing: np.ndarray) -> dict:
+    lg, lw = got @ LUMINANCE, want @ LUMINANCE
+    e = np.abs(lg - lw) / np.maximum(lw, 1e-9)
+    ratio = got[facing].mean(0) / want[facing].mean(0)
+    return {"err_mean": float(e.mean()), "err_p95": float(np.quantile(e, 0.95)),
+            "cell_r": float(ratio[0]), "cell_g": float(ratio[1]), "cell_b": float(ratio[2]),
+            "cell_ok": bool(np.all(np.abs(ratio - 1) <= 0.03))}
+
+
+def boxes_of(names) -> list:
+    cs = [centre(n) if isinstance(n, str) else np.asarray(n, np.float64) for n in names]
+    return [(c - RADIUS, c + RADIUS) for c in cs]
+
+
+def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
+    rows = []
+    d_world = monomial_coefficients(bake_sh_points(r, np.asarray(PROBE, np.float64)[None], MEASURE_FACE))[0]
+    data = {p: sphere_points(p, n_points) for p in PLACES}
+    t0 = time.perf_counter()
+    refs = {p: reference(r, *data[p][:2]) for p in PLACES}
+    print(f"references: {len(PLACES) * n_points} per-point probes in {time.perf_counter() - t0:.1f} s", flush=True)
+    volumes = {}
+    for spacing, face, k in configs:
+        plan = plan_volume(boxes_of(PLACES), spacing, budget=4096)
+        t0 = time.perf_counter()
+        volumes[(spacing, face, k)] = (bake_volume(r, plan.spec, face_size=face, lod_k=k), plan,
+                                       time.perf_counter() - t0)
+        print(f"volume {spacing}:{face}:{k}: {plan.messages[-1]}, {volumes[(spacing, face, k)][2]:.1f} s",
+              flush=True)
+    for p in PLACES:
+        pts, nrm, facing = data[p]
+        want = refs[p]
+        rows.append({"place": p, "method": "world", **errors(eval_irradiance(d_world, nrm), want, facing)})
+        got, kind = auto_today(r, p, pts, nrm, d_world)
+        rows.append({"place": p, "method": f"auto ({kind})", **errors(got, want, facing)})
+        for (spacing, face, k), (v, plan, secs) in volumes.items():
+            rows.append({"place": p, "method": f"volume {spacing}:{face}:{k:g}", "probes": plan.spec.count,
+                         "bake_s": round(secs, 2), **errors(vol.sample(v, pts, nrm), want, facing)})
+    return rows
+
+
+def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
+    def world() -> float:
+        t0 = time.perf_counter()
+        bake_probe(None, np.asarray(PROBE, np.float64), ProbeSettings(), renderer=r, host_splats=scene)
+        return time.perf_counter() - t0
+
+    def volume(names) -> tuple[float, int]:
+        spacing, face, k = DEFAULT
+        plan = plan_volume(boxes_of(names), spacing, coarsen=True)
+        t0 = time.perf_counter()
+        bake_volume(r, plan.spec, face_size=face, lod_k=k)
+        return time.perf_counter() - t0, plan.spec.count
+
+    def auto(names) -> float:
+        t0 = time.perf_counter()
+        d_world = monomial_coefficients(bake_sh_points(r, np.asarray(PROBE, np.float64)[None], MEASURE_FACE))[0]
+        for name in names:
+            c = centre(name)
+            pts = measure_points(c - RADIUS, c + RADIUS)
+            d = monomial_coefficients(bake_sh_points(r, pts, MEASURE_FACE))
+            choice = choose_light(name, d_world, d, TOLERANCE)
+            if choice.kind == "grid":
+                spec = mesh_grid(c - RADIUS, c + RADIUS, choice.variation)
+                bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+        return time.perf_counter() - t0
+
+    world()  # warm-up: pipelines, allocations
+    volume(COST_SETS["3 meshes"])
+    rows = []
+    for _ in range(repeats):
+        tw = world()
+        for label, names in COST_SETS.items():
+            tv, probes = volume(names)
+            rows.append({"meshes": label, "world_s": round(tw, 3), "volume_s": round(tv, 3), "probes": probes,
+                         "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2)})
+            print(rows[-1], flush=True)
+        ta = auto(COST_SETS["3 meshes"])
+        rows.append({"meshes": "3 meshes, Auto today", "world_s": round(tw, 3), "volume_s": round(ta, 3),
+                     "probes": 0, "ratio": round((tw + ta) / tw, 2), "load": round(os.getloadavg()[0], 2)})
+        print(rows[-1], flush=True)
+    return rows
+
+
+def write_csv(path: str, rows: list[dict], extra: dict) -> None:
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    keys = list(extra) + sorted({k for r in rows for k in r}, key=lambda k: list(rows[0]).index(k)
+                                if k in rows[0] else 99)
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, keys)
+        w.writeheader()
+        for row in rows:
+            w.writerow({**extra, **row})
+
+
+def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    methods = list(dict.fromkeys(r["method"].split(" (")[0] for r in acc))
+    places = list(PLACES)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.8), gridspec_kw={"width_ratios": [2.2, 1]})
+    width = 0.8 / len(methods)
+    for i, m in enumerate(methods):
+        vals = [100 * next(r["err_mean"] for r in acc if r["place"] == p and r["method"].split(" (")[0] == m)
+                for p in places]
+        a.bar(np.arange(len(places)) + i * width, vals, width, label=m)
+    a.set_xticks(np.arange(len(places)) + 0.4 - width / 2, places)
+    a.set_ylabel("per-point irradiance error, mean (%)")
+    a.set_yscale("log")
+    a.axhline(3, color="k", lw=0.8, ls="--")
+    a.set_title("White spheres in the sample room vs dense per-point probes")
+    a.legend(fontsize=7, ncol=2)
+    labels = list(dict.fromkeys(c["meshes"] for c in costs))
+    ratios = [np.median([c["ratio"] for c in costs if c["meshes"] == m]) for m in labels]
+    bars = b.bar(range(len(labels)), ratios, color=["C0", "C1", "C7"][:len(labels)])
+    for bar, v in zip(bars, ratios):
+        b.text(bar.get_x() + bar.get_width() / 2, v, f"{v:.1f}x", ha="center", va="bottom")
+    b.set_xticks(range(len(labels)), [lb.replace(", ", "\n") for lb in labels], fontsize=8)
+    b.set_ylabel("whole bake / World-probe-only bake")
+    b.axhline(2, color="k", lw=0.8, ls="--")
+    b.axhline(4, color="k", lw=0.8, ls=":")
+    b.set_title(f"Cost ({device}; targets 2x and 4x)")
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--points", type=int, default=48)
+    ap.add_argument("--configs", default="0.6:16:0,0.6:16:1,0.4:16:0,0.6:32:0",
+                    help="volume configurations spacing:face:lod_k, comma separated")
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--skip-accuracy", action="store_true")
+    ap.add_argument("--out-csv", default=None)
+    ap.add_argument("--png", default=os.path.join(REPO, "docs", "img", "volume_bench.png"))
+    a = ap.parse_args()
+    configs = [tuple(float(x) if i != 1 else int(x) for i, x in enumerate(c.split(":"))) for c in a.configs.split(",")]
+    scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
+    t0 = time.perf_counter()
+    r = SplatRenderer(scene, lod=True)
+    print(f"renderer with a level of detail: {time.perf_counter() - t0:.1f} s ({scene.count:,} splats)")
+    name = r.ctx.device_name.lower()
+    dev = "lavapipe" if "llvmpipe" in name else name.replace(" ", "-")
+    extra = {"date": datetime.date.today().isoformat(), "device": r.ctx.device_name}
+    acc = [] if a.skip_accuracy else accuracy(r, a.points, configs)
+    costs = cost(r, scene, a.repeats)
+    r.close()
+    base = a.out_csv or os.path.join(REPO, "docs", "bench", f"volume_{dev}.csv")
+    if acc:
+        write_csv(base.replace(".csv", "_accuracy.csv"), acc, extra)
+        print("\n| place | method | per-point error mean | p95 | camera half R/G/B (ours/ref) | cell |")
+        print("|---|---|---|---|---|---|")
+        for row in acc:
+            print(f"| {row['place']} | {row['method']} | {100 * row['err_mean']:.1f}% | {100 * row['err_p95']:.1f}% | "
+                  f"{row['cell_r']:.3f} / {row['cell_g']:.3f} / {row['cell_b']:.3f} | "
+                  f"{'ok' if row['cell_ok'] else 'out'} |")
+    write_csv(base.replace(".csv", "_cost.csv"), costs, extra)
+    print("\n| meshes | World s | volume (or Auto) s | probes | ratio | load |\n|---|---|---|---|---|---|")
+    for c in costs:
+        print(f"| {c['meshes']} | {c['world_s']} | {c['volume_s']} | {c['probes']} | {c['ratio']}x | {c['load']} |")
+    if acc:
+        plot(acc, costs, a.png, dev)
+        print(f"wrote {a.png}")
+
+
+if __name__ == "__main__":
+    main()
