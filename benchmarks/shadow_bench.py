@@ -14,8 +14,10 @@ read back on the Vulkan device, shadows) give the shadows' time against the spla
     .venv/bin/python benchmarks/shadow_bench.py                      # 320x240 at 256 spp, cost at 1920x1080
     .venv/bin/python benchmarks/shadow_bench.py --size 160x120 --samples 64 --cost-size 480x270 --no-write
 
-Writes docs/bench/shadow_<device>.csv, docs/img/shadow_bench.png (per-pixel D, ours against Cycles) and
-docs/img/shadow_ours_vs_cycles.png (the frames side by side); prints the table for docs/benchmarks.md.
+Writes docs/bench/shadow_<device>.csv, docs/img/shadow_bench.png (per-pixel D, ours against Cycles),
+docs/img/shadow_ours_vs_cycles.png (the frames side by side) and docs/img/shadow_room.png (no measurement: the
+bundled sample room baked through the add-on with two lights split off, a grey sphere and a red cube on its floor,
+F12 with Shadows on Splats off and on); prints the table for docs/benchmarks.md.
 """
 from __future__ import annotations
 
@@ -53,6 +55,7 @@ def main() -> None:
     ap.add_argument("--cost-size", type=_size, default=(1920, 1080), help="the cost frame, WxH")
     ap.add_argument("--device", default="lavapipe", help="the name in the CSV file's name")
     ap.add_argument("--no-write", action="store_true", help="print only")
+    ap.add_argument("--no-room", action="store_true", help="skip the sample room's picture")
     args = ap.parse_args()
 
     import bpy
@@ -108,6 +111,7 @@ def main() -> None:
                  "ms_handler_off": cost[False][0]["ms"],
                  "shadows_over_splats": round(best_on["ms_shadows"] / best_on["ms_splats"], 2),
                  "load": round(max(load0, os.getloadavg()[0]), 1)})
+    room = None if args.no_room or args.no_write else _room(bpy, S, tmp)
     gs_ibl_addon.unregister()
 
     date = datetime.date.today().isoformat()
@@ -135,7 +139,67 @@ def main() -> None:
         for row in rows:
             wr.writerow({"date": date, **row})
     _plots(chosen, frames["grey"], sphere, ROOT / "docs" / "img")
+    if room is not None:
+        _room_plot(room, ROOT / "docs" / "img" / "shadow_room.png")
     print(f"wrote {out_csv}, docs/img/shadow_bench.png, docs/img/shadow_ours_vs_cycles.png")
+
+
+def _room(bpy, S, tmp: pathlib.Path) -> dict:
+    """The sample room through the add-on: bake (64^2 faces, two lights split off), F12 off and on, Cycles 32 spp."""
+    from gs_ibl_addon.blender.render import frame
+    from gs_ibl_addon.blender.splats.object import create_splat_object
+    from gs_ibl_addon.core import synthetic
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    room = create_splat_object(bpy.context, synthetic.sample_environment(), "Room")
+    room.hide_render = False
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=48, ring_count=24, radius=0.35, location=(0.3, 0.6, 0.36))
+    bpy.ops.object.shade_smooth()
+    bpy.context.active_object.data.materials.append(S._diffuse(bpy, "Grey", (0.7, 0.7, 0.7)))
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-0.6, 1.2, 0.25))
+    bpy.context.active_object.data.materials.append(S._diffuse(bpy, "Red", (0.6, 0.1, 0.08)))
+    scene.cursor.location = (0.0, 0.0, 1.0)
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    s = bpy.context.active_object.gs_ibl_probe
+    s.splats, s.face_size, s.irradiance_size, s.lights = room, 64, 16, 2
+    bpy.ops.gs_ibl.bake_probe()
+    cam = bpy.data.objects.new("Cam", bpy.data.cameras.new("Cam"))
+    cam.data.lens = 24
+    scene.collection.objects.link(cam)
+    S._look_at(bpy, cam, (1.9, -1.2, 1.5), (-0.2, 1.1, 0.3))
+    scene.camera = cam
+    r = scene.render
+    r.engine, r.resolution_x, r.resolution_y = "CYCLES", 480, 270
+    scene.cycles.samples, scene.cycles.use_denoising = 32, False
+    r.image_settings.file_format = "OPEN_EXR"
+    scene.view_settings.view_transform = "Standard"
+    out = {}
+    for state in (False, True):
+        scene.gs_ibl_render.shadows = state
+        out[state] = S.render(bpy, tmp / f"room_{int(state)}.exr")
+    out["record"] = next(iter(frame.last_render(scene)["frames"].values()))
+    return out
+
+
+def _room_plot(room: dict, path: pathlib.Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    off, on = room[False], room[True]
+    ratio = on[..., :3].sum(-1) / np.maximum(off[..., :3].sum(-1), 1e-6)
+    fig, ax = plt.subplots(1, 3, figsize=(16, 3.4))
+    ax[0].imshow(_tone(off[..., :3]))
+    ax[0].set_title("sample room, F12 (Cycles): Shadows on Splats off", fontsize=10)
+    ax[1].imshow(_tone(on[..., :3]))
+    ax[1].set_title("on (lit by the baked probe: window, lamp and room)", fontsize=10)
+    shown = ax[2].imshow(np.where(off[..., 3] > 0.5, ratio, np.nan), vmin=0.3, vmax=1.0, cmap="magma")
+    ax[2].set_title(f"on / off ({room['record'].get('ms_shadows')} ms of shadows, 480x270)", fontsize=10)
+    fig.colorbar(shown, ax=ax[2], fraction=0.03)
+    for a in ax:
+        a.axis("off")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def _plots(c: dict, frames: tuple, sphere: np.ndarray, folder: pathlib.Path) -> None:

@@ -7,7 +7,10 @@
   a^2 / (a^2 + h^2) of its cosine-weighted light (the disc's view factor).
 - The sun-like sky over a floor under a sphere: ours against a dense brute-force integral at points in the umbra,
   the penumbra and outside.
-- The reduced-resolution path with its depth-aware upsampling against the full-resolution one.
+- The reduced-resolution path with its depth-aware upsampling against the full-resolution one; a render border
+  against the crop of the full frame.
+- A mesh's reflected light: under a disc of albedo rho the loss is its view factor times (1 - rho).
+- Large meshes get fewer samples carrying the same light.
 """
 from __future__ import annotations
 
