@@ -59,7 +59,6 @@ def _submit(ctx: VulkanContext, cmd):
             ctx._free_fences.append(fence)
             raise
         ctx.stats.submits += 1
-        ctx.in_flight += 1
         return fence
 
 
@@ -73,7 +72,6 @@ def _wait(ctx: VulkanContext, fence) -> None:
         vk.vkResetFences(ctx.device, 1, fences)
         with ctx.lock:
             ctx._free_fences.append(fence)
-            ctx.in_flight -= 1
 
 
 def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
@@ -110,11 +108,8 @@ class Recorder:
         vk = self.vk = ctx.vk
         self.ctx = ctx
         self.reusable = reusable
-        with ctx.lock:  # a recording boundary: full descriptor pools are reset here when nothing is in flight
-            ctx.reset_descriptor_pools()
-            ctx.open_recordings += 1
-        self._open = True
-        self.epoch = ctx.epoch
+        ctx.reset_descriptor_pools()  # full pools nothing uses any more are reset here, between recordings
+        self.pools: dict[int, object] = {}  # descriptor pools whose sets this recording binds (context.pool_users)
         self.buffers: dict[int, Buffer] = {}  # every buffer the recording uses (a Program checks they live)
         self.cmd = _take_command_buffer(ctx)
         flags = 0 if reusable else vk.VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT
@@ -139,6 +134,12 @@ class Recorder:
         stages = vk.VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT | vk.VK_PIPELINE_STAGE_TRANSFER_BIT
         vk.vkCmdPipelineBarrier(self.cmd, stages, stages, 0, 1, mbs, 0, None, 0, None)
 
+    def _hold(self, pool) -> None:
+        if id(pool) not in self.pools:
+            self.pools[id(pool)] = pool
+            with self.ctx.lock:
+                self.ctx.pool_users[id(pool)] = self.ctx.pool_users.get(id(pool), 0) + 1
+
     def _use(self, *buffers: Buffer) -> None:
         for b in buffers:
             self.buffers[b.serial] = b
@@ -157,6 +158,7 @@ class Recorder:
         data = kernel.pack(push)
         vk.vkCmdBindPipeline(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.handle)
         sets = [pipeline.descriptor_set(buffers)]
+        self._hold(pipeline.pool)
         self._use(*buffers)
         vk.vkCmdBindDescriptorSets(self.cmd, vk.VK_PIPELINE_BIND_POINT_COMPUTE, pipeline.layout, 0, 1, sets, 0, None)
         if data:
@@ -192,13 +194,6 @@ class Recorder:
         if self._forced:
             self.timestamp("end")
         self.vk.vkEndCommandBuffer(self.cmd)
-        self._close_recording()
-
-    def _close_recording(self) -> None:
-        if self._open:
-            self._open = False
-            with self.ctx.lock:
-                self.ctx.open_recordings -= 1
 
     def submit(self) -> dict[str, float]:
         ctx = self.ctx
@@ -214,13 +209,17 @@ class Recorder:
     def program(self) -> "Program":
         """End the recording and keep it: Program.run() submits it again and again."""
         self._end()
-        prog = Program(self.ctx, self.cmd, self.query_pool, list(self.labels), list(self.buffers.values()), self.epoch)
+        prog = Program(self.ctx, self.cmd, self.query_pool, list(self.labels), list(self.buffers.values()),
+                       self.pools)
         prog.forced = self._forced
         self.cmd = self.query_pool = None
+        self.pools = {}  # the program's now
         return prog
 
     def _give_back(self) -> None:
         ctx = self.ctx
+        release_pools(ctx, self.pools)
+        self.pools = {}
         if self.cmd is not None:
             self.vk.vkResetCommandBuffer(self.cmd, 0)
             ctx._free_cmds.append(self.cmd)
@@ -237,25 +236,25 @@ class Recorder:
             self.submit()
         elif self.cmd is not None:
             self.vk.vkEndCommandBuffer(self.cmd)
-            self._close_recording()
             self._give_back()
 
 
 class Program:
     """A recorded command buffer, submitted again with ``run()`` (waits; returns GPU timings per stage).
 
-    It stays valid while every buffer it uses lives and the context's descriptor sets were not reset
-    (``valid``); its owner re-records when not. ``close()`` returns its command buffer to the context.
+    It stays valid while every buffer it uses lives (``valid``); its owner re-records when not. Its descriptor
+    sets live as long as it does (the pools they came from count it as a user: context.pool_users). ``close()``
+    returns its command buffer to the context.
     """
 
     def __init__(self, ctx: VulkanContext, cmd, query_pool, labels: list[str], buffers: list[Buffer],
-                 epoch: int) -> None:
+                 pools: dict[int, object]) -> None:
         self.ctx, self.cmd, self.query_pool, self.labels = ctx, cmd, query_pool, labels
-        self.buffers, self.epoch = buffers, epoch
+        self.buffers, self.pools = buffers, pools
 
     @property
     def valid(self) -> bool:
-        return (self.cmd is not None and self.ctx.device is not None and self.epoch == self.ctx.epoch
+        return (self.cmd is not None and self.ctx.device is not None
                 and all(b.handle is not None for b in self.buffers))
 
     def run(self) -> dict[str, float]:
@@ -295,3 +294,16 @@ class Program:
                 ctx._free_queries.append(self.query_pool)
         self.cmd = self.query_pool = None
         self.buffers = []
+        release_pools(ctx, self.pools)
+        self.pools = {}
+
+
+def release_pools(ctx: VulkanContext, pools: dict[int, object]) -> None:
+    """A recording or program is done with the descriptor pools it bound sets of (context.pool_users)."""
+    with ctx.lock:
+        for key in pools:
+            left = ctx.pool_users.get(key, 0) - 1
+            if left > 0:
+                ctx.pool_users[key] = left
+            else:
+                ctx.pool_users.pop(key, None)

@@ -100,14 +100,11 @@ class VulkanContext:
         self._free_queries: list = []
         self._staging: dict[str, object] = {}
         self._scratch: dict[int, list] = {}
-        # Descriptor-set generation: bumped when pipelines' retired descriptor pools are reset, which invalidates
-        # recorded command buffers (commands.Program checks it before each submission). Resets happen only at a
-        # recording boundary with nothing in flight (reset_descriptor_pools): recordings open and submissions not
-        # yet waited for are counted by commands.py.
-        self.epoch = 0
+        # Descriptor pools in use: per pool (by id), the recordings and kept programs that bound one of its sets
+        # (commands.py counts them). A full pool is retired (pipelines.py) and reset once none uses it
+        # (reset_descriptor_pools), so no recording or program ever loses a set it bound.
+        self.pool_users: dict[int, int] = {}
         self.pools_retired = False
-        self.open_recordings = 0
-        self.in_flight = 0
         # Profiling (benchmarks): every recording gets timestamps, so stats.gpu_ms counts all GPU time.
         self.stamp_all = False
         # Stage objects cached per context (tables uploaded once, recorded programs), closed with it.
@@ -175,16 +172,15 @@ class VulkanContext:
         raise VulkanUnavailable(f"{self.device_name}: no memory type with flags {flags:#x}")
 
     def reset_descriptor_pools(self) -> None:
-        """Free the sets of pipelines' full (retired) descriptor pools, when no recording is open and no submission
-        is in flight; recorded programs then re-record (the epoch). Called by each new recording."""
+        """Reset the pipelines' full (retired) descriptor pools that no open recording, submission in flight or kept
+        program uses (pool_users); called by each new recording."""
         with self.lock:
-            if not self.pools_retired or self.open_recordings or self.in_flight:
+            if not self.pools_retired:
                 return
+            left = 0
             for p in self._pipelines.values():
-                if p.retired:
-                    p.reset_retired()
-            self.pools_retired = False
-            self.epoch += 1
+                left += p.reset_retired(lambda pool: self.pool_users.get(id(pool), 0) == 0)
+            self.pools_retired = left > 0
 
     def release(self, buffer) -> None:
         """Return a scratch buffer to the pool (its contents are kept until reused)."""

@@ -45,7 +45,7 @@ class Pipeline:
         cpcis = [cpci]
         self.handle = vk.vkCreateComputePipelines(ctx.device, ctx.pipeline_cache.handle, 1, cpcis, None)[0]
         del code, stage, cpci, cpcis, entry
-        self._pools: list = []  # [current, ...retired]: a full pool is retired, never reset while it may be in use
+        self._pools: list = []  # [current, ...retired]: a full pool is retired, reset once nothing uses its sets
         self._spare: list = []  # reset pools, reused before a new one is made
         self._pool = self._new_pool()
         self._sets: dict[tuple, object] = {}
@@ -67,14 +67,24 @@ class Pipeline:
         """Full pools waiting for reset_retired (their sets may still be bound by a recording or a program)."""
         return len(self._pools) - 1
 
-    def reset_retired(self) -> None:
-        """Free the sets of the retired pools. Only at a recording boundary with nothing in flight (the context's
-        reset_descriptor_pools), where the epoch moves on so recorded programs that may bind them re-record."""
+    @property
+    def pool(self):
+        """The pool the sets descriptor_set returns now come from (a recording counts its users: commands.py)."""
+        return self._pool
+
+    def reset_retired(self, unused) -> int:
+        """Free the sets of the retired pools for which ``unused(pool)`` (the context's reset_descriptor_pools: no
+        recording, submission or kept program binds them); returns how many retired pools are left."""
         vk = self.ctx.vk
+        keep = [self._pools[0]]
         for pool in self._pools[1:]:
-            vk.vkResetDescriptorPool(self.ctx.device, pool, 0)
-            self._spare.append(pool)
-        del self._pools[1:]
+            if unused(pool):
+                vk.vkResetDescriptorPool(self.ctx.device, pool, 0)
+                self._spare.append(pool)
+            else:
+                keep.append(pool)
+        self._pools = keep
+        return len(keep) - 1
 
     def descriptor_set(self, buffers: Sequence[Buffer]):
         vk = self.ctx.vk
@@ -85,9 +95,9 @@ class Pipeline:
         if ds is not None:
             return ds
         if len(self._sets) >= self.POOL_SETS:
-            # A full pool is retired, not reset: a recording open now or a program in flight may bind its sets
-            # (a reset here freed them under a frame being recorded). The context resets retired pools at the
-            # next recording boundary with nothing in flight (commands.Recorder).
+            # A full pool is retired, not reset: a recording open now, a submission in flight or a kept program
+            # may bind its sets (a reset here freed them under a frame being recorded). The context resets it at
+            # a later recording's start once none uses it (commands.Recorder, context.pool_users).
             self._pool = self._new_pool()
             self._sets.clear()
             self.ctx.pools_retired = True
