@@ -4,7 +4,8 @@ Target: white spheres and Suzannes at five places (centre, by the window, far co
 within 3% of the mean of native Cycles at 8,192 spp (denoiser off), in Cycles and in EEVEE.
 
 Run:  .venv/bin/python benchmarks/auto_light_bench.py [--native-samples 8192] [--samples 256] [--eevee-samples 16]
-      [--places centre,window] [--meshes sphere] [--steps native,world,auto]  (without native: the last run's)
+      [--places centre,window] [--meshes sphere] [--steps native,world,auto,volume]  (without native: the last
+      run's) [--volume-budget 64 --volume-face 16]  (a trial of Lighting Volume's size)
       .venv/bin/python benchmarks/auto_light_bench.py --replot build/auto-light/run   (tables and chart again)
 Needs the trixie root (scripts/blender_roots.sh ensure trixie). The Blender side is benchmarks/auto_light_scene.py,
 run in bpy 5.3 with the built zip installed by Blender's own installer through tests/real_blender/test_matrix.py's
@@ -140,14 +141,16 @@ def plot(rows: list[dict], path: Path, title: str) -> None:
 
 
 def montage(run: Path, places, meshes, path: Path) -> None:
-    """Every render of the run, each row one mesh at one place: native Cycles, World Probe in Cycles, Auto in
-    Cycles, World Probe in EEVEE, Auto in EEVEE; each row exposed so its native mean is 0.4."""
+    """Every render of the run, each row one mesh at one place: native Cycles, World Probe, Auto and Volume (where
+    run) in Cycles, the same in EEVEE; each row exposed so its native mean is 0.4."""
     from gs_ibl_addon.core.image_io import write_png_preview
     rows = []
     for place in places:
         for mesh in meshes:
             key = f"{mesh}_{place}"
-            names = [f"{t}_{key}" for t in ("native", "world_cycles", "auto_cycles", "world_eevee", "auto_eevee")]
+            names = [f"{t}_{key}" for t in ("native", "world_cycles", "auto_cycles", "volume_cycles", "world_eevee",
+                                             "auto_eevee", "volume_eevee")]
+            names = [n for n in names if not n.startswith("volume") or (run / f"{n}.npy").exists()]
             if not all((run / f"{n}.npy").exists() for n in names):
                 continue
             ims = [np.load(run / f"{n}.npy") for n in names]
@@ -253,7 +256,8 @@ def _finish(run: Path, write: bool) -> None:
         plot(rows, PNG, f"White sphere and Suzanne (albedo 0.8) at five places in the sample room: mean of ours / "
                         f"native Cycles {args['native_samples']} spp (denoiser off), per-channel range as ticks\n"
                         f"probe at the room's centre, panel defaults; ours: Cycles {args['samples']} spp, EEVEE "
-                        f"{args['eevee_samples']} samples; Blender {result['blender']}, 2-core CPU, {date}; bakes: "
+                        f"{args['eevee_samples']} samples; Blender {result['blender']}, 2-core CPU, {date}\n"
+                        "whole bakes: "
                         f"World {t.get('world_bake_s', 0):.0f} s, Auto {t.get('auto_bake_s', 0):.0f} s, Volume "
                         f"{t.get('volume_bake_s', 0):.0f} s")
         montage(run, args["places"], args["meshes"], RENDERS)
@@ -274,6 +278,8 @@ def main() -> None:
                     help="EEVEE options for a trial (scene.eevee, e.g. use_fast_gi=False,clamp_surface_indirect=0)")
     ap.add_argument("--cycles-set", default="", metavar="KEY=VALUE,...",
                     help="Cycles options for a trial, every render (scene.cycles, e.g. diffuse_bounces=0)")
+    ap.add_argument("--volume-budget", type=int, default=None, help="Lighting Volume's probe budget (a trial)")
+    ap.add_argument("--volume-face", type=int, default=None, help="Lighting Volume's cube face (a trial)")
     ap.add_argument("--no-write", action="store_true", help="leave docs/ alone (a trial run)")
     ap.add_argument("--replot", metavar="RUN", help="tables, CSV and chart again from a kept run folder")
     a = ap.parse_args()
@@ -304,7 +310,8 @@ def main() -> None:
                 "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": a.native_samples,
                 "samples": a.samples, "eevee_samples": a.eevee_samples, "threads": a.threads,
                 "steps": a.steps.split(","), "date": time.strftime("%Y-%m-%d"),
-                "eevee_settings": _options(a.eevee_set), "cycles_settings": _options(a.cycles_set)}
+                "eevee_settings": _options(a.eevee_set), "cycles_settings": _options(a.cycles_set),
+                "volume_budget": a.volume_budget, "volume_face": a.volume_face}
         kept = _kept_natives(run, args) if "native" not in args["steps"] else {}
         result = matrix.run_script(runner, HERE / "auto_light_scene.py", args, RESULT_TAG, "auto")
         result["wall_s"] = time.perf_counter() - t_start

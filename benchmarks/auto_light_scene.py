@@ -163,6 +163,8 @@ def main() -> dict:
             # first frame compiles again, so the first auto EEVEE frame's time holds that
         if "volume" in steps:  # Lighting Volume (issue 37): one volume over every mesh, shared
             s.lighting = "VOLUME"
+            volume = importlib.import_module(f"{MODULE}.blender.lighting.volume")
+            volume.BUDGET, volume.FACE = ARGS.get("volume_budget"), ARGS.get("volume_face")  # None: the core's
             t0 = time.perf_counter()
             _, rec["volume_report"], rec["volume_warning"] = gb.bake_into_world(bpy.context.scene, probe)
             times["volume_bake_s"] = time.perf_counter() - t0

@@ -241,8 +241,12 @@ def _build(tree, atlas) -> None:
     b = _Nodes(tree)
     N, L = b.N, b.L
     gin, gout = N.new("NodeGroupInput"), N.new("NodeGroupOutput")
-    volume = {"Shader": volume_nodes.volume_group("CYCLES"), "EEVEE": volume_nodes.volume_group("EEVEE")}
-    world_at = atlas if atlas is not None else volume_nodes.volume_image()
+    # the volume's lookups only while a mesh reads them: Cycles' shader stack holds the grid's or the volume's, not
+    # both (prune_atlas), and a file that went back to grids keeps its volume images for undo
+    used = any(o.get(GRID_KEY) == VOLUME_KEY for o in bpy.data.objects)
+    volume = {"Shader": volume_nodes.volume_group("CYCLES") if used else None,
+              "EEVEE": volume_nodes.volume_group("EEVEE") if used else None}
+    world_at = atlas if atlas is not None else volume_nodes.volume_image() if used else None
     if world_at is None:
         L.new(gin.outputs["Shader"], gout.inputs["Shader"])
         L.new(gin.outputs["Shader"], gout.inputs["EEVEE"])

@@ -166,6 +166,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
     for obj in lit:
         ll.set_object_grid(obj, ll.VOLUME_KEY)
     ll.prune_atlas()  # before the group is rebuilt: tiles nobody reads any more (volume_nodes.py says why)
+    grids = sorted(o.name for o in bpy.data.objects if ll.has_local_light(o) in ("probe", "grid"))
     store_volume(irr, vis, vol.spec, world, s.irradiance_image)
     for obj in lit:
         ll.light_object(obj, float(s.strength))
@@ -183,6 +184,11 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))
     lines.append("a mesh moved out of the volume's box fades to the World probe's light; re-bake to cover it")
+    if grids:  # local_light.prune_atlas: one shader cannot hold both lookups in Cycles
+        lines.append("Warning: " + ", ".join(grids[:4]) + (", ..." if len(grids) > 4 else "") + " still have "
+                     "per-object probes or grids (another probe's, or More Than One Probe's): Cycles cannot hold "
+                     "those and the volume in one shader (the meshes render black there); use Lighting Volume on "
+                     "that probe too, or Remove Local Light from them")
     s.local_report = "\n".join(lines)
     return lines[0], {"lit": [o.name for o in lit], "outside": outside, "probes": vol.spec.count}
 
