@@ -46,6 +46,10 @@
 #                                        timestamped; and a new process's context, upload and first bakes, the
 #                                        second process finding the first's pipeline cache on disk). Into $OUT:
 #                                        bake_stages.csv, stages.log. Carry .gl and .whl
+#   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
+#                                        volume's accuracy against per-point probes at the five places, its bake's
+#                                        cost against a World-only bake). Into $OUT: volume_accuracy.csv,
+#                                        volume_cost.csv, volume_bench.png, volume.log. Carry .gl and .whl
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -65,7 +69,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full|final|refs|stages)
+trials|grid|full|final|refs|stages|volume)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -138,6 +142,16 @@ trials|grid|full|final|refs|stages)
         --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages (cache on disk): exit $?"
       echo "[gpu_run] stages: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = volume ]; then
+    # The light volume (issue 37): accuracy against per-point probes and the bake's cost against a World-only bake.
+    # Deadline 400 s; about a minute expected.
+    log="$out/volume.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 400 python3 benchmarks/volume_bench.py --points 64 --repeats 3 \
+        --out-csv "$out/volume.csv" --png "$out/volume_bench.png" || echo "[gpu_run] volume_bench: exit $?"
+      echo "[gpu_run] volume: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = refs ]; then
     # Deadline: gsplat's ~55 s compile, then ~2 s a view; stopped at 300 s
     log="$out/refs.log"
@@ -166,7 +180,7 @@ trials|grid|full|final|refs|stages)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume" >&2
   exit 2
   ;;
 esac

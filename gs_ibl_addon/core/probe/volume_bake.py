@@ -7,9 +7,9 @@ into its two octahedral maps (volume.py's layout) by fixed linear maps of the cu
   every probe.
 - Irradiance: E/pi at each texel is linear in the cube's radiance. The texels are fitted by least squares so that
   the *bilinear lookup* (volume.bilinear_map) reproduces the cosine-lobe irradiance over FIT_DIRECTIONS directions
-  (the fit matrix pinv(B) (B: bilinear weights at those directions) times the cosine-lobe quadrature of the
-  cube's texels): bilinear lookups of point-sampled texels err by twice as much at the map's folds (volume.py).
-  One (IRR^2, 6 F^2) matrix per face size, cached; a chunk is one matmul.
+  ((B^T B)^-1 B^T C, B the bilinear weights at those directions, C their cosine lobes over the cube's texels):
+  bilinear lookups of point-sampled texels err twice as much at the map's folds (volume.py). The radiance is
+  box-averaged to IRR_FACE^2 first; one (IRR^2, 6 IRR_FACE^2) matrix, built once a session; a chunk is one matmul.
 - Visibility: each texel's radial distance r = z sqrt(1 + s^2 + t^2) (the renderer's depth is the coverage-weighted
   z along the face's axis), the far distance where coverage < COVERED, filtered into (mean r, mean r^2) by DDGI's
   lobe max(0, d.w)^VIS_SHARPNESS (normalised per texel): another fixed matrix.
@@ -32,7 +32,9 @@ from .grid import GridSpec
 from .volume import (COVERED, FAR_FACTOR, IRR, VIS, VIS_SHARPNESS, LightVolume, bilinear_taps, grid_maps,
                      probe_positions, spec_spacing, texel_directions)
 
-DEFAULT_FACE = 32  # the cube face each probe renders: see volume_bench.py --faces (irradiance of 32^2 vs 64^2)
+# The cube face each probe renders. 32^2 changed no place's error over 16^2 by more than 0.4% (volume_bench.py,
+# 2026-12-05: the maps are made from 16^2 and 32^2 faces anyway) and costs ~2x on lavapipe.
+DEFAULT_FACE = 16
 # Faces above these are box-averaged to them before the maps: irradiance needs no finer texels (analytic cubes' fitted
 # maps read 0.22% rms at 16^2 and at 32^2, tests/test_volume_bake.py), visibility's lobe of ~10 degrees a little finer.
 IRR_FACE, VIS_FACE = 16, 32
