@@ -13,15 +13,22 @@ from gs_ibl_addon.core.render.gpu_sort import Scanner
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.synthetic import random_scene
-from gs_ibl_addon.core.vk import Buffer, Recorder, get_context, pipelines
+from gs_ibl_addon.core.vk import Buffer, Recorder, VulkanContext, pipelines
 
 SIZES = (16, 24, 32, 40, 48, 56)
 
 
 def _scan_pipelines(ctx, what: str) -> list:
-    """``what`` of the prefix sum's pipelines (the kernels these tests record; other tests' kept programs, such as
-    the filters' plans, may hold other kernels' pools)."""
+    """``what`` of the prefix sum's pipelines (the kernels these tests record)."""
     return [getattr(p, what) for p in ctx._pipelines.values() if p.name.startswith("scan_")]
+
+
+@pytest.fixture
+def own_context():
+    """A context of the test's own: the shared one's kept programs (other tests' renderers and filter plans) may
+    hold pools that these tests expect to see reset."""
+    with VulkanContext() as ctx:
+        yield ctx
 
 
 @pytest.fixture
@@ -42,8 +49,8 @@ def test_frames_survive_a_pool_filling_while_recording(monkeypatch):
                 np.testing.assert_array_equal(got, w)
 
 
-def test_one_recording_binds_more_sets_than_a_pool_holds(small_pools):
-    ctx = get_context()
+def test_one_recording_binds_more_sets_than_a_pool_holds(small_pools, own_context):
+    ctx = own_context
     rng = np.random.default_rng(3)
     data = [rng.integers(0, 100, 1000).astype(np.uint32) for _ in range(10)]
     bufs = [Buffer(ctx, 4000, f"scan{i}") for i in range(10)]
@@ -83,10 +90,10 @@ def test_a_render_in_flight_keeps_its_sets(monkeypatch):
                 np.testing.assert_array_equal(got, w)
 
 
-def test_a_kept_program_keeps_its_pool(small_pools):
+def test_a_kept_program_keeps_its_pool(small_pools, own_context):
     """A program recorded, then a recording that fills the pool and later ones: the program's sets stay (its pool is
     in use while it lives) and it runs as recorded; once it is closed its pool is reset."""
-    ctx = get_context()
+    ctx = own_context
     rng = np.random.default_rng(4)
     data = [rng.integers(0, 100, 1000).astype(np.uint32) for _ in range(10)]
     bufs = [Buffer(ctx, 4000, f"kept{i}") for i in range(10)]

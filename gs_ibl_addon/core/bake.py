@@ -362,9 +362,9 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             frame = r.last_frame
             value = (covered_means(np.asarray(result.sh_coefficients)[None], [result.hole_fraction])[0]
                      if s.hole_fill == "mean" else np.asarray(s.hole_colour, np.float64))
-            fill_frame_holes(frame, value[None])
-            filled = filter_probe(frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
-                                  roughness=None, read_radiance=False, **s.extra)
+            with fill_frame_holes(frame, value[None]):  # one submission with the filter
+                filled = filter_probe(frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
+                                      roughness=None, read_radiance=False, **s.extra)
             result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
             result.hole_fill = {"method": s.hole_fill, "value": [float(v) for v in value],
                                 "fraction": float(result.hole_fraction)}

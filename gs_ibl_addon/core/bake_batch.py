@@ -209,8 +209,8 @@ def _bake(r: SplatRenderer, pos: np.ndarray, s: ProbeSettings, method: str, say,
             t0 = time.perf_counter()
             fill_values = (covered_means(sh, holes) if s.hole_fill == "mean" else
                            np.tile(np.asarray(s.hole_colour, np.float64), (n, 1)))
-            fill_frame_holes(frame, fill_values)
-            sh, irr, _, _ = _filter_batch(frame, s, method)
+            with fill_frame_holes(frame, fill_values):  # one submission with the filter
+                sh, irr, _, _ = _filter_batch(frame, s, method)
             fill_ms = (time.perf_counter() - t0) * 1e3
     with times.stage("radiance readback"):
         read = keep_radiance or s.glossy or (fills and not fill_on_gpu) or on_cube

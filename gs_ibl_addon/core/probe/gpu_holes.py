@@ -8,7 +8,9 @@ fraction h says sum(clamp(alpha) dOmega) = 4 pi (1 - h), so covered_mean = DC / 
 """
 from __future__ import annotations
 
+import contextlib
 import math
+from typing import Iterator
 
 import numpy as np
 
@@ -27,19 +29,27 @@ def covered_means(sh: np.ndarray, holes: np.ndarray) -> np.ndarray:
     return np.where(covered[:, None] > 0, dc / np.maximum(covered, 1e-300)[:, None], 0.0)
 
 
-def fill_frame_holes(frame, fills: np.ndarray) -> None:
-    """Add (1 - alpha) x fills[probe] to the RGB of every texel of a render_probes frame, on the GPU (the frame's
-    image changes in place; alpha is kept, as holes.fill_holes keeps it)."""
+@contextlib.contextmanager
+def fill_frame_holes(frame, fills: np.ndarray) -> Iterator[None]:
+    """``with fill_frame_holes(frame, fills): filter(frame)``: add (1 - alpha) x fills[probe] to the RGB of every
+    texel of a render_probes frame on the GPU (in place; alpha is kept, as holes.fill_holes keeps it). The fill is
+    queued, not waited for: the work started inside the block goes to the GPU with it, in one submission."""
     frame.wait()
     ctx, probes = frame.ctx, frame.probes
     fill = np.zeros((probes, 4), np.float32)
     fill[:, :3] = np.asarray(fills, np.float64).reshape(probes, 3)
     total = frame.pixels
     buf = scratch(ctx, fill.nbytes, "hole-fill")
+    prog = None
     try:
         buf.write(fill)
-        with Recorder(ctx) as rec:
-            rec.dispatch(KERNELS["probe_fill_holes"], [frame.image, buf], groups(total, 256, ctx), n=total,
-                         per_probe=total // probes)
+        rec = Recorder(ctx)
+        rec.dispatch(KERNELS["probe_fill_holes"], [frame.image, buf], groups(total, 256, ctx), n=total,
+                     per_probe=total // probes)
+        prog = rec.program()
+        prog.start()
+        yield
     finally:
+        if prog is not None:
+            prog.close()  # waits for it if the block did not
         buf.close()

@@ -4,6 +4,7 @@ pools and go back to them; GPU timings come from timestamp queries.
 """
 from __future__ import annotations
 
+import threading
 from typing import Sequence
 
 import numpy as np
@@ -44,14 +45,41 @@ def _take_command_buffer(ctx: VulkanContext):
     return vk.vkAllocateCommandBuffers(ctx.device, cbai)[0]
 
 
-def _submit(ctx: VulkanContext, cmd):
-    """Submit ``cmd`` and return its fence (from the context's pool) without waiting."""
+class Submission:
+    """One vkQueueSubmit of the command buffers queued since the last (context.queued), with its fence; ``wait()``
+    may be called by each of their owners, the first waits."""
+
+    def __init__(self, ctx: VulkanContext, fence) -> None:
+        self.ctx, self.fence, self.done = ctx, fence, False
+        self._lock = threading.Lock()
+
+    def wait(self) -> None:
+        with self._lock:
+            if self.done:
+                return
+            vk, ctx = self.ctx.vk, self.ctx
+            fences = [self.fence]
+            try:
+                vk.vkWaitForFences(ctx.device, 1, fences, vk.VK_TRUE, _NO_TIMEOUT)
+            finally:
+                vk.vkResetFences(ctx.device, 1, fences)
+                with ctx.lock:
+                    ctx._free_fences.append(self.fence)
+                self.done = True
+
+
+def flush(ctx: VulkanContext) -> Submission | None:
+    """Submit every command buffer queued (Program.start, _submit) in one vkQueueSubmit, in the order queued: the
+    queue runs them in that order, each opening with a full barrier. None when nothing was queued."""
     vk = ctx.vk
     with ctx.lock:
+        queued, ctx.queued = ctx.queued, []
+        if not queued:
+            return None
         fence = (ctx._free_fences.pop() if ctx._free_fences
                  else vk.vkCreateFence(ctx.device, vk.VkFenceCreateInfo(), None))
-        cmds = [cmd]
-        si = vk.VkSubmitInfo(commandBufferCount=1, pCommandBuffers=cmds)
+        cmds = [cmd for cmd, _ in queued]
+        si = vk.VkSubmitInfo(commandBufferCount=len(cmds), pCommandBuffers=cmds)
         sis = [si]
         try:
             vk.vkQueueSubmit(ctx.queue, 1, sis, fence)
@@ -59,23 +87,22 @@ def _submit(ctx: VulkanContext, cmd):
             ctx._free_fences.append(fence)
             raise
         ctx.stats.submits += 1
-        return fence
+        sub = Submission(ctx, fence)
+        for _, owner in queued:
+            if owner is not None:
+                owner._submission = sub
+        return sub
 
 
-def _wait(ctx: VulkanContext, fence) -> None:
-    """Wait for a fence from _submit and give it back to the context."""
-    vk = ctx.vk
-    fences = [fence]
-    try:
-        vk.vkWaitForFences(ctx.device, 1, fences, vk.VK_TRUE, _NO_TIMEOUT)
-    finally:
-        vk.vkResetFences(ctx.device, 1, fences)
-        with ctx.lock:
-            ctx._free_fences.append(fence)
+def _submit(ctx: VulkanContext, cmd) -> Submission:
+    """Submit ``cmd`` after whatever is queued, in the same vkQueueSubmit, without waiting."""
+    with ctx.lock:
+        ctx.queued.append((cmd, None))
+        return flush(ctx)
 
 
 def _submit_and_wait(ctx: VulkanContext, cmd) -> None:
-    _wait(ctx, _submit(ctx, cmd))
+    _submit(ctx, cmd).wait()
 
 
 def _read_stamps(ctx: VulkanContext, query_pool, labels: list[str]) -> dict[str, float]:
@@ -262,26 +289,32 @@ class Program:
         return self.wait()
 
     def start(self) -> None:
-        """Submit without waiting (the queue runs submissions in order, each opening with a full barrier, so a
-        program started next sees this one's writes); ``wait()`` before reading what it wrote."""
+        """Queue for submission without waiting: programs started one after another go to the GPU together, in
+        one vkQueueSubmit, at the first wait (flush), and run in the order started, each opening with a full
+        barrier, so a program started next sees this one's writes. ``wait()`` before reading what it wrote."""
         if not self.valid:
             raise RuntimeError("recorded program is stale (a buffer it uses was freed); record it again")
-        if getattr(self, "_fence", None) is not None:
+        if self.running:
             raise RuntimeError("program started twice without a wait")
-        self._fence = _submit(self.ctx, self.cmd)
+        with self.ctx.lock:
+            self._started, self._submission = True, None
+            self.ctx.queued.append((self.cmd, self))
 
     def wait(self) -> dict[str, float]:
-        """Wait for the submission from start(); returns its GPU timings per stage."""
-        fence, self._fence = getattr(self, "_fence", None), None
-        if fence is None:
+        """Wait for the program from start() (submitting what is queued, itself included); returns its GPU
+        timings per stage."""
+        if not self.running:
             raise RuntimeError("program waited on without a start")
-        _wait(self.ctx, fence)
+        if self._submission is None:
+            flush(self.ctx)
+        self._submission.wait()
+        self._started, self._submission = False, None
         stamps = _read_stamps(self.ctx, self.query_pool, self.labels)
         return {} if getattr(self, "forced", False) else stamps
 
     @property
     def running(self) -> bool:
-        return getattr(self, "_fence", None) is not None
+        return getattr(self, "_started", False)
 
     def close(self) -> None:
         ctx = self.ctx

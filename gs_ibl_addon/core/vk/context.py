@@ -97,6 +97,7 @@ class VulkanContext:
         # only holds them and destroys them with the device.
         self._free_cmds: list = []
         self._free_fences: list = []
+        self.queued: list = []  # (command buffer, owner) started and not yet submitted: commands.flush
         self._free_queries: list = []
         self._staging: dict[str, object] = {}
         self._scratch: dict[int, list] = {}
@@ -190,6 +191,7 @@ class VulkanContext:
         vk = self.vk
         if getattr(self, "device", None) is None:
             return
+        self.queued.clear()  # started programs never waited for: their owners are closing with the device
         vk.vkDeviceWaitIdle(self.device)
         for obj in list(self.cache.values()):
             close = getattr(obj, "close", None)
