@@ -363,7 +363,7 @@ def display(img: np.ndarray, space: str) -> np.ndarray:
 def load_refs(args) -> dict:
     """capture -> its refs npz (made here with --stand-in where the GPU machine's are missing)."""
     out = {}
-    for name in args.captures.split(","):
+    for name in [c for c in args.captures.split(",") if c]:
         path = os.path.join(args.refs, f"refs_{name}.npz")
         if not os.path.exists(path):
             if not args.stand_in:
@@ -403,7 +403,16 @@ def run_bench(args) -> None:
         for f in (os.path.abspath(__file__), bs.__file__):
             shutil.copy(f, runner.host / os.path.basename(f))
         caps, spaces = [], {}
-        for name in args.captures.split(","):
+        for spec in [c for c in args.synthetic.split(",") if c]:  # time only: no reference image
+            import frame_cost_bench as fcb
+            from gs_ibl_addon.core.formats.ply import write_ply
+            lab, scene, cv, _ = fcb.scene_and_camera(spec, *args.size_wh)
+            name = lab.replace(" ", "_")
+            write_ply(runner.host / f"{name}.ply", scene)
+            spaces[name] = scene.colour_space
+            caps.append({"name": name, "path": str(runner.inner / f"{name}.ply"), "views": [
+                {"name": "v0", "camera": [*cv.matrix.ravel(), cv.tan_x, cv.tan_y, *cv.shift]}]})
+        for name in [c for c in args.captures.split(",") if c]:
             _, path, _ = fb.parse_capture(name)
             shutil.copy(path, runner.host / os.path.basename(path))
             spaces[name] = read_scene(path).colour_space
@@ -413,7 +422,7 @@ def run_bench(args) -> None:
                "size": list(args.size_wh), "captures": caps, "methods": methods(args)}
         (runner.host / "args.json").write_text(json.dumps(job))
         assert matrix._install(runner, str(runner.inner / "gs_ibl.zip")).returncode == 0, "install failed"
-        log(f"Blender 5.3 (bpy, {args.threads} threads), {len(caps)} captures x {len(caps[0]['views'])} views, "
+        log(f"Blender 5.3 (bpy, {args.threads} threads), {len(caps)} captures x {len(caps[-1]['views'])} views, "
             f"{len(job['methods'])} methods; load {os.getloadavg()[0]:.1f}")
         res = runner.run([runner.python(), str(runner.inner / "native_frame_bench.py"), "in-blender",
                           str(runner.inner / "args.json")], "bench")
@@ -428,9 +437,9 @@ def run_bench(args) -> None:
         runner.close()
     rows = []
     for row in result["rows"]:
-        ref = refs[row["capture"]]
+        ref = refs.get(row["capture"], {"reference": ""})
         img = images.get(f"{row['capture']}_{row['view']}_{row['method']}")
-        small = (row["width"], row["height"]) == args.size_wh and img is not None
+        small = (row["width"], row["height"]) == args.size_wh and img is not None and row["capture"] in refs
         shown = display(img, spaces[row["capture"]]) if small else None
         cmp = fb.compare(shown, ref[f"gsplat_{row['view']}"].astype(np.float32)) if small else {}
         lin = ref.get(f"gsplat_lin_{row['view']}")
@@ -501,7 +510,9 @@ def plot(rows: list[dict], png: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    caps = list(dict.fromkeys(r["capture"] for r in rows))
+    caps = list(dict.fromkeys(r["capture"] for r in rows if r["psnr"] != ""))  # those with a reference
+    if not caps:
+        return
     views = list(dict.fromkeys(r["view"] for r in rows))
     shapes = dict(zip(views, "osD^v<>p"))
     fig, axes = plt.subplots(1, len(caps), figsize=(6.4 * len(caps), 5.0), squeeze=False)
@@ -533,7 +544,7 @@ def plot(rows: list[dict], png: str) -> None:
         ax.set_ylabel("PSNR against gsplat classic, dB")
         ax.set_title(cap, fontsize=9)
         ax.grid(True, which="both", alpha=0.3)
-    r0 = rows[0]
+    r0 = next(r for r in rows if r["capture"] in caps)
     fig.suptitle(f"A capture in F12: Blender {r0['blender']}'s native splats (red Cycles, green EEVEE) against GS-IBL "
                  f"drawing them (blue), {r0['device']}, load {r0.get('load', '?')} on 2 cores, {r0['date']};\n"
                  f"reference: {r0['reference']}", fontsize=8)
@@ -547,8 +558,10 @@ def save_compare_sheet(path: str, rows: list[dict], refs: dict, images: dict, sp
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    caps = list(dict.fromkeys(r["capture"] for r in rows))
+    caps = [c for c in dict.fromkeys(r["capture"] for r in rows) if c in refs]
     cols = list(dict.fromkeys(r["method"] for r in rows if r["psnr"] != ""))
+    if not caps:
+        return
     fig, axes = plt.subplots(len(caps), len(cols) + 1, figsize=(2.6 * (len(cols) + 1), 1.8 * len(caps) + 0.4),
                              squeeze=False)
     for i, cap in enumerate(caps):
@@ -583,6 +596,8 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("mode", choices=["refs", "bench", "plot"])
     ap.add_argument("--captures", default="guitar,room")
+    ap.add_argument("--synthetic", default="", help="bench: also frame_cost_bench's scenes (random:1M, shell:3M, ...), "
+                    "their one view, time only (no reference image)")
     ap.add_argument("--views", default="", help="of v0..v7 (comma-separated; refs: empty is all eight; bench: "
                     "default v0,v4)")
     ap.add_argument("--size", default="480x270", help="the comparison size (native Cycles renders it on the CPU)")
