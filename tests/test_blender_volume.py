@@ -212,3 +212,45 @@ def test_volume_bake_lights_every_mesh_and_follows_motion(blender, tmp_path):
     bpy.context.view_layer.objects.active = probe
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert ll.has_local_light(bpy.data.objects[names["sphere"]]) is None
+
+
+def test_every_visible_splat_object_lights_the_volume(blender, tmp_path, write_3dgs_ply):
+    """Two splat objects: a grey shell (the probe's own) and a red ball beside the mesh (another capture). The
+    volume is baked from both, merged and sorted together ("from 2 splat objects"): the mesh's side facing the ball
+    is redder than with the ball hidden from renders (then "from 1 splat object")."""
+    from gs_ibl_addon.blender.lighting import volume_nodes as vn
+    from gs_ibl_addon.core import synthetic
+    shell = synthetic.shell_scene(lambda d: np.full(d.shape, 0.3), 1500, radius=3.0)
+    ball = synthetic._sphere_object((0.6, 0.0, 0.0), 0.2, (0.9, 0.05, 0.05), 0.05)
+    for name, sc in (("shell", shell), ("ball", ball)):
+        write_3dgs_ply(tmp_path / f"{name}.ply", sc)
+        assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(tmp_path / f"{name}.ply"),
+                                            show_proxy=False) == {"FINISHED"}
+    shell_obj, ball_obj = bpy.data.objects["shell"], bpy.data.objects["ball"]
+    bpy.ops.mesh.primitive_cube_add(size=0.2, location=(0.0, 0.0, 0.0))
+    for o in bpy.context.view_layer.objects.selected:
+        o.select_set(False)
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.splats = shell_obj
+    probe.gs_ibl_probe.face_size, probe.gs_ibl_probe.irradiance_size = 32, 8
+    probe.gs_ibl_probe.lighting = "VOLUME"
+    toward = np.array([[0.1, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
+
+    def bake():
+        bpy.context.view_layer.objects.active = probe
+        assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+        w, h = vn.volume_image().size
+        irr = np.empty(w * h * 4, np.float32)
+        vn.volume_image().pixels.foreach_get(irr)
+        vis = np.empty(np.prod(vn.visibility_image().size) * 4, np.float32)
+        vn.visibility_image().pixels.foreach_get(vis)
+        vw, vh = vn.visibility_image().size
+        return probe.gs_ibl_probe.local_report, pv.sample_packed(
+            irr.reshape(h, w, 4)[..., :3], vis.reshape(vh, vw, 4)[..., :3], vn.volume_spec(), *toward)[0]
+    both_report, both = bake()
+    ball_obj.hide_render = True
+    one_report, one = bake()
+    print(f"\nfacing the ball: both {np.round(both, 4)}, the shell alone {np.round(one, 4)}")
+    assert "from 2 splat objects" in both_report and "from 1 splat object" in one_report
+    assert both[0] / both[2] > 1.5 * one[0] / one[2]  # redder with the ball
