@@ -31,6 +31,7 @@ from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
 from .scene import SplatScene
 from .stage_times import StageTimes
+from .vk import get_context
 from .probe.reference import exact_irradiance_parts
 from .tolerance import ErrorModel, check_tolerance, choose_irradiance_size, relative_rms, search_face
 from .settings import (AUTO_FIRST_FACE, AUTO_MAX_FACE, DEFAULT_HOLE_FILL, DEFAULT_IRRADIANCE_SIZE, DEFAULT_LOD,
@@ -444,15 +445,14 @@ def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSet
     r = renderer
     highlights = None
     stage_ms: dict[str, float] = {}  # each stage's wall and GPU time (core/stage_times.py), into the result's timings
-    times = StageTimes(renderer.ctx if renderer is not None else None, stage_ms)
+    times = StageTimes(renderer.ctx if renderer is not None else get_context(), stage_ms)  # the upload's context
     if scene is not None and renderer is None:  # clipped splats gained before upload (core/probe/highlights.py)
         scene, highlights = gain_clipped_splats(scene, s.highlight_gain)
     try:
         if r is None:
             say(f"uploading {scene.count:,} splats", 0.0)
             with times.stage("upload"):
-                r = SplatRenderer(scene, lod=s.lod == "auto")
-            times.ctx = r.ctx
+                r = SplatRenderer(scene, times.ctx, lod=s.lod == "auto")
         host = scene if scene is not None else host_splats
         result = _search_and_filter(r, r.scene_count, pos, s, method, say, hole_radiance, highlights is not None,
                                     times)
