@@ -62,9 +62,13 @@ def _emissive_cube(bpy, name, location, size, colour):
     return ob
 
 
-def build(bpy, tmp_path, cam_x=0.0):
+def build(bpy, tmp_path, cam_x=0.0, transparent=True):
+    """The scene; ``transparent``: Film Transparent on as the user's own choice, so the composite's background stays
+    transparent and the splats' alpha can be checked (test_f12_keeps_the_world_behind_everything: the World)."""
     from gs_ibl_addon.blender.splats.object import create_splat_object
     scene = bpy.context.scene
+    if transparent:
+        scene.render.film_transparent = True
     wall = create_splat_object(bpy.context, splat_wall(), "Wall")
     wall.hide_render = False  # its camera icon: in renders
     _emissive_cube(bpy, "Front", FRONT_AT, 0.6, FRONT_COLOUR)
@@ -329,7 +333,7 @@ def test_turning_it_off_gives_the_users_compositor_back(blender, tmp_path):
     tree.links.new(inv.outputs[0], out.inputs[0])
     names = sorted(n.name for n in tree.nodes)
     scene.render.film_transparent = False
-    build(bpy, tmp_path)  # a splat object with its camera icon on: our nodes go in
+    build(bpy, tmp_path, transparent=False)  # a splat object with its camera icon on: our nodes go in
     assert compositor.installed(scene) and compositor.tree_of(scene) == tree
     fed = inv.inputs[1].links[0].from_node
     assert fed.get("gs_ibl") == compositor.NODE_ROLE  # the user's Invert now takes meshes and splats
@@ -348,7 +352,7 @@ def test_turning_it_off_gives_the_users_compositor_back(blender, tmp_path):
 def test_a_scene_without_compositor_gets_ours_and_loses_it(blender, tmp_path):
     bpy = blender
     from gs_ibl_addon.blender.render import compositor
-    scene, _ = build(bpy, tmp_path)
+    scene, _ = build(bpy, tmp_path, transparent=False)
     assert compositor.installed(scene)
     scene.gs_ibl_render.enabled = False
     assert compositor.tree_of(scene) is None and not scene.render.film_transparent
@@ -489,3 +493,86 @@ def test_a_refusal_of_the_renderer_is_said_and_draws_nothing(blender, tmp_path, 
     said = frame.last_render(scene)["messages"]
     assert any("render 32x24 or smaller" in m and "Output Properties > Resolution" in m for m in said), said
     np.testing.assert_allclose(out, render, atol=1e-6)
+
+
+WORLD = (0.15, 0.3, 0.5)
+
+
+def _coloured_world(bpy, scene):
+    world = bpy.data.worlds.new("Sky")
+    if world.node_tree is None:  # 4.2: no tree until asked for
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (*WORLD, 1.0)
+    scene.world = world
+
+
+def _engine(bpy, scene, engine: str) -> None:
+    if engine == "EEVEE":
+        for name in ("BLENDER_EEVEE_NEXT", "BLENDER_EEVEE"):  # 4.2-4.4: EEVEE Next
+            try:
+                scene.render.engine = name
+                break
+            except TypeError:
+                continue
+        scene.eevee.taa_render_samples = 4
+
+
+# EEVEE compiles its shaders for a minute or two on a CPU: the fast suite takes Cycles, a real Blender run both
+# (GS_IBL_F12_ENGINES=CYCLES,EEVEE; docs/final-frame.md section 10)
+ENGINES = os.environ.get("GS_IBL_F12_ENGINES", "CYCLES").split(",")
+
+
+@pytest.mark.parametrize("engine", ENGINES)
+def test_f12_keeps_the_world_behind_everything(blender, tmp_path, engine):
+    """Film Transparent (which we turn on) takes the World out of the render; the composite puts it back under
+    BEHIND from the Environment pass: final = FRONT over (render over (BEHIND over World)). Where no splats are, it
+    is Blender's own render with Film Transparent off (a cube beside the wall checks the anti-aliased edges, where
+    the pass holds the World weighted by the uncovered share); on the wall, the splats over the World; a user who
+    had Film Transparent on keeps a transparent background."""
+    bpy = blender
+    _needs_depth_cut()
+    from gs_ibl_addon.blender.render import compositor, frame
+    scene, wall = build(bpy, tmp_path, transparent=False)
+    _engine(bpy, scene, engine)
+    compositor.sync_world(scene)  # what the depsgraph update of the engine change does in Blender's window
+    chained = any(n.get(compositor.PART) == "over_world" for n in compositor.tree_of(scene).nodes)
+    assert chained != compositor.world_pass_empty(scene)
+    _coloured_world(bpy, scene)
+    _emissive_cube(bpy, "Side", (1.95, 0.5, 1.25), 0.5, (0.9, 0.3, 0.2))  # beside the wall, in the World
+    assert scene.render.film_transparent and compositor.shows_world(scene)
+    out = f12(bpy, tmp_path, "world")
+    scene.gs_ibl_render.enabled = False  # Blender's own renders of the meshes
+    assert not scene.render.film_transparent and not bpy.context.view_layer.use_pass_environment  # put back
+    opaque = meshes_only(bpy, tmp_path, wall, "world_opaque")  # with the World
+    scene.render.film_transparent = True
+    render = meshes_only(bpy, tmp_path, wall, "world_meshes")  # without: as ours is rendered
+    scene.render.film_transparent = False
+    scene.gs_ibl_render.enabled = True
+    full = splats_reference()
+    bare = full[..., 3] < 1e-4  # no splats
+    if compositor.world_pass_empty(scene):  # 4.2's EEVEE: no World in the pass; said, the background transparent
+        assert any("World is not shown" in m for m in frame.last_render(scene)["messages"])
+        mean, p99, worst = errors(out, reference_composite(render, full, W // 2))
+        assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)
+        assert out[bare & (render[..., 3] == 0), 3].max() < 1e-4
+        return
+    sky = np.broadcast_to(np.array([*WORLD, 1.0], np.float32), out.shape)
+    ref = over(reference_composite(render, full, W // 2), sky)
+    mean, p99, worst = errors(out, ref)
+    print(f"F12 with the World, {bpy.app.version_string} {engine}: mean {mean:.5f}, p99 {p99:.5f}, "
+          f"max abs {worst:.4f}")
+    assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)
+    np.testing.assert_allclose(out[..., 3], 1.0, atol=1e-4)
+    edges = bare & (render[..., 3] > 0.02) & (render[..., 3] < 0.98)
+    assert edges.sum() >= 4 and bare.sum() > 100, (edges.sum(), bare.sum())
+    assert np.abs(out[bare] - opaque[bare]).max() < 0.01, np.abs(out[bare] - opaque[bare]).max()
+    # a user's own Film Transparent: the background stays transparent
+    compositor.remove(scene)
+    scene.render.film_transparent = True
+    compositor.install(scene)
+    assert not compositor.shows_world(scene)
+    out = f12(bpy, tmp_path, "transparent")
+    mean, p99, worst = errors(out, reference_composite(render, full, W // 2))
+    assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)
+    assert out[bare & (render[..., 3] == 0), 3].max() < 1e-4
+

@@ -2,8 +2,11 @@
 
 For each Render Layers node of the scene: Render Layers.Image -> Alpha Over (background BEHIND, foreground the
 render) -> Alpha Over (background that, foreground FRONT) -> whatever the render's image fed before (the user's own
-nodes, or the output). FRONT and BEHIND are float images of ours per view layer (premultiplied, scene-linear) that
-the frame handler fills for every frame (frame.py). The user's nodes see meshes and splats as one image, and the view
+nodes, or the output). Film Transparent (needed: the render's alpha must be the meshes' coverage) takes the World
+out of the render, so where we turned it on, BEHIND goes over the World first: the Environment pass divided by the
+share of the pixel it holds (``_world``). A user who had Film Transparent on keeps a transparent background.
+FRONT and BEHIND are float images of ours per view layer (premultiplied, scene-linear) that the frame handler fills
+for every frame (frame.py). The user's nodes see meshes and splats as one image, and the view
 transform is applied after compositing, to both alike. A File Output node per view layer (Splat Pass setting)
 writes FRONT and BEHIND as a multilayer EXR, the splats' own pass for compositors.
 
@@ -29,6 +32,7 @@ FRONT_ROLE, BEHIND_ROLE = "render_front", "render_behind"  # images; image[LAYER
 PART, FOR_RL, LAYER, SCENE = "gs_ibl_part", "gs_ibl_render_layers", "gs_ibl_view_layer", "gs_ibl_scene"
 STATE = "gs_ibl_render_state"  # on the scene: what install changed, to put back ({setting: previous value})
 PASS_FILE_STEM = "splats_"
+ENV_PASS = "use_pass_environment:"  # STATE key + view layer name: the Environment pass we turned on there
 
 
 def new_api(scene) -> bool:
@@ -168,6 +172,48 @@ def _wire_file_output(scene, tree, new5: bool, rl, front, behind):
             tree.links.new(src, fo.inputs[name])
 
 
+def shows_world(scene) -> bool:
+    """Whether the composite puts the World back under everything: Film Transparent was turned on by us (install
+    remembered it), not by the user, who then keeps a transparent background."""
+    return "film_transparent" in scene.get(STATE, {})
+
+
+def world_pass_empty(scene) -> bool:
+    """Blender 4.2's EEVEE leaves the Environment pass black under Film Transparent (Cycles in every version and
+    EEVEE from 5.0 fill it: docs/final-frame.md section 10): the World is not put back there."""
+    return bpy.app.version < (5, 0, 0) and scene.render.engine.startswith("BLENDER_EEVEE")
+
+
+def _env_output(rl):
+    return rl.outputs.get("Env") or rl.outputs.get("Environment")  # 4.2: Env; 5.x: Environment
+
+
+def _world(tree, new5: bool, rl, behind_out):
+    """BEHIND over the World as the camera sees it. The Environment pass holds the World weighted by the share of
+    the pixel no surface covers (1 - the render's alpha: a mesh edge's pixel holds both), so it is divided by that
+    share first: the render, laid over this, brings its own share back (exact at anti-aliased edges; where a mesh
+    covers the pixel the pass is 0 and so is the quotient)."""
+    x, y = rl.location.x, rl.location.y
+    inv = _new(tree, "CompositorNodeInvert", "world_share", rl.name, (x + 300, y - 800))
+    tree.links.new(rl.outputs["Alpha"], inv.inputs[1])  # Color: (a, a, a) -> (1 - a, ...)
+    if new5:
+        div = _new(tree, "ShaderNodeMix", "world_unweighted", rl.name, (x + 450, y - 700))
+        div.data_type, div.blend_type, div.clamp_result = "RGBA", "DIVIDE", False
+        def by_id(sockets, identifier):  # the Mix node's sockets share names across its data types
+            return next(sk for sk in sockets if sk.identifier == identifier)
+        by_id(div.inputs, "Factor_Float").default_value = 1.0
+        a, b = by_id(div.inputs, "A_Color"), by_id(div.inputs, "B_Color")
+        out = by_id(div.outputs, "Result_Color")
+    else:
+        div = _new(tree, "CompositorNodeMixRGB", "world_unweighted", rl.name, (x + 450, y - 700))
+        div.blend_type, div.use_clamp = "DIVIDE", False
+        div.inputs[0].default_value = 1.0
+        a, b, out = div.inputs[1], div.inputs[2], div.outputs[0]
+    tree.links.new(_env_output(rl), a)
+    tree.links.new(inv.outputs[0], b)
+    return _alpha_over(tree, new5, out, behind_out, "over_world", rl.name, (x + 550, y - 450)).outputs["Image"]
+
+
 def _wire(scene, tree, rl, write_pass: bool) -> None:
     """Our nodes between ``rl``.Image and whatever it fed."""
     new5 = new_api(scene)
@@ -185,8 +231,44 @@ def _wire(scene, tree, rl, write_pass: bool) -> None:
                       (x + 750, y))
     for sock in fed:
         tree.links.new(top.outputs["Image"], sock)  # replaces the link from the render (one link per input)
+    _sync_world(scene, tree, rl)
     if write_pass:
         _wire_file_output(scene, tree, new5, rl, imgs[1].outputs["Image"], imgs[0].outputs["Image"])
+
+
+_WORLD_PARTS = ("world_share", "world_unweighted", "over_world")
+
+
+def _sync_world(scene, tree, rl) -> bool:
+    """The World chain under BEHIND in ``rl``'s nodes where it is wanted (shows_world, and a pass that holds it),
+    taken out where not (the engine or the Film Transparent choice changed). True if anything changed."""
+    ours = {n.get(PART): n for n in tree.nodes if _ours(n) and n.get(FOR_RL) == rl.name}
+    if "over_behind" not in ours or "behind_image" not in ours:
+        return False
+    want = shows_world(scene) and not world_pass_empty(scene)
+    if want == ("over_world" in ours):
+        return False
+    new5 = new_api(scene)
+    bg = ours["over_behind"].inputs["Background" if new5 else 1]
+    behind = ours["behind_image"].outputs["Image"]
+    if want:
+        tree.links.new(_world(tree, new5, rl, behind), bg)
+    else:
+        for part in _WORLD_PARTS:
+            if part in ours:
+                tree.nodes.remove(ours[part])
+        tree.links.new(behind, bg)
+    return True
+
+
+def sync_world(scene) -> None:
+    """The World chain of every wired Render Layers node as the scene's engine wants it now (main thread: a
+    depsgraph update of the scene, install)."""
+    tree = tree_of(scene)
+    if tree is None:
+        return
+    for rl in render_layers_nodes(scene, tree):
+        _sync_world(scene, tree, rl)
 
 
 def installed(scene) -> bool:
@@ -224,12 +306,17 @@ def install(scene, write_pass: bool = False) -> None:
     for layer in scene.view_layers:
         if layer.use:
             ensure_images(scene, layer.name)
+            if shows_world(scene) and not layer.use_pass_environment:
+                _remember(scene, f"{ENV_PASS}{layer.name}", False)
+                layer.use_pass_environment = True  # the World, which Film Transparent takes out of the render
     wired = {n.get(FOR_RL) for n in tree.nodes if _ours(n, "over_front")}
     has_file = {n.get(FOR_RL) for n in tree.nodes if _ours(n, "file")}
     for rl in render_layers_nodes(scene, tree):
         if rl.name not in wired:
             _wire(scene, tree, rl, write_pass)
-        elif write_pass and rl.name not in has_file:
+            continue
+        _sync_world(scene, tree, rl)
+        if write_pass and rl.name not in has_file:
             front = next(n for n in tree.nodes if _ours(n, "front_image") and n.get(FOR_RL) == rl.name)
             behind = next(n for n in tree.nodes if _ours(n, "behind_image") and n.get(FOR_RL) == rl.name)
             _wire_file_output(scene, tree, new_api(scene), rl, front.outputs["Image"], behind.outputs["Image"])
@@ -277,6 +364,9 @@ def remove(scene) -> None:
         r.film_transparent = bool(state["film_transparent"])
     if "use_compositing" in state:
         r.use_compositing = bool(state["use_compositing"])
+    for layer in scene.view_layers:
+        if f"{ENV_PASS}{layer.name}" in state:
+            layer.use_pass_environment = bool(state[f"{ENV_PASS}{layer.name}"])
     if STATE in scene:
         del scene[STATE]
     for im in [im for im in bpy.data.images if (is_ours(im, FRONT_ROLE) or is_ours(im, BEHIND_ROLE))

@@ -81,6 +81,9 @@ def on_render_init(scene, *_args) -> None:
             say(f"the compositor could not be set up ({type(e).__name__}: {e}); splats not drawn")
     if scene.camera is None:
         say("splats not drawn: the scene has no camera (Scene Properties > Camera)")
+    if compositor.shows_world(scene) and compositor.world_pass_empty(scene):
+        say("the World is not shown behind the splats: Blender 4.2's EEVEE leaves it out of the Environment pass "
+            "under Film Transparent (Cycles shows it); the background is transparent")
 
 
 @persistent
@@ -320,6 +323,8 @@ def _write(im, rgba: np.ndarray) -> None:
 def on_depsgraph_update(scene, depsgraph) -> None:
     if _job is None:  # never during a render (its handlers may run on another thread)
         setup.on_depsgraph_update(scene, depsgraph)
+        if depsgraph.id_type_updated("SCENE") and setup.enabled(scene) and compositor.installed(scene):
+            compositor.sync_world(scene)  # the engine changed: the World under the splats where its pass holds it
 
 
 @persistent
