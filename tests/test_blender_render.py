@@ -576,3 +576,75 @@ def test_f12_keeps_the_world_behind_everything(blender, tmp_path, engine):
     assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)
     assert out[bare & (render[..., 3] == 0), 3].max() < 1e-4
 
+
+def test_meshes_of_other_object_types_hide_the_splats(blender, tmp_path):
+    """The mesh depth holds everything the engines render as a mesh, not only Mesh objects: a text, a curve with a
+    bevel, a metaball, a collection instance and geometry-nodes instances, all in front of the wall, hide the
+    splats behind them (the composite is their render over the splats' blend); an instancer whose camera
+    visibility is off takes its instances out of the depth as it takes them out of Blender's render."""
+    bpy = blender
+    _needs_depth_cut()
+    from gs_ibl_addon.blender.render import frame
+    scene, wall = build(bpy, tmp_path)
+    for name in ("Front", "Back"):
+        bpy.data.objects[name].hide_render = True
+    mat = bpy.data.objects["Front"].data.materials[0]  # emissive yellow
+
+    def link(ob, at):
+        ob.location = at
+        scene.collection.objects.link(ob)
+        if hasattr(ob.data, "materials"):
+            ob.data.materials.append(mat)
+        return ob
+    text = link(bpy.data.objects.new("Text", bpy.data.curves.new("Text", "FONT")), (-1.5, -1.5, 0.3))
+    text.data.body, text.data.size = "GS", 0.8
+    text.rotation_euler = (math.radians(90), 0.0, 0.0)  # facing the camera
+    cu = bpy.data.curves.new("Tube", "CURVE")
+    cu.dimensions, cu.bevel_depth = "3D", 0.08
+    sp = cu.splines.new("POLY")
+    sp.points.add(1)
+    sp.points[0].co, sp.points[1].co = (-1.2, 0.0, 0.0, 1.0), (0.3, 0.0, 0.0, 1.0)
+    link(bpy.data.objects.new("Tube", cu), (0.0, -1.5, -0.7))
+    mb = bpy.data.metaballs.new("Meta")
+    mb.elements.new().radius = 0.3
+    mb.render_resolution = 0.05
+    link(bpy.data.objects.new("Meta", mb), (0.2, -1.5, 0.5))
+    src = _emissive_cube(bpy, "Source", (0.0, 0.0, 0.0), 0.4, (0.9, 0.3, 0.2))
+    coll = bpy.data.collections.new("Instanced")
+    coll.objects.link(src)
+    scene.collection.objects.unlink(src)
+    inst = link(bpy.data.objects.new("Instancer", None), (1.0, -1.5, 0.5))
+    inst.instance_type, inst.instance_collection = "COLLECTION", coll
+    host = link(bpy.data.objects.new("Spheres", bpy.data.meshes.new("Spheres")), (0.6, -1.5, -0.2))
+    ng = bpy.data.node_groups.new("Spheres", "GeometryNodeTree")
+    ng.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    ng.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    line, ico = ng.nodes.new("GeometryNodeMeshLine"), ng.nodes.new("GeometryNodeMeshIcoSphere")
+    line.inputs["Count"].default_value = 3
+    line.inputs["Offset"].default_value = (0.35, 0.0, 0.0)
+    ico.inputs["Radius"].default_value, ico.inputs["Subdivisions"].default_value = 0.15, 2
+    on_points = ng.nodes.new("GeometryNodeInstanceOnPoints")
+    ng.links.new(line.outputs[0], on_points.inputs["Points"])
+    ng.links.new(ico.outputs[0], on_points.inputs["Instance"])
+    ng.links.new(on_points.outputs[0], ng.nodes.new("NodeGroupOutput").inputs[0])
+    host.modifiers.new("Spheres", "NODES").node_group = ng
+    out = f12(bpy, tmp_path, "types")
+    tris = frame.last_render(scene)["frames"][1]["triangles"]
+    render = meshes_only(bpy, tmp_path, wall, "types_meshes")
+    full = splats_reference()
+    mean, p99, worst = errors(out, over(render, full))
+    print(f"other object types in front: mean {mean:.5f}, p99 {p99:.5f}, max abs {worst:.4f}; {tris} triangles")
+    assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)
+    covered = (render[..., 3] > 0.99) & (full[..., 3] > 0.3)  # a mesh in front of splats
+    boxes = {"text": (7, 18, 3, 20), "metaball": (11, 17, 33, 39), "collection instance": (10, 18, 47, 58),
+             "geometry-nodes instances": (25, 31, 42, 61), "curve bevel": (36, 39, 8, 38)}  # rows, columns
+    for what, (r0, r1, c0, c1) in boxes.items():
+        assert covered[r0:r1, c0:c1].sum() >= 5, what  # each one is in front of splats
+    assert np.abs(out[covered] - render[covered]).max() < 0.02
+    host.visible_camera = False  # its instances go from Blender's render and from the depth alike
+    inst.visible_camera = False
+    out = f12(bpy, tmp_path, "types_hidden")
+    assert frame.last_render(scene)["frames"][1]["triangles"] < tris
+    render = meshes_only(bpy, tmp_path, wall, "types_hidden_meshes")
+    mean, p99, worst = errors(out, over(render, full))
+    assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)

@@ -133,12 +133,23 @@ def _albedo(ob) -> np.ndarray:
 def _mesh_triangles(dg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """World-space triangles (m, 3, 3) of the meshes the camera sees and of those that cast shadows (Object >
     Visibility > Ray Visibility: Camera, Shadow; evaluated: modifiers, instances), and the casters' diffuse colour
-    (RGB, their mean by area)."""
+    (RGB, their mean by area).
+
+    Everything the engines render as a mesh is a MESH instance of the evaluated depsgraph: a text, a curve with a
+    bevel or extrusion, a surface, a metaball (their evaluated mesh comes as an instance of the object), collection
+    and geometry-nodes instances. Not meshes, and not here: curves (hair), point clouds, volumes, lights, cameras.
+    An instance is seen as its instancer lets it be, as Cycles does (both visibilities ANDed)."""
     out, seen_by, casts, albedo = [], [], [], []
     for inst in dg.object_instances:
         ob = inst.object
+        if ob.type != "MESH" or is_splat_object(ob.original):
+            continue
         seen, shadow = getattr(ob, "visible_camera", True), getattr(ob, "visible_shadow", True)
-        if ob.type != "MESH" or not (seen or shadow) or is_splat_object(ob.original):
+        parent = inst.parent if inst.is_instance else None
+        if parent is not None:
+            seen = seen and getattr(parent, "visible_camera", True)
+            shadow = shadow and getattr(parent, "visible_shadow", True)
+        if not (seen or shadow) or (parent is not None and is_splat_object(parent.original)):
             continue
         me = ob.data
         if hasattr(me, "calc_loop_triangles"):
