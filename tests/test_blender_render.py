@@ -577,6 +577,76 @@ def test_f12_keeps_the_world_behind_everything(blender, tmp_path, engine):
     assert out[bare & (render[..., 3] == 0), 3].max() < 1e-4
 
 
+def _file_output(bpy, scene, tree, src, directory):
+    """A File Output of the user's writing ``src`` as one RGBA float EXR into ``directory``."""
+    from gs_ibl_addon.blender.render import compositor
+    fo = tree.nodes.new("CompositorNodeOutputFile")
+    if hasattr(fo.format, "media_type"):  # 5.0+: a File Output starts as a multilayer image
+        fo.format.media_type = "IMAGE"
+    fo.format.file_format, fo.format.color_depth, fo.format.color_mode = "OPEN_EXR", "32", "RGBA"
+    if compositor.new_api(scene):
+        fo.directory, fo.file_name = str(directory) + os.sep, "layer_"
+        fo.file_output_items.new("RGBA", "Image")
+        tree.links.new(src, fo.inputs["Image"])
+    else:
+        fo.base_path = str(directory) + os.sep
+        tree.links.new(src, fo.inputs[0])
+
+
+def _only_exr(bpy, directory):
+    files = [f for f in os.listdir(directory) if f.endswith(".exr")]
+    assert len(files) == 1, files
+    return read_exr(bpy, directory / files[0])
+
+
+def test_two_view_layers_each_get_their_own_splats(blender, tmp_path):
+    """frame_change_post runs once per view layer; each layer has its FRONT and BEHIND images and its own nodes
+    after its Render Layers node, and the render's record lists both layers. The second layer leaves the front
+    cube out (its collection excluded), so there the splats cover its place; its composite goes to a File Output of
+    the user's, the first layer's to the output."""
+    bpy = blender
+    _needs_depth_cut()
+    from gs_ibl_addon.blender.render import compositor, frame
+    scene, wall = build(bpy, tmp_path)
+    front = bpy.data.objects["Front"]
+    coll = bpy.data.collections.new("Front Only")
+    scene.collection.children.link(coll)
+    coll.objects.link(front)
+    scene.collection.objects.unlink(front)
+    first = scene.view_layers[0]
+    second = scene.view_layers.new("No Front")
+    second.layer_collection.children["Front Only"].exclude = True
+    tree = compositor.tree_of(scene)
+    rl = tree.nodes.new("CompositorNodeRLayers")
+    rl.layer = second.name
+    _file_output(bpy, scene, tree, rl.outputs["Image"], tmp_path / "second")
+    _file_output(bpy, scene, tree, rl.outputs["Image"], tmp_path / "second_meshes")
+    files = [n for n in tree.nodes if n.bl_idname == "CompositorNodeOutputFile"]
+    files[1].mute = True
+    out = f12(bpy, tmp_path, "two_layers")  # render_init wires the new Render Layers node
+    out2 = _only_exr(bpy, tmp_path / "second")
+    rec = frame.last_render(scene)
+    layers = rec["frames"][1]["layers"]
+    assert set(layers) == {first.name, second.name} and rec["messages"] == [], rec
+    assert all(r["objects"] == ["Wall"] and r["splats"] > 0 for r in layers.values()), layers
+    assert rec["frames"][1]["splats"] == sum(r["splats"] for r in layers.values())
+    ims = {compositor.find_image(scene, n, role).name for n in (first.name, second.name)
+           for role in (compositor.FRONT_ROLE, compositor.BEHIND_ROLE)}
+    assert len(ims) == 4, ims
+    files[0].mute, files[1].mute = True, False
+    render = meshes_only(bpy, tmp_path, wall, "two_layers_meshes")
+    render2 = _only_exr(bpy, tmp_path / "second_meshes")
+    full = splats_reference()
+    for got, ref, name in ((out, reference_composite(render, full, W // 2), first.name),
+                           (out2, over(full, render2), second.name)):
+        mean, p99, worst = errors(got, ref)
+        print(f"view layer {name}: mean {mean:.5f}, p99 {p99:.5f}, max abs {worst:.4f}")
+        assert mean <= 0.01 and p99 <= 0.03, (name, mean, p99, worst)
+    i, j = project(FRONT_AT)
+    np.testing.assert_allclose(out[j, i], (*FRONT_COLOUR, 1.0), atol=0.02)  # the cube in the first layer
+    assert render2[j, i, 3] < 1e-4 and np.abs(out2[j, i] - full[j, i]).max() < 0.02  # the splats in the second
+
+
 def test_meshes_of_other_object_types_hide_the_splats(blender, tmp_path):
     """The mesh depth holds everything the engines render as a mesh, not only Mesh objects: a text, a curve with a
     bevel, a metaball, a collection instance and geometry-nodes instances, all in front of the wall, hide the

@@ -48,7 +48,9 @@ def rendering() -> bool:
 
 
 def last_render(scene) -> dict:
-    """{"messages": [...], "frames": {frame: {...}}, "cancelled": bool} of the scene's last render."""
+    """{"messages": [...], "frames": {frame: {...}}, "cancelled": bool} of the scene's last render. A frame's record
+    holds each view layer's under "layers" ({name: {"objects", "splats", "ms", ...}}) and over them the frame's
+    totals (_file)."""
     return _last.get(scene.name, {"messages": [], "frames": {}, "cancelled": False})
 
 
@@ -231,7 +233,25 @@ def fill(scene, dg) -> None:
     _write(front_im, front)
     _write(behind_im, behind)
     record["ms"] = round(1e3 * (time.perf_counter() - t0), 1)
-    _job["record"]["frames"][frame] = record
+    _file(_job["record"]["frames"].setdefault(frame, {"layers": {}}), layer, record)
+
+
+def _file(frame_record: dict, layer: str, record: dict) -> None:
+    """``record`` as view layer ``layer``'s of its frame (frame_change_post runs once per view layer, each with its
+    own images); the frame's own fields sum its layers' (times, splats, triangles), join their object lists and
+    messages, so a one-layer frame reads as its layer's record."""
+    frame_record["layers"][layer] = record
+    layers = list(frame_record["layers"].values())
+    for key in {k for r in layers for k in r}:
+        values = [r[key] for r in layers if key in r]
+        if key == "light_samples":
+            frame_record[key] = max(values)
+        elif key == "objects":
+            frame_record[key] = sorted({n for v in values for n in v})
+        elif isinstance(values[0], list):
+            frame_record[key] = [x for v in values for x in v]
+        elif isinstance(values[0], (int, float)):
+            frame_record[key] = round(sum(values), 1) if isinstance(values[0], float) else sum(values)
 
 
 def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
