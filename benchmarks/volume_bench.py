@@ -10,7 +10,9 @@ shading points on each sphere (Fibonacci, normals outward) the reference is a de
 - auto: Lighting Auto of today: the 9-point measurement with the World probe's place, then the World probe, the mesh's
   own probe or its order-2 SH grid (3^3 or 5^3), as auto_bake_core.py / blender/lighting do;
 - volume S:F:K: one light volume over all five spheres (volume_region.plan_volume, spacing S m), F^2 faces,
-  level of detail k = K (0: every splat), read by volume.sample.
+  level of detail k = K (0: every splat), read by volume.sample;
+- volume at auto's nodes: a volume per sphere on the nodes of Auto's grid for it (3^3, or 5^3 where Auto takes it),
+  16^2 faces: octahedral maps and visibility against order-2 SH at equal density.
 Numbers per place and method: the per-point luminance error relative to the reference (mean, 95th percentile) and
 the mean of the camera-facing half's RGB, ours / reference (auto_light_bench's cell: within 3% in all channels).
 
@@ -142,6 +144,14 @@ def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
         rows.append({"place": p, "method": "world", **errors(eval_irradiance(d_world, nrm), want, facing)})
         got, kind = auto_today(r, p, pts, nrm, d_world)
         rows.append({"place": p, "method": f"auto ({kind})", **errors(got, want, facing)})
+        # the same nodes as Auto's grid for this mesh (3^3 or 5^3 over its shrunk box), as a volume: octahedral maps and
+        # visibility against order-2 SH at equal density
+        c = centre(p)
+        spec = mesh_grid(c - RADIUS, c + RADIUS, 2.0 if kind == "grid 5^3" else 0.0)
+        t0 = time.perf_counter()
+        brick = bake_volume(r, spec, face_size=16)
+        rows.append({"place": p, "method": "volume at auto's nodes", "probes": spec.count,
+                     "bake_s": round(time.perf_counter() - t0, 2), **errors(vol.sample(brick, pts, nrm), want, facing)})
         for (spacing, face, k), (v, plan, secs) in volumes.items():
             rows.append({"place": p, "method": f"volume {spacing}:{face}:{k:g}", "probes": plan.spec.count,
                          "bake_s": round(secs, 2), **errors(vol.sample(v, pts, nrm), want, facing)})
