@@ -566,15 +566,22 @@ def test_f12_keeps_the_world_behind_everything(blender, tmp_path, engine):
     edges = bare & (render[..., 3] > 0.02) & (render[..., 3] < 0.98)
     assert edges.sum() >= 4 and bare.sum() > 100, (edges.sum(), bare.sum())
     assert np.abs(out[bare] - opaque[bare]).max() < 0.01, np.abs(out[bare] - opaque[bare]).max()
-    # a user's own Film Transparent: the background stays transparent
-    compositor.remove(scene)
-    scene.render.film_transparent = True
-    compositor.install(scene)
-    assert not compositor.shows_world(scene)
+    # the user's own Film Transparent (the panel's Transparent; the other tests had it on before our nodes went in):
+    # the background stays transparent, and turning Splats in Renders off leaves it on
+    settings = scene.gs_ibl_render
+    assert not settings.transparent
+    settings.transparent = True
+    assert settings.transparent and not compositor.shows_world(scene)
+    assert not any(n.get(compositor.PART) == "over_world" for n in compositor.tree_of(scene).nodes)
     out = f12(bpy, tmp_path, "transparent")
     mean, p99, worst = errors(out, reference_composite(render, full, W // 2))
     assert mean <= 0.01 and p99 <= 0.03, (mean, p99, worst)
     assert out[bare & (render[..., 3] == 0), 3].max() < 1e-4
+    settings.transparent = False  # the World again
+    assert compositor.shows_world(scene) and np.abs(f12(bpy, tmp_path, "again") - ref).max() < 0.02
+    settings.transparent = True
+    settings.enabled = False
+    assert scene.render.film_transparent and settings.transparent
 
 
 def _file_output(bpy, scene, tree, src, directory):

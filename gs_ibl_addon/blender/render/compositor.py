@@ -178,6 +178,40 @@ def shows_world(scene) -> bool:
     return "film_transparent" in scene.get(STATE, {})
 
 
+def transparent(scene) -> bool:
+    """The user's own Film Transparent: before install the setting itself; after, what install found (we keep
+    Blender's on while our nodes are in)."""
+    if not installed(scene):
+        return bool(scene.render.film_transparent)
+    return not shows_world(scene)
+
+
+def set_transparent(scene, value: bool) -> None:
+    """The user's Film Transparent (the panel's *Transparent*): with our nodes in, Blender's stays on and this
+    decides whether the World is put back, and what removing our nodes leaves (on stays on)."""
+    if not installed(scene):
+        scene.render.film_transparent = bool(value)
+        return
+    state = dict(scene.get(STATE, {}))
+    if value:
+        state.pop("film_transparent", None)
+    else:
+        state["film_transparent"] = False
+    scene[STATE] = state
+    _environment_passes(scene)
+    sync_world(scene)
+
+
+def _environment_passes(scene) -> None:
+    """The Environment pass on in every rendered view layer where the World is put back (remembered, to restore)."""
+    if not shows_world(scene):
+        return
+    for layer in scene.view_layers:
+        if layer.use and not layer.use_pass_environment:
+            _remember(scene, f"{ENV_PASS}{layer.name}", False)
+            layer.use_pass_environment = True  # the World, which Film Transparent takes out of the render
+
+
 def world_pass_empty(scene) -> bool:
     """Blender 4.2's EEVEE leaves the Environment pass black under Film Transparent (Cycles in every version and
     EEVEE from 5.0 fill it: docs/final-frame.md section 10): the World is not put back there."""
@@ -306,9 +340,7 @@ def install(scene, write_pass: bool = False) -> None:
     for layer in scene.view_layers:
         if layer.use:
             ensure_images(scene, layer.name)
-            if shows_world(scene) and not layer.use_pass_environment:
-                _remember(scene, f"{ENV_PASS}{layer.name}", False)
-                layer.use_pass_environment = True  # the World, which Film Transparent takes out of the render
+    _environment_passes(scene)
     wired = {n.get(FOR_RL) for n in tree.nodes if _ours(n, "over_front")}
     has_file = {n.get(FOR_RL) for n in tree.nodes if _ours(n, "file")}
     for rl in render_layers_nodes(scene, tree):

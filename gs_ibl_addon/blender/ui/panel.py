@@ -155,6 +155,7 @@ def _draw_render_settings(layout, context) -> None:
     row.prop(rs, "enabled", icon="RESTRICT_RENDER_OFF" if rs.enabled else "RESTRICT_RENDER_ON")
     if rs.enabled:
         row.prop(rs, "write_pass", text="Pass", toggle=True, icon="FILE_IMAGE")
+        row.prop(rs, "transparent", toggle=True, icon="WORLD")  # off: the World behind meshes and splats
         if rs.write_pass:
             col.prop(rs, "pass_path", text="")
         if hasattr(rs, "shadows"):

@@ -152,6 +152,16 @@ def _render_setting_changed(self, context) -> None:
         setup.enabled_changed(self.id_data)
 
 
+def _get_transparent(self) -> bool:
+    from ..render import compositor
+    return compositor.transparent(self.id_data)
+
+
+def _set_transparent(self, value: bool) -> None:
+    from ..render import compositor
+    compositor.set_transparent(self.id_data, value)
+
+
 class GSIBL_RenderSettings(bpy.types.PropertyGroup):
     """Splats in final renders (F12, Render Animation, blender -b -f/-a), per scene (render/)."""
     enabled: BoolProperty(name="Splats in Renders", default=True, update=_render_setting_changed,
@@ -166,6 +176,11 @@ class GSIBL_RenderSettings(bpy.types.PropertyGroup):
     pass_path: StringProperty(name="Splat Pass Folder", default="//splat_pass/", subtype="DIR_PATH",
                               update=_render_setting_changed,
                               description="Where the Splat Pass File is written (splats_<view layer>_<frame>.exr)")
+    transparent: BoolProperty(name="Transparent", get=_get_transparent, set=_set_transparent,
+                              description="Your Film Transparent: off, the World shows behind meshes and splats "
+                                          "(Blender's Film Transparent stays on while splats are in renders, and "
+                                          "the World is put back from the Environment pass); on, the background "
+                                          "is transparent")
     shadows: BoolProperty(name="Shadows on Splats", default=True,
                           description="Meshes darken the splats under them (shadows and contact darkening), lit "
                                       "from the baked probe whose World the scene uses; the same in Cycles and "
