@@ -4,7 +4,9 @@ For each Render Layers node of the scene: Render Layers.Image -> Alpha Over (bac
 render) -> Alpha Over (background that, foreground FRONT) -> whatever the render's image fed before (the user's own
 nodes, or the output). Film Transparent (needed: the render's alpha must be the meshes' coverage) takes the World
 out of the render, so where we turned it on, BEHIND goes over the World first: the Environment pass divided by the
-share of the pixel it holds (``_world``). A user who had Film Transparent on keeps a transparent background.
+share of the pixel it holds (``_world``). A user who had Film Transparent on keeps a transparent background, and
+the render settings' *Transparent* changes that wish later (``set_transparent``); Blender 4.2's EEVEE leaves the
+pass black, so there the World is not put back (``world_pass_empty``).
 FRONT and BEHIND are float images of ours per view layer (premultiplied, scene-linear) that the frame handler fills
 for every frame (frame.py). The user's nodes see meshes and splats as one image, and the view
 transform is applied after compositing, to both alike. A File Output node per view layer (Splat Pass setting)
@@ -174,7 +176,8 @@ def _wire_file_output(scene, tree, new5: bool, rl, front, behind):
 
 def shows_world(scene) -> bool:
     """Whether the composite puts the World back under everything: Film Transparent was turned on by us (install
-    remembered it), not by the user, who then keeps a transparent background."""
+    remembered it) or the user turned *Transparent* off since, not on by the user's wish (a transparent
+    background)."""
     return "film_transparent" in scene.get(STATE, {})
 
 
@@ -222,6 +225,11 @@ def _env_output(rl):
     return rl.outputs.get("Env") or rl.outputs.get("Environment")  # 4.2: Env; 5.x: Environment
 
 
+def _by_id(sockets, identifier: str):
+    """A socket by identifier: the Mix node's sockets share their names across its data types."""
+    return next(sk for sk in sockets if sk.identifier == identifier)
+
+
 def _world(tree, new5: bool, rl, behind_out):
     """BEHIND over the World as the camera sees it. The Environment pass holds the World weighted by the share of
     the pixel no surface covers (1 - the render's alpha: a mesh edge's pixel holds both), so it is divided by that
@@ -233,11 +241,9 @@ def _world(tree, new5: bool, rl, behind_out):
     if new5:
         div = _new(tree, "ShaderNodeMix", "world_unweighted", rl.name, (x + 450, y - 700))
         div.data_type, div.blend_type, div.clamp_result = "RGBA", "DIVIDE", False
-        def by_id(sockets, identifier):  # the Mix node's sockets share names across its data types
-            return next(sk for sk in sockets if sk.identifier == identifier)
-        by_id(div.inputs, "Factor_Float").default_value = 1.0
-        a, b = by_id(div.inputs, "A_Color"), by_id(div.inputs, "B_Color")
-        out = by_id(div.outputs, "Result_Color")
+        _by_id(div.inputs, "Factor_Float").default_value = 1.0
+        a, b = _by_id(div.inputs, "A_Color"), _by_id(div.inputs, "B_Color")
+        out = _by_id(div.outputs, "Result_Color")
     else:
         div = _new(tree, "CompositorNodeMixRGB", "world_unweighted", rl.name, (x + 450, y - 700))
         div.blend_type, div.use_clamp = "DIVIDE", False
