@@ -42,6 +42,8 @@ def _positions() -> list[tuple[str, tuple]]:
 def _scene(n: int):
     import bpy
     import gs_ibl_addon
+    if hasattr(bpy.types.Object, "gs_ibl_probe"):  # the last count's scene: registered once at a time
+        gs_ibl_addon.unregister()
     bpy.ops.wm.read_factory_settings(use_empty=True)
     gs_ibl_addon.register()
     assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(SAMPLE), show_proxy=False) == {"FINISHED"}
