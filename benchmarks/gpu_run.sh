@@ -50,6 +50,9 @@
 #                                        volume's accuracy against per-point probes at the five places, its bake's
 #                                        cost against a World-only bake). Into $OUT: volume_accuracy.csv,
 #                                        volume_cost.csv, volume_bench.png, volume.log. Carry .gl and .whl
+#                                        VOLUME_POINTS=32 (default 256, volume_bench's): shading points per
+#                                        sphere; compare rows with lavapipe's only at the same count (the CSV's
+#                                        points column)
 # gsplat JIT-compiles its CUDA on first use (~55 s); its build comes back as $OUT/gsplat_cuda.so.xz: put it in .whl
 # and the next run loads it (GSPLAT_SO). shared/NOTES-vulkan-and-gpu.md says why each package is there.
 set -euo pipefail
@@ -148,7 +151,7 @@ trials|grid|full|final|refs|stages|volume)
     log="$out/volume.log"
     (
       set +e
-      timeout --signal=INT --kill-after=10 400 python3 benchmarks/volume_bench.py --points 64 --repeats 3 \
+      timeout --signal=INT --kill-after=10 400 python3 benchmarks/volume_bench.py --points "${VOLUME_POINTS:-256}" --repeats 3 \
         --out-csv "$out/volume.csv" --png "$out/volume_bench.png" || echo "[gpu_run] volume_bench: exit $?"
       echo "[gpu_run] volume: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
