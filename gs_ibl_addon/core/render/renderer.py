@@ -34,6 +34,7 @@ groups one after another in the same submission, reusing the pair buffers.
 """
 from __future__ import annotations
 
+import sys
 import time
 import warnings
 import weakref
@@ -522,6 +523,15 @@ def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
     return np.concatenate(rows), tile_base, pixel_base
 
 
+def _refs(held: dict, name: str) -> int:
+    return sys.getrefcount(held[name])
+
+
+# What _refs says of an array nothing but a dict holds, measured the same way (what getrefcount counts of a
+# function's own references differs between Python versions).
+_REFS_UNHELD = _refs({"a": np.empty(0)}, "a")
+
+
 def cut_pixels(batch: ViewBatch, cut) -> np.ndarray:
     """The depth cut of render(cut=...) as the raster reads it: float32, the views' pixels one after another.
     ``cut``: per view an (H, W) array (one array for a one-view batch) of distances along the view axis, +inf where
@@ -578,6 +588,7 @@ class SplatRenderer:
         self._budgets: dict[tuple, tuple[int, int]] = {}
         self._min_chunks: dict[tuple, int] = {}  # per batch shape, the chunks the loop limit asked for (LOOP_PAIRS)
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
+        self._host: dict[str, np.ndarray] = {}  # render_camera's last arrays (_host_array)
         self._sorted_depth: tuple[Buffer, Buffer] | None = None  # where the depth sort leaves its result
         self.kernels: dict[str, str] = {}  # the last recording's raster and emit kernels, and why (batch_kernels)
         try:
@@ -673,6 +684,7 @@ class SplatRenderer:
         for b in self._frame.values():
             self._drop(b)
         self._frame.clear()
+        self._host.clear()
         for name in self._PAIR_BUFFERS + ("inst_key", "inst_val", "owners", "tile_sorter", "cut_sorter"):
             self._drop(getattr(self, name, None))
             setattr(self, name, None)
@@ -785,13 +797,27 @@ class SplatRenderer:
         v = batch.views[0]
         check_camera_fits(self.ctx, v.width, v.height)
         res = self.render(batch, timestamps=timestamps, depth=depth, lod_k=lod_k, cut=cut)
-        front = res.images[0]
-        # Without a cut BEHIND is zero: np.zeros's pages are the kernel's until written (zeros_like writes 33 MB a
-        # 1080p frame, most of its host time on lavapipe)
-        behind = res.behinds[0] if cut is not None else np.zeros(front.shape, front.dtype)
+        frame, px, hw = res.frame, v.width * v.height, (v.height, v.width)
+        frame.wait()
+        front = frame.image.read(np.float32, px * 4, out=self._host_array("front", hw + (4,)))
+        # Without a cut BEHIND is zero: np.zeros's fresh pages need no writing (zeros_like wrote 33 MB a 1080p frame)
+        behind = (frame.behind.read(np.float32, px * 4, out=self._host_array("behind", hw + (4,))) if cut is not None
+                  else np.zeros(front.shape, front.dtype))
+        d = frame.depth.read(np.float32, px, out=self._host_array("depth", hw)) if depth else None
         timings = dict(res.timings_ms)
         timings["wall"] = (time.perf_counter() - t0) * 1e3
-        return CameraFrame(front, behind, res.depths[0] if depth else None, timings, dict(self.kernels))
+        return CameraFrame(front, behind, d, timings, dict(self.kernels))
+
+    def _host_array(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A float32 array for render_camera to read ``name`` into: the one it gave back last time once nothing
+        else holds it (no caller, no view of it: a view holds its base), else a new one, kept for next time. Read
+        into memory written before, a 1080p frame's 41 MB cost no page faults (the readback's host time: a copy
+        into fresh pages is several times one into used ones)."""
+        held = self._host
+        if name in held and held[name].shape == shape and _refs(held, name) == _REFS_UNHELD:  # (no local name on it)
+            return held[name]
+        a = held[name] = np.empty(shape, np.float32)
+        return a
 
     def resolve(self, result: RenderResult | None = None) -> bool:
         """Finish the submitted render, if one is in flight; True when it was drawn again, with room for more
@@ -1057,6 +1083,7 @@ class SplatRenderer:
         while self._owned:
             self._owned.pop().destroy()
         self._frame.clear()
+        self._host.clear()
         self.generation += 1  # frames of this renderer are stale now
 
     def __enter__(self) -> "SplatRenderer":

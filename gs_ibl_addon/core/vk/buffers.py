@@ -82,18 +82,28 @@ class Buffer:
                 with Recorder(self.ctx) as rec:
                     rec.copy(stage, self, piece.nbytes, dst_offset=offset + start)
 
-    def read(self, dtype=np.uint8, count: int | None = None, offset: int = 0) -> np.ndarray:
+    def read(self, dtype=np.uint8, count: int | None = None, offset: int = 0,
+             out: np.ndarray | None = None) -> np.ndarray:
+        """``count`` values of ``dtype`` from byte ``offset`` as a new array, or into ``out`` (C-contiguous, of
+        exactly those bytes; returned): host memory written before costs no page faults (renderer.render_camera)."""
         dt = np.dtype(dtype)
         n = (self.nbytes - offset) // dt.itemsize if count is None else int(count)
         nbytes = n * dt.itemsize
+        if out is not None and (out.nbytes != nbytes or not out.flags.c_contiguous or not out.flags.writeable):
+            raise ValueError(f"read of {nbytes} bytes from buffer {self.name!r} into an array of {out.nbytes} "
+                             "(it must be C-contiguous, writeable and of exactly those bytes)")
         stats = self.ctx.stats
         stats.readbacks += 1
         stats.readback_bytes += nbytes
         # Small reads of mapped memory are direct even when uncached (a few words cost less than a copy).
         if self._map is not None and (self.host_cached or nbytes <= 4096):
-            return np.frombuffer(self._map, dtype=dt, count=n, offset=offset).copy()
-        out = np.empty(n, dt)
-        dst = out.view(np.uint8)
+            if out is None:
+                return np.frombuffer(self._map, dtype=dt, count=n, offset=offset).copy()
+            out.reshape(-1).view(np.uint8)[:] = np.frombuffer(self._map, np.uint8, nbytes, offset)
+            return out
+        if out is None:
+            out = np.empty(n, dt)
+        dst = out.reshape(-1).view(np.uint8)
         with self.ctx.lock:
             stage = staging(self.ctx, min(nbytes, STAGING_MAX), "down")
             for start in range(0, nbytes, STAGING_MAX):
