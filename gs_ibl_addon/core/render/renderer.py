@@ -789,7 +789,9 @@ class SplatRenderer:
         view (ViewBatch.camera: lens shift, render border), ``cut`` None or the (H, W) float32 distance along the
         view axis of the mesh surface each pixel sees (+inf where none; the window's pixels for a border), and a
         CameraFrame of FRONT, BEHIND (render(cut=...)), the depth and the GPU timings back. A frame whose images
-        this device cannot hold is refused first, naming the size that fits (check_camera_fits)."""
+        this device cannot hold is refused first, naming the size that fits (check_camera_fits). The arrays are the
+        caller's while it holds them (or a view of them); ones it let go are read into by a later frame (_host_array),
+        so hold the array, not a raw pointer into it."""
         t0 = time.perf_counter()
         if batch.n_probes != 1 or len(batch.views) != 1:
             raise ValueError(f"render_camera draws one camera view; this batch has {batch.n_probes} origin(s) and "
