@@ -3,7 +3,10 @@ test_matrix.run_gui_script like test_gui_render.py, see below): the sample room 
 and Suzanne, Add Probe, Bake (Lighting Auto), a real F12 in Cycles then in EEVEE (frames saved), then Lighting Volume
 over a sphere keyframed across the room, baked, and Render Animation (Ctrl F12; small frames, EEVEE). Screenshots of
 the whole screen after each step (the sidebar's GS-IBL tab with Splats in Renders, the render window) for a person to
-look at; DIR/artist.json holds the reports and timings.
+look at; DIR/artist.json holds the reports and timings. With ``--checks 1`` instead (240x135, EEVEE): F12 before any
+bake (the "no shadows" message), the bake, the sidebar buttons' tooltips (the first one shows; Blender draws no second
+tooltip without a real pointer move between), then F12 with Shadows on Splats on, off, and Transparent on and off
+(RGBA frames c6..c9).
 
     blender --python gui_artist.py -- --out DIR --room ROOM.PLY
 
@@ -304,8 +307,63 @@ def steps(pkg: str):
     yield 5.0, lambda: anim_done(pkg)
 
 
+def set_render(**kw) -> None:
+    for k, v in kw.items():
+        setattr(bpy.context.scene.gs_ibl_render, k, v)
+    log(f"render settings {kw}: film_transparent {bpy.context.scene.render.film_transparent}")
+
+
+def hover(x: int, y: int, name: str):
+    """The pointer over a button (screen pixels from the top left), its tooltip drawn, a screenshot."""
+    yield 0.5, lambda: (focus(), xdo("mousemove", "--sync", x, y))
+    yield 2.5, lambda: shot(name)
+    yield 0.5, pointer_away
+
+
+def save_rgba(pkg: str, name: str) -> None:
+    scene = bpy.context.scene
+    scene.render.image_settings.color_mode = "RGBA"
+    save_result(pkg, name)
+    scene.render.image_settings.color_mode = "RGB"
+
+
+def check_steps(pkg: str):
+    """The settings as a user tries them: F12 before any bake (no shadows: said?), Shadows on Splats off, Transparent
+    on; the tooltips of the sidebar's squeezed buttons."""
+    yield 1.0, lambda: build(pkg)
+    yield 1.0, lambda: (setattr(bpy.context.scene.render, "engine", "BLENDER_EEVEE"),
+                        setattr(bpy.context.scene.render, "resolution_percentage", 50))
+    yield from open_tab()
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_result(pkg, "c1_unbaked")
+    yield 1.0, lambda: invoke("add_probe")
+    yield 1.0, lambda: (state.__setitem__("t_bake", time.perf_counter()), invoke("bake_probe"))
+    yield from wait_for_jobs(pkg)
+    yield 1.0, lambda: bake_done("bake_auto")
+    yield 3.0, lambda: shot("c2_baked")
+    yield from hover(1100, 226, "c3_tip_shadows")
+    yield from hover(1238, 205, "c4_tip_transparent")
+    yield from hover(1080, 205, "c5_tip_splats_in_renders")
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_result(pkg, "c6_shadows_on")
+    yield 0.5, lambda: set_render(shadows=False)
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_result(pkg, "c7_shadows_off")
+    yield 0.5, lambda: set_render(shadows=True, transparent=True)
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_rgba(pkg, "c8_transparent")
+    yield 0.5, lambda: set_render(transparent=False)
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_rgba(pkg, "c9_opaque")
+
+
 def finish(error: str | None = None) -> None:
     write_result(os.path.join(OUT, "artist.json"), {"steps": state["steps"], "log": state["log"]}, error)
 
 
-start(steps, finish)
+start(check_steps if arg("--checks") else steps, finish)
