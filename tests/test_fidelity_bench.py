@@ -22,7 +22,8 @@ BENCH = os.path.join(ROOT, "benchmarks")
 def final_commands(out: str) -> list[list[str]]:
     """The argv of each python3 command of gpu_run.sh's final mode, ``$out`` replaced by ``out``."""
     text = open(os.path.join(BENCH, "gpu_run.sh")).read()
-    block = text[text.index('elif [ "$1" = final ]'):text.index('elif [ "$1" = trials ]')]
+    start = text.index('elif [ "$1" = final ]')
+    block = text[start:text.index('elif [ "$1" = ', start + 1)]  # to the next mode's branch
     block = block.replace("\\\n", " ")
     cmds = []
     for line in block.splitlines():
