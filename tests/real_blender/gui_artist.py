@@ -6,7 +6,8 @@ the whole screen after each step (the sidebar's GS-IBL tab with Splats in Render
 look at; DIR/artist.json holds the reports and timings. With ``--checks 1`` instead (240x135, EEVEE): F12 before any
 bake (the "no shadows" message), the bake, the sidebar buttons' tooltips (the first one shows; Blender draws no second
 tooltip without a real pointer move between), then F12 with Shadows on Splats on, off, and Transparent on and off
-(RGBA frames c6..c9).
+(RGBA frames c6..c9). With ``--world GUITAR.PLY``: the guitar capture before a blue World, F12 with Transparent off (the
+World behind the splats) and on (RGBA frames w1, w2); add tests/data/guitar.compressed.ply to the inputs.
 
     blender --python gui_artist.py -- --out DIR --room ROOM.PLY
 
@@ -362,8 +363,50 @@ def check_steps(pkg: str):
     yield 3.0, lambda: save_rgba(pkg, "c9_opaque")
 
 
+def build_world(pkg: str) -> None:
+    """The guitar capture (nothing around it) before a blue World and a grey sphere: the World must show behind the
+    splats unless Transparent is on."""
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    assert bpy.ops.gs_ibl.import_splats(filepath=arg("--world"), axis_preset="OPENCV") == {"FINISHED"}
+    scene = bpy.context.scene
+    world = scene.world or bpy.data.worlds.new("World")
+    scene.world = world
+    world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+    bg.inputs["Color"].default_value = (0.1, 0.25, 0.8, 1.0)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.42, location=(0.95, 1.45, 0.42))
+    bpy.ops.object.shade_smooth()
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.data.sensor_fit, cam.data.angle = "HORIZONTAL", math.radians(58.0)
+    scene.collection.objects.link(cam)
+    cam.location = (2.2, 7.6, 2.0)
+    cam.rotation_euler = (Vector((0.15, 0.0, 1.85)) - cam.location).to_track_quat("-Z", "Y").to_euler()
+    scene.camera = cam
+    r = scene.render
+    r.resolution_x, r.resolution_y, r.resolution_percentage = *ANIM_SIZE, 100
+    r.engine = "BLENDER_EEVEE"
+    scene.eevee.taa_render_samples = SAMPLES
+    scene.view_settings.view_transform = "Standard"
+    scene.gs_ibl_render.shadows = False  # no probe here
+    log(f"world scene: film_transparent {r.film_transparent}, transparent {scene.gs_ibl_render.transparent}")
+
+
+def world_steps(pkg: str):
+    yield 1.0, lambda: build_world(pkg)
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_rgba(pkg, "w1_world")
+    yield 0.5, lambda: set_render(transparent=True)
+    yield 0.5, press_f12
+    yield from wait_for_render()
+    yield 3.0, lambda: save_rgba(pkg, "w2_transparent")
+    yield 0.5, lambda: set_render(enabled=False)
+    yield 1.0, lambda: log(f"Splats in Renders off: film_transparent {bpy.context.scene.render.film_transparent}")
+
+
 def finish(error: str | None = None) -> None:
     write_result(os.path.join(OUT, "artist.json"), {"steps": state["steps"], "log": state["log"]}, error)
 
 
-start(check_steps if arg("--checks") else steps, finish)
+start(world_steps if arg("--world") else check_steps if arg("--checks") else steps, finish)
