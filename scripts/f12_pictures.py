@@ -6,9 +6,9 @@ Two captures: the bundled sample room (samples/room.ply) and the real guitar cap
 (tests/data/guitar.compressed.ply). In each a white sphere and a grey Suzanne stand where some splats are in front of
 them and others behind (the room's yellow and blue splat balls in front, the walls behind; the guitar in front of
 Suzanne, the sphere in front of the guitar; a sun lamp lights the meshes by the guitar, whose capture holds nothing
-around it). A probe by the meshes is baked (Lighting Auto), then each engine renders the scene camera once; the
-time of that F12 (bpy.ops.render.render; the splats' share from the render handler's record) goes to the caption
-line printed at the end and to --json.
+around it; a blue World shows behind it, as F12 does unless Transparent is on). A probe by the meshes is baked
+(Lighting Auto), then each engine renders the scene camera once; the time of that F12 (bpy.ops.render.render; the
+splats' share from the render handler's record) goes to the caption line printed at the end and to --json.
 
     .venv/bin/python scripts/f12_pictures.py --out-dir docs/img [--json timings.json]    # the bpy module (5.0.1)
 
@@ -56,6 +56,8 @@ SCENES = {
         "probe": (0.0, 0.8, 1.5),
         # the capture holds nothing around the guitar to light the meshes: a sun from the camera's upper left
         "sun": ((-4.0, 5.0, 6.0), 2.5),
+        # a blue World (the GUI check's): F12 shows it behind the splats (Keep Background, the bake's default)
+        "world": (0.1, 0.25, 0.8),
         "camera": ((2.2, 7.6, 2.0), (0.15, 0.0, 1.85), 58.0),
     },
 }
@@ -124,6 +126,12 @@ def build(name: str, face_size: int) -> dict:
         sun.data.energy = strength
         sun.rotation_euler = (-Vector(towards)).to_track_quat("-Z", "Y").to_euler()  # a light shines down its -Z
         bpy.context.scene.collection.objects.link(sun)
+    if "world" in spec:
+        world = bpy.data.worlds.new("World")
+        world.use_nodes = True
+        bg = next(n for n in world.node_tree.nodes if n.bl_idname == "ShaderNodeBackground")
+        bg.inputs["Color"].default_value = (*spec["world"], 1.0)
+        bpy.context.scene.world = world
     position, look_at, fov = spec["camera"]
     cam = bs.camera("Camera", position, look_at, fov)
     cam.data.clip_end = 200.0
@@ -142,7 +150,7 @@ def render(engine: str, path: str, args) -> dict:
     r = scene.render
     r.resolution_x, r.resolution_y, r.resolution_percentage = args.width, args.height, 100
     r.image_settings.file_format = "PNG"
-    r.image_settings.color_mode = "RGB"  # no alpha: where nothing is drawn (the guitar's surroundings) it is black
+    r.image_settings.color_mode = "RGB"  # no alpha: the World shows behind the splats (Transparent off)
     if engine == "cycles":
         r.engine = "CYCLES"
         c = scene.cycles
