@@ -150,23 +150,21 @@ def _draw_render_settings(layout, context) -> None:
     rs = getattr(scene, "gs_ibl_render", None)
     if rs is None:
         return
+    # One setting a row: side by side at the sidebar's default width they read "Splats i…", "Transpa…"
     col = layout.column(align=True)
-    row = col.row(align=True)
-    row.prop(rs, "enabled", icon="RESTRICT_RENDER_OFF" if rs.enabled else "RESTRICT_RENDER_ON")
+    col.prop(rs, "enabled", icon="RESTRICT_RENDER_OFF" if rs.enabled else "RESTRICT_RENDER_ON")
     if rs.enabled:
-        row.prop(rs, "write_pass", text="Pass", toggle=True, icon="FILE_IMAGE")
-        row.prop(rs, "transparent", toggle=True, icon="WORLD")  # off: the World behind meshes and splats
+        col.prop(rs, "write_pass", text="Pass", icon="FILE_IMAGE")
         if rs.write_pass:
             col.prop(rs, "pass_path", text="")
+        col.prop(rs, "transparent", icon="WORLD")  # off: the World behind meshes and splats
         if hasattr(rs, "shadows"):
-            row = col.row(align=True)
-            row.prop(rs, "shadows", icon="LIGHT_SUN")
+            col.prop(rs, "shadows", icon="LIGHT_SUN")
             if rs.shadows:
-                row.prop(rs, "shadow_strength", text="Strength", slider=True)
+                col.prop(rs, "shadow_strength", text="Strength", slider=True)
         if hasattr(rs, "native_splats") and any(is_native_splats(o) for o in scene.objects):  # Blender 5.3+
-            row = col.row(align=True)
-            row.label(text="Native Splats")
-            row.prop(rs, "native_splats", expand=True)
+            col.label(text="Native Splats")
+            col.row(align=True).prop(rs, "native_splats", expand=True)
     line, notes = render_setup.describe(scene, getattr(context, "view_layer", None))
     _label_block(col, context, line, icon="RENDER_STILL")
     for note in notes:

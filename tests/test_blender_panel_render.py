@@ -1,0 +1,74 @@
+"""The render settings in the GS-IBL panel, found by a real-GUI check in Blender 5.2.2 (sidebar at its default
+width): labels cut where settings shared a row, two fields named "Strength", a last render's message a later bake
+made untrue, the stale mark beside a running bake's progress, Lighting changes not marking the bake, an animated
+parent not said, and the settings in the Properties editor's Render tab."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+RENDER_PROPS = ("enabled", "write_pass", "transparent", "shadows", "shadow_strength")
+
+
+class _Rows:
+    """Records what a draw function lays out: each prop with the text it would show and the row it is in (a row
+    holds the props drawn into it; a column gives each prop a row of its own)."""
+
+    def __init__(self, rec: dict, row: bool = False):
+        self.rec, self.is_row = rec, row
+        self.ident = len(rec.setdefault("containers", [])) if row else None
+        if row:
+            rec["containers"].append([])
+
+    def _slot(self) -> list:
+        if self.is_row:
+            return self.rec["containers"][self.ident]
+        self.rec.setdefault("containers", []).append([])
+        return self.rec["containers"][-1]
+
+    def prop(self, data, name, text=None, **_kw):
+        self._slot().append(name)
+        self.rec.setdefault("props", []).append((name, text if text is not None else
+                                                 data.bl_rna.properties[name].name))
+
+    def label(self, text="", icon="NONE", **_kw):
+        self.rec.setdefault("labels", []).append((text, icon))
+
+    def row(self, *_a, **_kw):
+        return _Rows(self.rec, row=True)
+
+    def column(self, *_a, **_kw):
+        return _Rows(self.rec)
+
+    box = split = column_flow = grid_flow = column
+
+    def __getattr__(self, _name):
+        return lambda *a, **kw: _Rows(self.rec)
+
+
+def _draw_sidebar(context=None) -> dict:
+    from gs_ibl_addon.blender.ui.panel import GSIBL_PT_panel
+    rec: dict = {}
+    GSIBL_PT_panel.draw(SimpleNamespace(layout=_Rows(rec)), context or bpy.context)
+    return rec
+
+
+def _render_settings_on():
+    rs = bpy.context.scene.gs_ibl_render
+    rs.enabled, rs.write_pass, rs.shadows = True, True, True
+    return rs
+
+
+def test_every_render_setting_has_a_row_of_its_own(blender):
+    """Side by side at the sidebar's default width the labels read "Splats i…", "Transpa…", "Shadows on Sp…"."""
+    _render_settings_on()
+    rec = _draw_sidebar()
+    shown = [name for name, _ in rec["props"]]
+    for name in RENDER_PROPS:
+        assert name in shown, name
+    for row in rec["containers"]:
+        together = [n for n in row if n in RENDER_PROPS]
+        assert len(together) <= 1, f"{together} share a row: their labels are cut at the sidebar's width"
