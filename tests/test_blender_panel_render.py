@@ -72,3 +72,16 @@ def test_every_render_setting_has_a_row_of_its_own(blender):
     for row in rec["containers"]:
         together = [n for n in row if n in RENDER_PROPS]
         assert len(together) <= 1, f"{together} share a row: their labels are cut at the sidebar's width"
+
+
+def test_no_two_fields_share_a_name(blender):
+    """The shadow strength read "Strength", like the probe's strength below it."""
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    _render_settings_on()
+    rec = _draw_sidebar()
+    texts = [text for _, text in rec["props"] if text]
+    assert ("shadow_strength", "Shadow Strength") in rec["props"]
+    assert ("strength", "Strength") in rec["props"]
+    assert len(texts) == len(set(texts)), sorted(t for t in texts if texts.count(t) > 1)
+    # the identifier stays: files saved before keep their value
+    assert bpy.context.scene.gs_ibl_render.bl_rna.properties["shadow_strength"].name == "Shadow Strength"

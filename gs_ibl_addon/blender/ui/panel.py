@@ -161,7 +161,7 @@ def _draw_render_settings(layout, context) -> None:
         if hasattr(rs, "shadows"):
             col.prop(rs, "shadows", icon="LIGHT_SUN")
             if rs.shadows:
-                col.prop(rs, "shadow_strength", text="Strength", slider=True)
+                col.prop(rs, "shadow_strength", slider=True)  # "Strength" alone read as the probe's
         if hasattr(rs, "native_splats") and any(is_native_splats(o) for o in scene.objects):  # Blender 5.3+
             col.label(text="Native Splats")
             col.row(align=True).prop(rs, "native_splats", expand=True)
