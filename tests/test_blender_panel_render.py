@@ -85,3 +85,28 @@ def test_no_two_fields_share_a_name(blender):
     assert len(texts) == len(set(texts)), sorted(t for t in texts if texts.count(t) > 1)
     # the identifier stays: files saved before keep their value
     assert bpy.context.scene.gs_ibl_render.bl_rna.properties["shadow_strength"].name == "Shadow Strength"
+
+
+def test_a_bake_drops_the_last_renders_no_probe_world_message(blender, tmp_path, write_3dgs_ply):
+    """"Last render: no shadows on the splats: the scene's World is not a baked probe's" stayed under the report of
+    the bake that since made the World a probe's. Other messages of that render stay."""
+    from tests.test_blender_panel import _import, _probe
+    from gs_ibl_addon.blender.render import frame
+    scene = bpy.context.scene
+    _render_settings_on()
+    _import(tmp_path, write_3dgs_ply)
+    probe = _probe(place="CURSOR", lighting="WORLD")
+    _, why = frame.probe_light(scene)  # what an F12 render says now, before a bake
+    assert why is not None and why.startswith(frame.NO_PROBE_WORLD)
+    other = "splats not drawn: the scene has no camera (Scene Properties > Camera)"
+    frame._last[scene.name] = {"messages": [other, why], "frames": {}, "cancelled": False}
+
+    def shown() -> str:  # the panel's labels, wrapped lines joined again
+        return " ".join(t for t, _ in _draw_sidebar()["labels"])
+
+    assert f"Last render: {frame.NO_PROBE_WORLD}" in shown()
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert probe.gs_ibl_probe.world is scene.world and frame.probe_light(scene)[1] is None
+    assert frame.NO_PROBE_WORLD not in shown()
+    assert f"Last render: {other}" in shown()
+    frame._last.pop(scene.name, None)

@@ -54,6 +54,20 @@ def last_render(scene) -> dict:
     return _last.get(scene.name, {"messages": [], "frames": {}, "cancelled": False})
 
 
+NO_PROBE_WORLD = "no shadows on the splats: the scene's World is not a baked probe's"  # probe_light's message
+
+
+def _is_probe_world(world) -> bool:
+    return world is not None and world.get(MARKER) == "world" and world.node_tree is not None
+
+
+def messages_now(scene) -> list[str]:
+    """The last render's messages that still hold: that the World was no baked probe's goes once a bake made it
+    one (the panel showed it under the bake's report, as if the bake had not helped)."""
+    return [m for m in last_render(scene)["messages"]
+            if not (m.startswith(NO_PROBE_WORLD) and _is_probe_world(scene.world))]
+
+
 def say(text: str) -> None:
     """A message of this render, once per render: the console and the panel."""
     if _job is None or text in _job["said"]:
@@ -293,9 +307,8 @@ def probe_light(scene, scale: float = 1.0) -> tuple[shadows.LightSamples | None,
     """(the light samples of the probe whose World ``scene`` uses: the World's radiance image at its strength and
     the suns the probe's bake split off, ``scale`` times the usual counts, or None; why not, or None)."""
     world = scene.world
-    if world is None or world.get(MARKER) != "world" or world.node_tree is None:
-        return None, "no shadows on the splats: the scene's World is not a baked probe's (bake a probe, or turn " \
-                     "Shadows on Splats off in the GS-IBL panel)"
+    if not _is_probe_world(world):
+        return None, NO_PROBE_WORLD + " (bake a probe, or turn Shadows on Splats off in the GS-IBL panel)"
     env = world.node_tree.nodes.get(RADIANCE_NODE)
     image = getattr(env, "image", None)
     if image is None or not image.size[0] or not image.size[1]:

@@ -169,7 +169,7 @@ def _draw_render_settings(layout, context) -> None:
     _label_block(col, context, line, icon="RENDER_STILL")
     for note in notes:
         _label_block(col, context, note)
-    for message in render_frame.last_render(scene)["messages"]:
+    for message in render_frame.messages_now(scene):
         _label_block(col, context, f"Last render: {message}", icon="ERROR")
 
 
