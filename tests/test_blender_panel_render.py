@@ -110,3 +110,34 @@ def test_a_bake_drops_the_last_renders_no_probe_world_message(blender, tmp_path,
     assert frame.NO_PROBE_WORLD not in shown()
     assert f"Last render: {other}" in shown()
     frame._last.pop(scene.name, None)
+
+
+def test_a_running_bake_is_not_marked_out_of_date(blender, tmp_path, write_3dgs_ply):
+    """The status bar showed the bake's progress and "the bake of 'GS-IBL Probe' is out of date (the probe moved)"
+    side by side, the mark about the very bake that was making it good."""
+    from tests.test_blender_panel import _import, _probe
+    from gs_ibl_addon.blender.common.jobs import notices
+    from gs_ibl_addon.blender.lighting import bake as gb
+    from gs_ibl_addon.blender.lighting.stale import refresh_notice, stale_reasons
+    scene = bpy.context.scene
+    splats = _import(tmp_path, write_3dgs_ply)
+    probe = _probe(place="CURSOR", lighting="WORLD")
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    probe.location.x += 0.5
+
+    def marked() -> bool:
+        bpy.context.view_layer.update()  # the probe's matrix_world follows its location
+        refresh_notice(scene)
+        in_bar = any("out of date" in n and repr(probe.name) in n for n in notices())
+        in_panel = any(t.startswith("Out of date") for t, _ in _draw_sidebar()["labels"])
+        assert in_bar == in_panel == bool(stale_reasons(scene, probe))
+        return in_bar
+
+    assert marked()
+    job = gb.bake_job(scene, probe, splats)
+    next(job)  # its first step: the bake runs (a Runner drives it between redraws)
+    assert not marked()
+    job.close()  # cancelled: the old bake is still out of date
+    assert marked()
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert not marked()

@@ -21,7 +21,7 @@ from ...core.probe.latlong import cube_to_latlong
 from ...core.settings import method_from_blender
 from ..splats import cache as splat_cache
 from .stamps import BAKE_KEY, stamp
-from .stale import record_bake, record_meshes, refresh_notice
+from .stale import record_bake, record_meshes, refresh_notice, while_baking
 from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from .volume import volume_light_steps
 from .object_probes import lit_meshes
@@ -196,7 +196,7 @@ def bake_job(scene: bpy.types.Scene, probe: bpy.types.Object, splats: bpy.types.
                          "never baked")
     settings = probe_settings(probe.gs_ibl_probe)
     check_fits_device(settings)  # before reading or uploading anything (limits.TooBig, a ValueError, names the size)
-    return _bake_steps(scene.name, probe.name, splats, settings)
+    return while_baking(scene.name, probe.name, _bake_steps(scene.name, probe.name, splats, settings))
 
 
 def _named(scene_name: str, probe_name: str, splats_name: str):

@@ -20,6 +20,17 @@ BAKED_KEY = "gs_ibl_baked"  # on a probe: {"probe": xyz, "splats": name, "splats
 NOTICE = "stale"  # the status bar's line (common/jobs.py set_notice)
 _TOLERANCE = 1e-5  # metres (and matrix entries): float32 round trips and re-evaluation are far below
 _NAMED = 3  # meshes named at most in a reason
+_baking: set[tuple[str, str]] = set()  # (scene, probe) names whose bake job runs now
+
+
+def while_baking(scene_name: str, probe_name: str, job):
+    """``job`` (a bake of the probe), during which the probe's bake is not marked out of date: the status bar
+    showed the mark beside the progress of the bake that was making it good."""
+    _baking.add((scene_name, probe_name))
+    try:
+        return (yield from job)
+    finally:  # also when it fails or is cancelled (the generator is closed)
+        _baking.discard((scene_name, probe_name))
 
 
 def _matrix(obj: bpy.types.Object) -> list[float]:
@@ -51,10 +62,10 @@ def record_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, names) -> Non
 
 
 def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
-    """Why the probe's last bake no longer describes the scene (empty: it does, or the probe has no record: never
-    baked, or baked by a version before the record)."""
+    """Why the probe's last bake no longer describes the scene (empty: it does, the probe has no record: never
+    baked, or baked by a version before the record, or its bake runs now)."""
     rec = probe.get(BAKED_KEY)
-    if rec is None or not probe.gs_ibl_probe.last_report:
+    if rec is None or not probe.gs_ibl_probe.last_report or (scene.name, probe.name) in _baking:
         return []
     out = []
     if _differs(probe.matrix_world.translation, rec.get("probe", ())):
