@@ -141,3 +141,35 @@ def test_a_running_bake_is_not_marked_out_of_date(blender, tmp_path, write_3dgs_
     assert marked()
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert not marked()
+
+
+def test_switching_lighting_marks_the_bake_out_of_date(blender, tmp_path, write_3dgs_ply):
+    """Auto / Volume / World Probe light meshes differently: after a switch the bake no longer says how they are
+    lit. Undo brings the Lighting back with the bake's record (both on the probe): no mark; a re-bake clears it."""
+    from tests.test_blender_panel import _import, _probe
+    from gs_ibl_addon.blender.common.jobs import notices
+    from gs_ibl_addon.blender.lighting.stale import stale_reasons
+    _import(tmp_path, write_3dgs_ply)
+    probe = _probe(place="CURSOR", lighting="WORLD")
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    bpy.ops.ed.undo_push(message="bake")
+    name = probe.name
+
+    def reasons() -> list[str]:
+        bpy.context.view_layer.update()  # the depsgraph update whose handler refreshes the status bar
+        probe = bpy.data.objects[name]
+        out = stale_reasons(bpy.context.scene, probe)  # undo replaced the scene and probe datablocks
+        in_bar = any("out of date" in n and "Lighting" in n for n in notices())
+        assert in_bar == any("Lighting" in r for r in out), (notices(), out)
+        return out
+
+    assert reasons() == []
+    probe.gs_ibl_probe.lighting = "AUTO"
+    bpy.ops.ed.undo_push(message="lighting")
+    assert reasons() == ["its Lighting is now Auto"]
+    assert bpy.ops.ed.undo() == {"FINISHED"}
+    assert bpy.data.objects[name].gs_ibl_probe.lighting == "WORLD" and reasons() == []
+    assert bpy.ops.ed.redo() == {"FINISHED"}
+    assert reasons() == ["its Lighting is now Auto"]
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert reasons() == []

@@ -2,10 +2,10 @@
 with the file and Undo brings it back together with the report it belongs to); the panel and the status bar compare
 it with the scene as it is now.
 
-Out of date: the probe moved, its splat object moved, was edited (its splat count changed) or replaced, or, for
-Lighting Auto, a mesh it chose the light of moved. After an undo that brought back an earlier bake's report while
-the probe stayed where the later bake was made, the mark shows too: the report and the World describe the probe
-where it was then.
+Out of date: the probe moved, its splat object moved, was edited (its splat count changed) or replaced, its Lighting
+(Auto / Volume / World Probe) changed, or, for Lighting Auto, a mesh it chose the light of moved. After an undo that
+brought back an earlier bake's report while the probe stayed where the later bake was made, the mark shows too: the
+report and the World describe the probe where it was then.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from ..common.jobs import set_notice
 from ..splats.object import splat_count
 
 BAKED_KEY = "gs_ibl_baked"  # on a probe: {"probe": xyz, "splats": name, "splats_matrix": 16 floats,
-# "splats_count": n, "meshes": {name: 16 floats}} of its last bake
+# "splats_count": n, "meshes": {name: 16 floats}, "lighting": "AUTO" | "VOLUME" | "WORLD"} of its last bake
 NOTICE = "stale"  # the status bar's line (common/jobs.py set_notice)
 _TOLERANCE = 1e-5  # metres (and matrix entries): float32 round trips and re-evaluation are far below
 _NAMED = 3  # meshes named at most in a reason
@@ -45,7 +45,8 @@ def _differs(a, b) -> bool:
 def record_bake(probe: bpy.types.Object, splats: bpy.types.Object) -> None:
     """What the bake just written was made from (Lighting Auto's meshes are added by record_meshes)."""
     probe[BAKED_KEY] = {"probe": [float(v) for v in probe.matrix_world.translation], "splats": splats.name,
-                        "splats_matrix": _matrix(splats), "splats_count": splat_count(splats), "meshes": {}}
+                        "splats_matrix": _matrix(splats), "splats_count": splat_count(splats), "meshes": {},
+                        "lighting": probe.gs_ibl_probe.lighting}
 
 
 def record_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, names) -> None:
@@ -84,6 +85,9 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
         out.append(f"{name!r} moved")
     elif splat_count(splats) != rec.get("splats_count"):
         out.append(f"{name!r} was edited")
+    lighting = probe.gs_ibl_probe.lighting
+    if rec.get("lighting", lighting) != lighting:  # a record from before it was kept: no mark
+        out.append(f"its Lighting is now {probe.gs_ibl_probe.bl_rna.properties['lighting'].enum_items[lighting].name}")
     moved = [m for m, place in rec.get("meshes", {}).items()
              if m in scene.objects and _differs(_matrix(scene.objects[m]), place)]
     if moved:

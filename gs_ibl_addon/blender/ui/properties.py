@@ -32,6 +32,15 @@ def _keep_background_changed(self, context) -> None:
         rebuild_world(scene, probe)
 
 
+def _lighting_changed(_self, context) -> None:
+    # The bake no longer says how meshes are lit: the status bar marks it out of date now (lighting/stale.py), not
+    # at the next depsgraph update (a settings edit may bring none)
+    from ..lighting.stale import refresh_notice
+    scene = getattr(context, "scene", None)
+    if scene is not None:
+        refresh_notice(scene)
+
+
 class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
     is_probe: BoolProperty(default=False, options={"HIDDEN"})
     splats: PointerProperty(name="Splats", type=bpy.types.Object, poll=_poll_splats,
@@ -80,7 +89,7 @@ class GSIBL_ProbeSettings(bpy.types.PropertyGroup):
                                    description="Seconds the probe and its splats must stay still before the "
                                                "automatic re-bake (a drag bakes once, at its end)")
     lighting: EnumProperty(
-        name="Lighting", default="AUTO",
+        name="Lighting", default="AUTO", update=_lighting_changed,
         items=[("AUTO", "Auto", "Each lit mesh (inside the splats' bounds) gets the light it needs, measured at every "
                 "bake and when it moves: this probe's World, a probe of its own, or a grid over it"),
                ("VOLUME", "Volume", "One light volume over the region every lit mesh occupies over the frame "
