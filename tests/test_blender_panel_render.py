@@ -173,3 +173,34 @@ def test_switching_lighting_marks_the_bake_out_of_date(blender, tmp_path, write_
     assert reasons() == ["its Lighting is now Auto"]
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert reasons() == []
+
+
+def test_an_animated_parent_is_said(blender, tmp_path, write_3dgs_ply):
+    """Add Probe parents the probe to the selected mesh; when that mesh is animated the World is baked where it
+    stands at the current frame, which the panel and the report did not say."""
+    from tests.test_blender_panel import _import
+    scene = bpy.context.scene
+    _import(tmp_path, write_3dgs_ply)
+    bpy.ops.mesh.primitive_cube_add(size=0.4, location=(0.5, 0.0, 0.0))
+    cube = bpy.context.active_object
+    cube.name = "MovingCube"
+    bpy.ops.gs_ibl.add_probe(place="SELECTED")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.face_size, probe.gs_ibl_probe.irradiance_size = 16, 8
+    probe.gs_ibl_probe.lighting = "WORLD"
+    assert probe.parent is cube
+
+    def labels() -> str:
+        return " ".join(t for t, _ in _draw_sidebar()["labels"])
+
+    assert "Follows MovingCube" in labels() and "animated" not in labels()
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert "animated" not in probe.gs_ibl_probe.last_report
+    cube.keyframe_insert("location", frame=1)
+    cube.location.x = 1.0
+    cube.keyframe_insert("location", frame=10)
+    scene.frame_set(4)
+    assert "The probe follows MovingCube, which is animated" in labels()
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    assert "the probe follows MovingCube, which is animated: baked at frame 4" in probe.gs_ibl_probe.last_report
+    scene.frame_set(1)

@@ -21,7 +21,7 @@ from ...core.probe.latlong import cube_to_latlong
 from ...core.settings import method_from_blender
 from ..splats import cache as splat_cache
 from .stamps import BAKE_KEY, stamp
-from .stale import record_bake, record_meshes, refresh_notice, while_baking
+from .stale import animated_text, record_bake, record_meshes, refresh_notice, while_baking
 from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from .volume import volume_light_steps
 from .object_probes import lit_meshes
@@ -289,6 +289,8 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     lines, warning = summary(result, seconds, stages, splats_name)
     if auto:
         lines.append(auto)
+    if animated_text(probe) is not None:  # the light is where the probe stands now, not along its path
+        lines.append(animated_text(probe, scene.frame_current))
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([WARNING_PREFIX + warning] if warning else []))
     probe.gs_ibl_probe.last_summary = summary_line(result, seconds, choices)
     stamp(probe)

@@ -62,6 +62,32 @@ def record_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, names) -> Non
     rec["meshes"] = meshes
 
 
+def _animated(obj: bpy.types.Object) -> bool:
+    ad = obj.animation_data
+    return ad is not None and (ad.action is not None or len(ad.drivers) > 0)
+
+
+def animated_follow(probe: bpy.types.Object) -> bpy.types.Object | None:
+    """The probe itself or the nearest parent it follows whose animation moves it (None: none): its bake holds the
+    light where that one stood at the frame of the bake, not along its path."""
+    obj = probe
+    while obj is not None:
+        if _animated(obj):
+            return obj
+        obj = obj.parent
+    return None
+
+
+def animated_text(probe: bpy.types.Object, frame: int | None = None) -> str | None:
+    """What the panel and the bake report say about an animated probe (None: not animated); ``frame``: the bake's."""
+    moving = animated_follow(probe)
+    if moving is None:
+        return None
+    who = "the probe is animated" if moving is probe else f"the probe follows {moving.name}, which is animated"
+    return f"{who}: baked at frame {frame}" if frame is not None else f"{who}: each bake holds the light where it " \
+                                                                       "stands at the current frame"
+
+
 def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
     """Why the probe's last bake no longer describes the scene (empty: it does, the probe has no record: never
     baked, or baked by a version before the record, or its bake runs now)."""

@@ -11,7 +11,7 @@ from mathutils import Vector
 from ..lighting import bake as gb
 from ..lighting import sources
 from ..lighting import world as gw
-from ..lighting.stale import stale_reasons, stale_text
+from ..lighting.stale import animated_text, stale_reasons, stale_text
 from ..lighting.stamps import stale_images
 from ..common.jobs import JobOperator, running
 from ..common.datablocks import PROBE_NAME, is_probe
@@ -214,6 +214,9 @@ class GSIBL_PT_panel(bpy.types.Panel):
         col.label(text=probe.name, icon="EMPTY_DATA")
         if probe.parent is not None:
             col.label(text=f"Follows {probe.parent.name} (its parent)", icon="LINKED")
+        moving = animated_text(probe)
+        if moving is not None:
+            _label_block(col, context, moving[0].upper() + moving[1:], icon="ANIM")
         col.prop(s, "splats")
         col.prop(s, "lighting")
         if s.splats is not None and not sources.in_scene(context.scene, s.splats):
