@@ -204,3 +204,22 @@ def test_an_animated_parent_is_said(blender, tmp_path, write_3dgs_ply):
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert "the probe follows MovingCube, which is animated: baked at frame 4" in probe.gs_ibl_probe.last_report
     scene.frame_set(1)
+
+
+def test_the_render_tab_shows_the_same_settings(blender, monkeypatch):
+    """Properties editor > Render has a GS-IBL Splats panel: the sidebar's render settings, drawn by the same
+    function (not a copy that could drift)."""
+    from gs_ibl_addon.blender.ui import panel
+    cls = bpy.types.Panel.bl_rna_get_subclass_py("GSIBL_PT_render_settings")
+    assert cls is not None, "not registered"
+    assert (cls.bl_space_type, cls.bl_region_type, cls.bl_context) == ("PROPERTIES", "WINDOW", "render")
+    _render_settings_on()
+    rec: dict = {}
+    cls.draw(SimpleNamespace(layout=_Rows(rec)), bpy.context)
+    sidebar = [p for p in _draw_sidebar()["props"] if p[0] in RENDER_PROPS + ("pass_path", "native_splats")]
+    assert rec["props"] == sidebar and {name for name, _ in sidebar} >= set(RENDER_PROPS)
+    calls = []
+    monkeypatch.setattr(panel, "_draw_render_settings", lambda layout, context: calls.append(layout))
+    cls.draw(SimpleNamespace(layout="render tab"), bpy.context)
+    panel.GSIBL_PT_panel.draw(SimpleNamespace(layout=_Rows({})), bpy.context)
+    assert calls[0] == "render tab" and len(calls) == 2

@@ -273,9 +273,22 @@ class GSIBL_PT_panel(bpy.types.Panel):
             layout.operator(GSIBL_OT_restore_world.bl_idname, icon="LOOP_BACK")
 
 
+class GSIBL_PT_render_settings(bpy.types.Panel):
+    """The render settings also where Blender's own are: Properties editor > Render (the same draw as the
+    sidebar's)."""
+    bl_label = "GS-IBL Splats"
+    bl_idname = "GSIBL_PT_render_settings"
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+
+    def draw(self, context):
+        _draw_render_settings(self.layout, context)
+
+
 def menu_add(self, context):
     self.layout.operator(GSIBL_OT_add_probe.bl_idname, text="GS-IBL Probe", icon="LIGHTPROBE_SPHERE")
 
 
-CLASSES = (GSIBL_OT_add_probe, GSIBL_OT_bake_probe, GSIBL_OT_restore_world, GSIBL_PT_panel)
+CLASSES = (GSIBL_OT_add_probe, GSIBL_OT_bake_probe, GSIBL_OT_restore_world, GSIBL_PT_panel, GSIBL_PT_render_settings)
 MENUS = ((bpy.types.VIEW3D_MT_add, menu_add),)
