@@ -31,10 +31,13 @@ ARGS = json.load(open(sys.argv[1]))
 
 
 def _reset() -> None:
-    """An empty scene, the World black, Cycles as the reference (blender_scene.reference_render_settings)."""
+    """An empty scene, the World black, Cycles as the reference (blender_scene.reference_render_settings), and
+    Cycles' own render of the native splats: Splats in Renders off (on, F12 draws the native splats with our
+    renderer, the Native Splats default, and hides them from Cycles: the reference would be ours)."""
     bs.clear("objects", "meshes", "pointclouds", "cameras", "worlds", "materials", "images")
     bs.black_world()
     bs.reference_render_settings(threads=ARGS.get("threads", 2), seed=ARGS.get("seed", 0))
+    bpy.context.scene.gs_ibl_render.enabled = False
 
 
 def _camera(cam: dict) -> bpy.types.Object:

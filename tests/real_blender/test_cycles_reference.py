@@ -203,6 +203,7 @@ def test_real_capture_our_render_matches_cycles(cycles_run):
     from gs_ibl_addon.core.formats import read_scene
     from gs_ibl_addon.core.render.renderer import SplatRenderer
     from gs_ibl_addon.core.render.views import ViewBatch
+    from gs_ibl_addon.core.vk.constants import SORT_RADIAL
     result, arrays = cycles_run
     rec = result["cases"]["guitar"]
     assert rec.get("ok"), rec.get("error")
@@ -213,7 +214,10 @@ def test_real_capture_our_render_matches_cycles(cycles_run):
     batch = ViewBatch.pinhole(c["position"], c["look_at"], c["fov_deg"], *CAPTURE_SIZE, up=c["up"])
     with SplatRenderer(scene) as r:
         dilated = r.render(batch).images[0].astype(np.float64)
-        img = r.render(dataclasses.replace(batch, energy_preserving=True)).images[0].astype(np.float64)
+        # the area average in distance order, as measured: Cycles blends each ray's hits in the order it meets
+        # them, which distance order follows more closely than 3DGS's view depth (blue +8.5% against +11.8% here)
+        img = r.render(dataclasses.replace(batch, energy_preserving=True, sort=SORT_RADIAL)).images[0].astype(
+            np.float64)
     cyc = arrays["view_guitar"].astype(np.float64)
     lit = np.maximum(img[..., 3], cyc[..., 3]) > 0.05
     diff = float(np.abs(img[..., :3] - cyc[..., :3])[lit].mean() / cyc[..., :3][lit].mean())
