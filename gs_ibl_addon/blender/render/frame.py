@@ -292,7 +292,8 @@ def _draw(dg, cam, items, record) -> tuple[np.ndarray, np.ndarray]:
     if shadowed and depth and depth[0] is not None:
         front, behind = _shadow(dg, cam, front, behind, depth[0], (casters, albedo), no_mesh,
                                 float(rs.shadow_strength), record)
-    behind = np.where(no_mesh[..., None], 0.0, behind).astype(np.float32)
+    # one full-frame array: astype copied the float32 result of np.where a second time
+    behind = np.where(no_mesh[..., None], np.float32(0.0), behind.astype(np.float32, copy=False))
     record.update(splats=int(renderer.scene_count), triangles=int(len(tris)),
                   ms_mesh_depth=round(1e3 * (t1 - t0), 1), ms_splats=round(1e3 * (t2 - t1), 1))
     if cam.window is not None and not cam.crop:  # a full-size frame, splats only where Blender renders
