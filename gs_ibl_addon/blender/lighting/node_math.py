@@ -73,13 +73,14 @@ class NodeMath:
         a.attribute_type, a.attribute_name = "OBJECT", name
         return a.outputs[kind]
 
-    def texel(self, image, u, v):
+    def texel(self, image, u, v, interpolation: str = "Closest"):
         """The texel of ``image`` under (u, v) in 0..1 (Closest, Extend): callers blend texels themselves, since
-        EEVEE's Linear filter read a coarser level where the coordinates jump between neighbouring pixels."""
+        EEVEE's Linear filter read a coarser level where the coordinates jump between neighbouring pixels; or, with
+        ``interpolation="Linear"``, the texture unit's own bilinear lookup there."""
         uv = self.combine(u, v)  # made before the texture: Cycles compiles nodes in the order they were made
         tex = self.N.new("ShaderNodeTexImage")
         tex.image = image
-        tex.interpolation = "Closest"
+        tex.interpolation = interpolation
         tex.extension = "EXTEND"
         self.L.new(uv, tex.inputs["Vector"])
         return tex.outputs["Color"]

@@ -126,13 +126,7 @@ def _bilinear(b: NodeMath, image, origin, local, width: int, height: int, linear
     if linear:  # pixel / size with the texel centres at +0.5, as the core's _bilinear
         u = b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), b.math("ADD", fx, 0.5)), 1.0 / width)
         v = b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), b.math("ADD", fy, 0.5)), 1.0 / height)
-        uv = b.combine(u, v)  # before the texture node (node_math.py says why)
-        tex = b.N.new("ShaderNodeTexImage")
-        tex.image = image
-        tex.interpolation = "Linear"
-        tex.extension = "EXTEND"
-        b.L.new(uv, tex.inputs["Vector"])
-        return tex.outputs["Color"]
+        return b.texel(image, u, v, "Linear")
     xs = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), 0.5 + k), 1.0 / width) for k in (0, 1)]
     ys = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), 0.5 + k), 1.0 / height) for k in (0, 1)]
     t = {(i, j): b.texel(image, xs[i], ys[j]) for i in (0, 1) for j in (0, 1)}
