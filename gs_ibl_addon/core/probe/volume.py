@@ -83,11 +83,39 @@ class LightVolume:
     moments: np.ndarray
     timings: dict = field(default_factory=dict)
     report: list = field(default_factory=list)  # what the bake chose and why, for the user's report
+    # Bricks (volume_refine.py): per cell of the grid (cell_shape), 1 or the r (BRICK_LEVELS) of its brick of
+    # (r + 1)^3 probes; None: no bricks. The bricks' maps, brick after brick in cell order, each brick's probes in
+    # the order lx + (r + 1) (ly + (r + 1) lz): (B, IRR, IRR, 3) and (B, VIS, VIS, 2).
+    refine: np.ndarray | None = None
+    brick_irradiance: np.ndarray | None = None
+    brick_moments: np.ndarray | None = None
 
     @property
     def probes(self) -> np.ndarray:
-        """(N, 3) probe positions in linear index order (ix fastest)."""
+        """(N, 3) the grid's probe positions in linear index order (ix fastest)."""
         return probe_positions(self.spec)
+
+    @property
+    def cells(self) -> np.ndarray:
+        """(cx, cy, cz) each cell's r (1: the grid's own eight corners)."""
+        return np.ones(cell_shape(self.spec), int) if self.refine is None else np.asarray(self.refine, int)
+
+    @property
+    def brick_count(self) -> int:
+        return 0 if self.brick_irradiance is None else len(self.brick_irradiance)
+
+    @property
+    def tiles(self) -> int:
+        """Maps in the atlases: the grid's probes, then the bricks'."""
+        return self.spec.count + self.brick_count
+
+    def all_maps(self) -> tuple[np.ndarray, np.ndarray]:
+        """(tiles, IRR, IRR, 3), (tiles, VIS, VIS, 2): the grid's maps in linear order, then the bricks'."""
+        irr, mom = flat_maps(self.irradiance), flat_maps(self.moments)
+        if self.brick_count:
+            irr = np.concatenate([irr, self.brick_irradiance])
+            mom = np.concatenate([mom, self.brick_moments])
+        return irr, mom
 
 
 def probe_positions(spec: GridSpec) -> np.ndarray:
@@ -221,8 +249,75 @@ def _tile(maps: np.ndarray) -> np.ndarray:
 
 def pack_atlas(volume: LightVolume) -> tuple[np.ndarray, np.ndarray]:
     """The two images the node group reads: irradiance (rows (IRR + 2), cols (IRR + 2), 3) RGB and visibility
-    (rows (VIS + 2), cols (VIS + 2), 3) of (mean, mean^2, 0); float32, row 0 at the bottom."""
-    return _tile(flat_maps(volume.irradiance)), _tile(flat_maps(volume.moments))
+    (rows (VIS + 2), cols (VIS + 2), 3) of (mean, mean^2, 0); float32, row 0 at the bottom; the grid's probes,
+    then the bricks' (LightVolume.all_maps)."""
+    irr, mom = volume.all_maps()
+    return _tile(irr), _tile(mom)
+
+
+# ------------------------------------------------------------------------------------------------------------------
+# Cells and bricks
+
+BRICK_LEVELS = (2, 4)  # a brick's r: nested (4's nodes hold 2's), and even (a cell's centre is one of its nodes)
+KEY_UNITS = 4  # positions in quarters of a cell: every node of every level on whole numbers (bricks share nodes)
+
+
+def cell_shape(spec: GridSpec) -> tuple[int, int, int]:
+    """Cells a side: nodes - 1 (one on an axis of one node)."""
+    return tuple(max(int(n) - 1, 1) for n in spec.shape)
+
+
+def flat_cells(a: np.ndarray) -> np.ndarray:
+    """(cx, cy, cz, ...) -> (C, ...) in linear order c = cx + ncx (cy + ncy cz) (the grid's probe order)."""
+    a = np.asarray(a)
+    return a.transpose(2, 1, 0, *range(3, a.ndim)).reshape(-1, *a.shape[3:])
+
+
+def brick_bases(refine: np.ndarray) -> np.ndarray:
+    """(cx, cy, cz) each refined cell's first brick probe among the bricks' (0 where r = 1)."""
+    r = np.asarray(refine, int)
+    size = flat_cells(np.where(r > 1, (r + 1) ** 3, 0))
+    base = np.cumsum(size) - size
+    c = r.shape
+    return base.reshape(c[2], c[1], c[0]).transpose(2, 1, 0)
+
+
+def _node_frame(spec: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+    """(first node, node step) per axis: node i at first + i step (one node: the box's middle, step 0)."""
+    lo, hi, n = (np.asarray(x, np.float64) for x in (spec.lo, spec.hi, spec.shape))
+    return np.where(n > 1, lo, (lo + hi) / 2), np.where(n > 1, (hi - lo) / np.maximum(n - 1, 1), 0.0)
+
+
+def brick_keys(spec: GridSpec, refine: np.ndarray) -> np.ndarray:
+    """(B, 3) int: every brick probe's position in KEY_UNITS of a cell from the first node, bricks in cell order
+    (the atlas's order): equal keys are one place (a brick's corners are grid nodes, neighbours share faces)."""
+    r = np.asarray(refine, int)
+    cells = np.stack(np.meshgrid(*(np.arange(k) for k in r.shape), indexing="ij"), -1)
+    out = []
+    for c, rc in zip(flat_cells(cells), flat_cells(r)):
+        if rc > 1:
+            lz, ly, lx = np.meshgrid(*(np.arange(rc + 1),) * 3, indexing="ij")
+            local = np.stack([lx, ly, lz], -1).reshape(-1, 3)
+            out.append(c * KEY_UNITS + local * (KEY_UNITS // rc))
+    return np.concatenate(out) if out else np.zeros((0, 3), int)
+
+
+def key_positions(spec: GridSpec, keys: np.ndarray) -> np.ndarray:
+    """(M, 3) world positions of brick_keys' keys."""
+    first, step = _node_frame(spec)
+    return first + np.asarray(keys, np.float64) / KEY_UNITS * step
+
+
+def pack_cells(volume: LightVolume) -> np.ndarray:
+    """The node group's third image: one texel a cell (cell c at column c % cols, row c // cols, cols =
+    ceil(sqrt(cells)), rows bottom first) of (its brick's first probe among the bricks', r, 0); float32 (whole
+    numbers, exact)."""
+    r = volume.cells
+    vals = np.stack([flat_cells(brick_bases(r)), flat_cells(r), np.zeros(r.size)], -1).astype(np.float32)
+    cols, rows = atlas_tiles(len(vals))
+    img = np.zeros((rows * cols, 3), np.float32)
+    img[:len(vals)] = vals
+    return img.reshape(rows, cols, 3)
 
 
 # ------------------------------------------------------------------------------------------------------------------
@@ -236,32 +331,65 @@ def spec_spacing(spec: GridSpec) -> float:
     return float(min(steps)) if steps else float(max(np.max(hi - lo), 1.0))
 
 
-def shader_constants(spec: GridSpec) -> dict:
-    """Every number the node group needs beside the two images, by name."""
-    cols, rows = atlas_tiles(spec.count)
+def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
+    """Every number the node group needs beside the three images, by name; ``tiles``: the atlases' maps
+    (LightVolume.tiles; None: the grid's alone)."""
+    cols, rows = atlas_tiles(spec.count if tiles is None else int(tiles))
+    ccols, crows = atlas_tiles(int(np.prod(cell_shape(spec))))
     return {"lo": tuple(map(float, spec.lo)), "hi": tuple(map(float, spec.hi)), "shape": tuple(spec.shape),
             "cols": cols, "rows": rows, "irr": IRR, "vis": VIS,
             "irradiance_size": (cols * (IRR + 2), rows * (IRR + 2)),  # (width, height)
             "visibility_size": (cols * (VIS + 2), rows * (VIS + 2)),
+            "cells": cell_shape(spec), "cells_size": (ccols, crows), "grid_count": spec.count,
             "normal_bias": NORMAL_BIAS * spec_spacing(spec),
             "variance_floor": VARIANCE_FLOOR, "min_weight": MIN_WEIGHT, "crush": CRUSH}
 
 
-def _corners(spec: GridSpec, positions: np.ndarray, normals: np.ndarray):
-    """Yields (probe index (M,), trilinear (M,), P' (M, 3), unit normals) for the 8 corners of each point."""
+def _corners(spec: GridSpec, positions: np.ndarray, normals: np.ndarray, cell_at):
+    """Yields (probe index among LightVolume.all_maps (M,), trilinear (M,), probe position q (M, 3), P' (M, 3), unit
+    normals) for the 8 corners of each point. ``cell_at(c)``: (M, 3) cell indices -> (brick base (M,), r (M,)), the
+    cells image's texel (the module docstring's lookup)."""
     n = np.asarray(normals, np.float64).reshape(-1, 3)
     n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-30)
     p = np.asarray(positions, np.float64).reshape(-1, 3) + NORMAL_BIAS * spec_spacing(spec) * n
     shape = np.asarray(spec.shape)
+    first, step = _node_frame(spec)
     g = spec.grid_coords(p)
-    i0 = np.minimum(np.floor(g).astype(int), shape - 1)
-    i1 = np.minimum(i0 + 1, shape - 1)
-    f = g - i0
-    for c in range(8):
-        bits = np.array([(c >> a) & 1 for a in range(3)], bool)
-        idx = np.where(bits, i1, i0)
-        tri = np.prod(np.where(bits, f, 1.0 - f), -1)
-        yield idx[:, 0] + shape[0] * (idx[:, 1] + shape[1] * idx[:, 2]), tri, p, n
+    c = np.minimum(np.floor(g), np.maximum(shape - 2, 0))
+    base, r = (np.asarray(x, np.float64) for x in cell_at(c.astype(int)))
+    local = (g - c) * r[:, None]
+    l0 = np.minimum(np.floor(local), r[:, None] - 1)
+    f = local - l0
+    fine = r > 1
+    for k in range(8):
+        bits = np.array([(k >> a) & 1 for a in range(3)], float)
+        corner = l0 + bits
+        tri = np.prod(np.where(bits > 0, f, 1.0 - f), -1)
+        node = np.minimum(c + corner, shape - 1)
+        coarse = node[:, 0] + shape[0] * (node[:, 1] + shape[1] * node[:, 2])
+        side = (r + 1)[:, None]
+        brick = spec.count + base + corner[:, 0] + side[:, 0] * (corner[:, 1] + side[:, 0] * corner[:, 2])
+        q = first + (c + corner / r[:, None]) * step
+        yield np.where(fine, brick, coarse).astype(int), tri, q, p, n
+
+
+def _cells_of(volume: LightVolume):
+    bases, r = brick_bases(volume.cells), volume.cells
+    return lambda c: (bases[c[:, 0], c[:, 1], c[:, 2]], r[c[:, 0], c[:, 1], c[:, 2]])
+
+
+def _cells_image(cells: np.ndarray | None, spec: GridSpec):
+    """cell_at reading pack_cells' image texel by texel, as the node group does (None: no bricks)."""
+    if cells is None:
+        return lambda c: (np.zeros(len(c)), np.ones(len(c)))
+    ncx, ncy, _ = cell_shape(spec)
+    cols = cells.shape[1]
+
+    def at(c):
+        i = c[:, 0] + ncx * (c[:, 1] + ncy * c[:, 2])
+        t = cells[i // cols, i % cols]
+        return t[:, 0], t[:, 1]
+    return at
 
 
 def _weight(q: np.ndarray, p: np.ndarray, moments: np.ndarray | None, tri: np.ndarray) -> np.ndarray:
@@ -285,11 +413,9 @@ def _away(p: np.ndarray, q: np.ndarray) -> np.ndarray:
 
 def sample(volume: LightVolume, positions: np.ndarray, normals: np.ndarray, visibility: bool = True) -> np.ndarray:
     """E/pi (M, 3) at (M, 3) positions with (M, 3) normals, from the unpacked maps (sample_packed's reference)."""
-    irr, mom = flat_maps(volume.irradiance), flat_maps(volume.moments)
-    q_all = volume.probes
+    irr, mom = volume.all_maps()
     num, den = 0.0, 0.0
-    for i, tri, p, n in _corners(volume.spec, positions, normals):
-        q = q_all[i]
+    for i, tri, q, p, n in _corners(volume.spec, positions, normals, _cells_of(volume)):
         vis = bilinear_map(mom[i], _away(p, q)) if visibility else None
         w = _weight(q, p, vis, tri)
         num = num + w[:, None] * bilinear_map(irr[i], n)
@@ -308,12 +434,11 @@ def _atlas_lookup(atlas: np.ndarray, size: int, probe: np.ndarray, d: np.ndarray
 
 
 def sample_packed(irr_atlas: np.ndarray, vis_atlas: np.ndarray, spec: GridSpec, positions: np.ndarray,
-                  normals: np.ndarray, visibility: bool = True) -> np.ndarray:
-    """What the node group does with the two images: E/pi (M, 3) at (M, 3) positions with (M, 3) normals."""
-    q_all = probe_positions(spec)
+                  normals: np.ndarray, visibility: bool = True, cells: np.ndarray | None = None) -> np.ndarray:
+    """What the node group does with the three images: E/pi (M, 3) at (M, 3) positions with (M, 3) normals
+    (``cells``: pack_cells' image; None: a volume without bricks)."""
     num, den = 0.0, 0.0
-    for i, tri, p, n in _corners(spec, positions, normals):
-        q = q_all[i]
+    for i, tri, q, p, n in _corners(spec, positions, normals, _cells_image(cells, spec)):
         vis = _atlas_lookup(vis_atlas, VIS, i, _away(p, q))[:, :2] if visibility else None
         w = _weight(q, p, vis, tri)
         num = num + w[:, None] * _atlas_lookup(irr_atlas, IRR, i, n)
@@ -329,20 +454,32 @@ def default_field(p: np.ndarray, n: np.ndarray) -> np.ndarray:
     return np.stack([0.5 + 0.1 * p[..., 0], 0.4 + 0.3 * n[..., 2], 0.3 + 0.2 * n[..., 0]], -1)
 
 
+def _field_maps(points: np.ndarray, irradiance_fn, wall_x: float | None, far: float):
+    """(M, IRR, IRR, 3) and (M, VIS, VIS, 2) maps of synthetic_volume's fields at (M, 3) probe positions."""
+    pts = points[:, None, None, :]
+    irr = irradiance_fn(np.broadcast_to(pts, (len(points), IRR, IRR, 3)),
+                        np.broadcast_to(texel_directions(IRR), (len(points), IRR, IRR, 3)))
+    d = np.broadcast_to(texel_directions(VIS), (len(points), VIS, VIS, 3))
+    r = np.full(d.shape[:-1], float(far))
+    if wall_x is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = (wall_x - points[:, None, None, 0]) / d[..., 0]
+        r = np.where((t > 0) & np.isfinite(t), np.minimum(t, far), r)
+    return np.asarray(irr, np.float64), np.stack([r, r * r], -1)
+
+
 def synthetic_volume(spec: GridSpec, irradiance_fn=default_field, wall_x: float | None = None,
-                     far: float = 100.0) -> LightVolume:
+                     far: float = 100.0, refine: np.ndarray | None = None) -> LightVolume:
     """A volume of known maps, for tests of the lookup and of the node group (no render).
 
     ``irradiance_fn(positions (..., 3), normals (..., 3)) -> (..., 3)`` E/pi, sampled at each probe's texel centres
     (default_field). Moments: the distance (variance 0) to the plane x = ``wall_x`` along each texel's direction
-    where the direction meets it, else ``far`` (wall_x None: no wall)."""
-    pts = spec.points()[:, :, :, None, None, :]
-    irr = irradiance_fn(np.broadcast_to(pts, (*spec.shape, IRR, IRR, 3)),
-                        np.broadcast_to(texel_directions(IRR), (*spec.shape, IRR, IRR, 3)))
-    d = np.broadcast_to(texel_directions(VIS), (*spec.shape, VIS, VIS, 3))
-    r = np.full(d.shape[:-1], float(far))
-    if wall_x is not None:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = (wall_x - spec.points()[:, :, :, None, None, 0]) / d[..., 0]
-        r = np.where((t > 0) & np.isfinite(t), np.minimum(t, far), r)
-    return LightVolume(spec, np.asarray(irr, np.float64), np.stack([r, r * r], -1))
+    where the direction meets it, else ``far`` (wall_x None: no wall). ``refine``: each cell's r (bricks), their
+    probes' maps from the same fields."""
+    irr, mom = _field_maps(probe_positions(spec), irradiance_fn, wall_x, far)
+    v = LightVolume(spec, grid_maps(irr, spec.shape), grid_maps(mom, spec.shape))
+    if refine is not None and np.any(np.asarray(refine) > 1):
+        v.refine = np.asarray(refine, int)
+        v.brick_irradiance, v.brick_moments = _field_maps(key_positions(spec, brick_keys(spec, v.refine)),
+                                                          irradiance_fn, wall_x, far)
+    return v
