@@ -19,7 +19,8 @@ face size and irradiance size from the tolerance, the probe at the splats' centr
 them, core/stage_times.py), Lighting Auto's bake of the sphere (the World probe, the measurement, the grid nodes;
 each a stage) and a 1920x1080 camera frame from the World probe's place (render_camera, depth on, no cut). Medians
 of --repeats after one warm-up. With --ab every run is also made with the host work the issue moved put back
-(host_paths: holes filled in numpy, numpy per-face parts, the enclosure masks made anew), the two alternating, so
+(host_paths: holes filled in numpy, numpy per-face parts, the enclosure masks made anew, the per-face cube put
+together on the host), the two alternating, so
 "before" and "after" share the machine's load. Prints a table; appends to --out (default
 docs/bench/bake_stages_<device>.csv).
 """
@@ -118,18 +119,19 @@ def stage_runs(r: SplatRenderer, scene) -> dict[str, dict[str, dict[str, float]]
 def host_paths():
     """--ab's "before": the host work issue 38 moved, put back for a peer in the same run: holes filled in numpy
     and uploaded again, the search's per-face parts in numpy on every device, the enclosure check's half-sphere
-    masks made on every bake."""
+    masks made on every bake, a per-face cube put together on the host (faces read back, resized, uploaded)."""
     from gs_ibl_addon.core import bake, bake_batch
     from gs_ibl_addon.core.probe import near
     from gs_ibl_addon.core.probe.reference import exact_irradiance_parts
-    saved = (bake.GPU_FILLS, bake_batch.GPU_FILLS, bake.irradiance_parts, near._halves)
+    saved = (bake.GPU_FILLS, bake_batch.GPU_FILLS, bake.irradiance_parts, near._halves, bake.GPU_ASSEMBLE)
     bake.GPU_FILLS = bake_batch.GPU_FILLS = ()
     bake.irradiance_parts = lambda change, size, ctx=None: exact_irradiance_parts(change, size)
     near._halves = near._halves.__wrapped__
+    bake.GPU_ASSEMBLE = False
     try:
         yield
     finally:
-        bake.GPU_FILLS, bake_batch.GPU_FILLS, bake.irradiance_parts, near._halves = saved
+        bake.GPU_FILLS, bake_batch.GPU_FILLS, bake.irradiance_parts, near._halves, bake.GPU_ASSEMBLE = saved
 
 
 def main_stages(a, info: dict) -> None:

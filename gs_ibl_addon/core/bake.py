@@ -20,6 +20,7 @@ import numpy as np
 from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import gpu_ggx_prefilter
+from .probe.gpu_assemble import GpuFaces, HostFaces
 from .probe.gpu_holes import GPU_FILLS, covered_means, fill_frame_holes
 from .probe.highlights import gain_clipped_splats, recover_highlights
 from .probe.holes import fill_holes
@@ -46,6 +47,9 @@ FACE_BY_FACE_FROM = 1024
 PER_FACE_BASE = 2 * AUTO_FIRST_FACE
 RADIANCE_OUT_MAX = 128
 PER_FACE_ROUNDS = 4  # plan, render, measure what the finer faces changed (one doubling each): at most this often
+# Face size 0's per-face cube is put together on the GPU (probe/gpu_assemble.py GpuFaces); False: on the host from
+# the faces read back, and filled and filtered from there (HostFaces, the reference; benchmarks' "before").
+GPU_ASSEMBLE = True
 
 
 class BadSetting(ValueError):
@@ -208,9 +212,11 @@ def irradiance_parts(change: np.ndarray, size: int, ctx=None) -> np.ndarray:
     return filter_probes(one_face, size, "exact", n, ctx=ctx).irradiance.astype(np.float64)
 
 
-def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], dict],
-                      filter_cube: Callable[[np.ndarray], ProbeResult], model: ErrorModel, s: ProbeSettings,
-                      say: Callable[[str, float], None], ctx=None) -> tuple[ProbeResult, list[int], list, dict]:
+def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], object],
+                      filter_cube: Callable[[object], ProbeResult], model: ErrorModel, s: ProbeSettings,
+                      say: Callable[[str, float], None], ctx=None,
+                      faces_from: Callable[[np.ndarray], object] = HostFaces
+                      ) -> tuple[ProbeResult, list[int], list, dict]:
     """Face size 0: "model no more than the probe needs", per cube face.
 
     The probe is rendered at 32^2 and 64^2 and the change between them gives the error (tolerance.ErrorModel).
@@ -218,9 +224,11 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
     size its part predicts it needs (a lamp's face finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), those
     faces are rendered again one doubling finer, and their parts, and from the second on their fall per doubling,
     are measured again from what they changed.
-    ``render_faces({face: size})`` returns {face: (size, size, 4) image}; ``filter_cube(cube)`` filters a host
-    cube; ``ctx``: the device that splits the change into faces' parts (irradiance_parts). Returns (the probe,
-    per-face sizes, trials, the tolerance plan)."""
+    ``render_faces({face: size})`` renders those faces' views, in face order (a RenderResult);
+    ``faces_from(cube)`` keeps the six faces of the last probe rendered (``cube``, read back: HostFaces; or its
+    frame, still on the GPU: probe/gpu_assemble.py GpuFaces), which put together each round's cube at one size
+    for ``filter_cube`` and the small cube of the parts; ``ctx``: the device that splits the change into faces'
+    parts (irradiance_parts). Returns (the probe, per-face sizes, trials, the tolerance plan)."""
     limit = int(s.max_face_size)
     cubes: dict[int, np.ndarray] = {}
 
@@ -238,8 +246,8 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
         def level(images) -> np.ndarray:  # where the exact filter integrates (its default downsample)
             return np.stack([faces_to_size(np.asarray(img[..., :3], np.float64)[None], first)[0] for img in images])
 
-        faces = list(cubes[face])
-        low = level(faces)
+        faces = faces_from(cubes[face])
+        low = level(cubes[face])
         model.take_parts(irradiance_parts(low - level(cubes[first]), m, ctx), [first] * 6, sizes,
                          result.irradiance)
         for _ in range(PER_FACE_ROUNDS):
@@ -250,14 +258,12 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
             names = ", ".join(f"{FACE_NAMES[f]} {n}^2" for f, n in todo.items())
             say(f"rendering faces {names}", min(0.8, 0.1 + 0.15 * len(trials)))
             before = list(sizes)
-            for f, image in render_faces(todo).items():
-                faces[f], sizes[f] = image, todo[f]
-            out = min(max(sizes), RADIANCE_OUT_MAX)
-            cube = np.stack([faces_to_size(img[None], out)[0] for img in faces]).astype(np.float32)
-            finer = filter_cube(cube)
-            finer.radiance = cube
+            for f in todo:
+                sizes[f] = todo[f]
+            faces.put(render_faces(todo), todo, min(max(sizes), RADIANCE_OUT_MAX), first)
+            finer = filter_cube(faces.cube)
             change = float(np.max(model.change(result.irradiance, finer.irradiance)))
-            finer_low = level(faces)
+            finer_low = faces.level()
             model.take_parts(irradiance_parts(finer_low - low, m, ctx), before, sizes, finer.irradiance)
             low = finer_low
             est = model.estimate_faces(sizes)
@@ -318,101 +324,116 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                             sh_order=s.sh_order, roughness=None, timings_ms=timings, use_gpu=True, vk_context=r.ctx,
                             splat_count=splat_count, device=r.ctx.device_name, **s.extra)
 
-    def render_faces(todo: dict[int, int]) -> dict[int, np.ndarray]:
+    def render_faces(todo: dict[int, int]):
         # one submission for every size: the probe's dilation is one size whatever the face (render/splat_math.py)
         chosen = sorted(todo)
         cube = ViewBatch.cubemap(pos, max(todo.values()))
         views = tuple(ViewBatch.cubemap(pos, todo[f]).views[f] for f in chosen)
-        res = r.render(replace(cube, views=views), timestamps=True)
-        for k, v in res.timings_ms.items():
-            extra_ms[f"render_{k}"] = extra_ms.get(f"render_{k}", 0.0) + v
-        return dict(zip(chosen, res.images))
+        res = r.render(replace(cube, views=views), timestamps=True, wait=False)  # the faces' assembly queued behind
+        rendered.append(res)
+        return res
 
-    def filter_cube(cube: np.ndarray) -> ProbeResult:
+    def filter_cube(cube) -> ProbeResult:  # a host cube, or GpuFaces' (its radiance stays on the GPU)
         return filter_probe(cube, irradiance_size=m_search, method=method, sh_order=s.sh_order, roughness=None,
-                            use_gpu=True, vk_context=r.ctx, splat_count=splat_count, device=r.ctx.device_name,
-                            **s.extra)
+                            use_gpu=True, vk_context=r.ctx, read_radiance=False, splat_count=splat_count,
+                            device=r.ctx.device_name, **s.extra)
+
+    def faces_from(cube: np.ndarray):
+        faces.append(GpuFaces(r.last_frame) if GPU_ASSEMBLE else HostFaces(cube))
+        return faces[-1]
 
     probe_at.last_frame = lambda: r.last_frame
-    extra_ms: dict[str, float] = {}  # renders of single faces (per-face sizes), added to the kept probe's
-    trials: list[dict] = []
-    plan: dict = {}
-    face_sizes = None
-    with times.stage("search" if not s.face_size else "render"):
-        if s.face_size:
-            face = int(s.face_size)
-            say(f"rendering a {face}x{face} cubemap", 0.2)
-            result = probe_at(face)
-        elif lod_k == 0:
-            result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube, ErrorModel(),
-                                                                 s, say, r.ctx)
-            face = min(max(face_sizes), RADIANCE_OUT_MAX) if result.radiance is not None else max(face_sizes)
-            for k, v in extra_ms.items():
-                result.timings_ms[k] = result.timings_ms.get(k, 0.0) + v
-        else:
-            result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
-    frame = None
-    # Holes are filled on the kept probe (the search above compared the unfilled probes: a fill moves every size
-    # alike) and it is filtered again; a probe without holes pays nothing. A one-colour fill of a probe whose frame
-    # is still on the GPU, with nothing else to change on its cube, is filled there (probe/gpu_holes.py) and its
-    # recorded filter runs again: no cube filled in numpy and uploaded again.
-    if (result.radiance is None and s.hole_fill in GPU_FILLS and result.hole_fraction > 0 and s.lights == 0
-            and (s.highlight_gain == 1 or highlights_done) and s.sh_order == 2):
+    rendered: list = []  # renders of single faces (per-face sizes): their GPU times go to the kept probe's
+    faces: list = []  # the per-face search's faces (GpuFaces: closed when the bake is done with its cube)
+    try:
+        trials: list[dict] = []
+        plan: dict = {}
+        face_sizes = None
+        with times.stage("search" if not s.face_size else "render"):
+            if s.face_size:
+                face = int(s.face_size)
+                say(f"rendering a {face}x{face} cubemap", 0.2)
+                result = probe_at(face)
+            elif lod_k == 0:
+                result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube,
+                                                                     ErrorModel(), s, say, r.ctx, faces_from)
+                for res in rendered:
+                    for k, v in res.timings_ms.items():
+                        result.timings_ms[f"render_{k}"] = result.timings_ms.get(f"render_{k}", 0.0) + v
+            else:
+                result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
+        # the kept probe's radiance: on the host (per-face cube put together there), else on the GPU in the last
+        # frame rendered or the per-face cube put together there
+        kept = faces[-1].cube if faces and faces[-1].cube is not None else r.last_frame
+        if face_sizes is not None:
+            face = int(np.shape(result.radiance)[1]) if result.radiance is not None else kept.face_size
+        frame = None
+        # Holes are filled on the kept probe (the search above compared the unfilled probes: a fill moves every
+        # size alike) and it is filtered again; a probe without holes pays nothing. A one-colour fill of a probe
+        # whose frame is still on the GPU, with nothing else to change on its cube, is filled there
+        # (probe/gpu_holes.py) and its recorded filter runs again: no cube filled in numpy and uploaded again.
+        if (result.radiance is None and s.hole_fill in GPU_FILLS and result.hole_fraction > 0 and s.lights == 0
+                and (s.highlight_gain == 1 or highlights_done) and s.sh_order == 2):
+            with times.stage("holes and lights"):
+                t0 = time.perf_counter()
+                frame = kept
+                value = (covered_means(np.asarray(result.sh_coefficients)[None], [result.hole_fraction])[0]
+                         if s.hole_fill == "mean" else np.asarray(s.hole_colour, np.float64))
+                with fill_frame_holes(frame, value[None]):  # one submission with the filter
+                    filled = filter_probe(frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
+                                          roughness=None, read_radiance=False, **s.extra)
+                result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
+                result.hole_fill = {"method": s.hole_fill, "value": [float(v) for v in value],
+                                    "fraction": float(result.hole_fraction)}
+                result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
+        with times.stage("radiance readback"):
+            if result.radiance is None:  # the kept probe's frame (or per-face cube) is still on the GPU
+                frame = kept
+                result.radiance = frame.read_cube()
         with times.stage("holes and lights"):
-            t0 = time.perf_counter()
-            frame = r.last_frame
-            value = (covered_means(np.asarray(result.sh_coefficients)[None], [result.hole_fraction])[0]
-                     if s.hole_fill == "mean" else np.asarray(s.hole_colour, np.float64))
-            with fill_frame_holes(frame, value[None]):  # one submission with the filter
-                filled = filter_probe(frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
-                                      roughness=None, read_radiance=False, **s.extra)
-            result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
-            result.hole_fill = {"method": s.hole_fill, "value": [float(v) for v in value],
-                                "fraction": float(result.hole_fraction)}
-            result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
-    with times.stage("radiance readback"):
-        if result.radiance is None:  # the kept probe is the last one rendered: its frame is still on the GPU
-            frame = r.last_frame
-            result.radiance = frame.read_cube()
-    with times.stage("holes and lights"):
-        if result.hole_fill is None and light_from_radiance(result, s, r.colour_space, hole_radiance,
-                                                            highlights_done):
-            t0 = time.perf_counter()
-            filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
-                                  sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra)
-            result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
-            result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
-            frame = None  # the glossy maps take the filled radiance
-    m = m_search
-    if not s.irradiance_size:
-        with times.stage("irradiance size"):
-            m, result.irradiance, between = choose_irradiance_size(
-                lambda size: filter_probe(result.radiance[..., :3], irradiance_size=size, method=method, sh_order=2,
-                                          roughness=None, use_gpu=True, vk_context=r.ctx, **s.extra).irradiance,
-                s.tolerance)
-        plan["irradiance_between_texels"] = {str(k): v for k, v in between.items()}
-    if trials and result.sh_coefficients is not None:  # what 9 SH coefficients alone would give (probe.json has them)
-        from .cubemap import face_directions
-        from .probe.sh_project import sh_irradiance
-        plan["sh_error"] = relative_rms(sh_irradiance(np.asarray(result.sh_coefficients, np.float64),
-                                                      face_directions(m)), result.irradiance)
-    if s.glossy:
-        say("prefiltering glossy maps", 0.85)
-        with times.stage("glossy"):
-            result.prefiltered, ggx_ms = gpu_ggx_prefilter(
-                frame if frame is not None else np.asarray(result.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
-        result.roughness = list(GLOSSY_ROUGHNESS)
-        result.timings_ms["ggx"] = ggx_ms.get("total", 0.0)
-    if trials:
-        plan.update(face_size=face, irradiance_size=m, method=method, sh_order=s.sh_order,
-                    lod="auto" if lod_k > 0 else "off")
-    if face_sizes is not None:
-        result.settings["face_sizes"] = list(face_sizes)  # rendered per face; "face_size" is the cube written
-    result.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
-                            "irradiance_size": m, "face_size_trials": trials,
-                            "converged": (not trials) or bool(plan.get("met")), "tolerance_plan": plan,
-                            "probe_position": [float(x) for x in pos]})
-    return result
+            if result.hole_fill is None and light_from_radiance(result, s, r.colour_space, hole_radiance,
+                                                                highlights_done):
+                t0 = time.perf_counter()
+                filled = filter_probe(result.radiance[..., :3], irradiance_size=m_search, method=method,
+                                      sh_order=s.sh_order, roughness=None, use_gpu=True, vk_context=r.ctx,
+                                      **s.extra)
+                result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
+                result.timings_ms["hole_fill"] = (time.perf_counter() - t0) * 1e3
+                frame = None  # the glossy maps take the filled radiance
+        m = m_search
+        if not s.irradiance_size:
+            with times.stage("irradiance size"):
+                m, result.irradiance, between = choose_irradiance_size(
+                    lambda size: filter_probe(result.radiance[..., :3], irradiance_size=size, method=method,
+                                              sh_order=2, roughness=None, use_gpu=True, vk_context=r.ctx,
+                                              **s.extra).irradiance,
+                    s.tolerance)
+            plan["irradiance_between_texels"] = {str(k): v for k, v in between.items()}
+        if trials and result.sh_coefficients is not None:  # what 9 SH coefficients alone give (probe.json has them)
+            from .cubemap import face_directions
+            from .probe.sh_project import sh_irradiance
+            plan["sh_error"] = relative_rms(sh_irradiance(np.asarray(result.sh_coefficients, np.float64),
+                                                          face_directions(m)), result.irradiance)
+        if s.glossy:
+            say("prefiltering glossy maps", 0.85)
+            with times.stage("glossy"):
+                result.prefiltered, ggx_ms = gpu_ggx_prefilter(
+                    frame if frame is not None else np.asarray(result.radiance), GLOSSY_ROUGHNESS, ctx=r.ctx)
+            result.roughness = list(GLOSSY_ROUGHNESS)
+            result.timings_ms["ggx"] = ggx_ms.get("total", 0.0)
+        if trials:
+            plan.update(face_size=face, irradiance_size=m, method=method, sh_order=s.sh_order,
+                        lod="auto" if lod_k > 0 else "off")
+        if face_sizes is not None:
+            result.settings["face_sizes"] = list(face_sizes)  # rendered per face; "face_size" is the cube written
+        result.settings.update({**asdict(s), "method_requested": s.method, "method": method, "face_size": face,
+                                "irradiance_size": m, "face_size_trials": trials,
+                                "converged": (not trials) or bool(plan.get("met")), "tolerance_plan": plan,
+                                "probe_position": [float(x) for x in pos]})
+        return result
+    finally:
+        for held in faces:  # the per-face cube is read: its buffers go back to the pool
+            held.close()
 
 
 def bake_probe(scene: SplatScene | None, probe_position=None, settings: ProbeSettings | dict | None = None,
