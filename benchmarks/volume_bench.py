@@ -45,7 +45,6 @@ REPO = os.path.dirname(HERE)
 sys.path.insert(0, REPO)
 sys.path.insert(0, HERE)
 from auto_light_bench import PLACES, PROBE  # noqa: E402
-from gs_ibl_addon.core import cubemap  # noqa: E402
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.probe import volume as vol  # noqa: E402
@@ -54,7 +53,7 @@ from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, meas
 from gs_ibl_addon.core.probe.grid import (bake_sh_points, eval_irradiance, interpolate,  # noqa: E402
                                           monomial_coefficients)
 from gs_ibl_addon.core.probe.variation import LUMINANCE  # noqa: E402
-from gs_ibl_addon.core.probe.volume_bake import bake_volume  # noqa: E402
+from gs_ibl_addon.core.probe.volume_bake import bake_volume, point_irradiance  # noqa: E402
 from gs_ibl_addon.core.probe.volume_region import plan_volume  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.synthetic import fibonacci_sphere  # noqa: E402
@@ -83,16 +82,9 @@ def sphere_points(place: str, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return c + RADIUS * d, d, facing
 
 
-def reference(r: SplatRenderer, pts: np.ndarray, nrm: np.ndarray, chunk: int = 24) -> np.ndarray:
+def reference(r: SplatRenderer, pts: np.ndarray, nrm: np.ndarray) -> np.ndarray:
     """E/pi at each point and normal: the point's own cube, integrated exactly against the cosine lobe."""
-    w = cubemap.face_directions(REF_FACE).reshape(-1, 3)
-    sa = np.broadcast_to(cubemap.texel_solid_angles(REF_FACE), (6, REF_FACE, REF_FACE)).reshape(-1)
-    out = np.empty((len(pts), 3))
-    for s in range(0, len(pts), chunk):
-        cubes = r.render_probes(pts[s:s + chunk], REF_FACE).frame.read_probes()[..., :3].reshape(-1, len(w), 3)
-        lobe = np.maximum(nrm[s:s + chunk] @ w.T, 0.0) * sa / np.pi
-        out[s:s + chunk] = np.einsum("pk,pkc->pc", lobe, cubes.astype(np.float64))
-    return out
+    return point_irradiance(r, pts, nrm, REF_FACE)
 
 
 def auto_today(r: SplatRenderer, place: str, pts: np.ndarray, nrm: np.ndarray, d_world: np.ndarray):

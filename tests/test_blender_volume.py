@@ -24,11 +24,26 @@ from tests.test_blender_probes import _camera_scene, _render, _sphere_pixels  # 
 SPEC = GridSpec((-1.3, -1.2, -1.1), (1.3, 1.2, 1.1), (4, 3, 3))
 
 
-def _volume():
-    def irradiance(p, n):  # varies with the probe's place and the direction, all channels differently
-        return np.stack([0.5 + 0.15 * p[..., 0] + 0.1 * n[..., 1], 0.4 + 0.3 * n[..., 2] + 0.1 * p[..., 2],
-                         0.3 + 0.2 * n[..., 0] - 0.05 * p[..., 1]], -1)
-    return pv.synthetic_volume(SPEC, irradiance, wall_x=0.5)
+def _irradiance(p, n):
+    """Varies with the probe's place (curving in x: bricks and grid differ) and the direction, all channels
+    differently."""
+    return np.stack([0.5 + 0.15 * p[..., 0] + 0.1 * n[..., 1] + 0.2 * p[..., 0] ** 2,
+                     0.4 + 0.3 * n[..., 2] + 0.1 * p[..., 2], 0.3 + 0.2 * n[..., 0] - 0.05 * p[..., 1]], -1)
+
+
+def _volume(bricks: bool = True):
+    """The synthetic volume with bricks in two of its 3 x 2 x 2 cells (r 4 and 2) where the sphere is."""
+    refine = np.ones(pv.cell_shape(SPEC), int)
+    refine[1, 0, 0], refine[2, 1, 1] = 4, 2
+    return pv.synthetic_volume(SPEC, _irradiance, wall_x=0.5, refine=refine if bricks else None)
+
+
+def _store(v):
+    """store_volume of ``v``; its three images (irradiance, visibility, cells)."""
+    irr, vis = pv.pack_atlas(v)
+    cells = pv.pack_cells(v)
+    store_volume(irr, vis, cells, SPEC, v.tiles)
+    return irr, vis, cells
 
 
 def _sharp(scene) -> None:
@@ -65,20 +80,22 @@ def test_group_renders_sample_packed(blender, engine, tmp_path):
     pixel's centre (the worst: along the wall's shadow edge, a step in the Chebyshev weight)."""
     scene, sphere, _mat = _camera_scene("CYCLES" if engine == "CYCLES" else _eevee())
     _sharp(scene)
-    irr, vis = pv.pack_atlas(_volume())
-    store_volume(irr, vis, SPEC)
+    irr, vis, cells = _store(_volume())
     _emission_material(sphere, engine)
     px = _render(scene, tmp_path, "volume")
     rows, cols, n = _sphere_pixels()
-    want = pv.sample_packed(irr, vis, SPEC, n, n)
+    want = pv.sample_packed(irr, vis, SPEC, n, n, cells=cells)
     got = px[rows, cols]
     rel = np.abs(got - want).max(-1) / np.abs(want).mean()
     print(f"\n{engine}: volume group vs sample_packed: median {100 * np.median(rel):.3f}%, 95th pct "
           f"{100 * np.percentile(rel, 95):.3f}%, max {100 * rel.max():.2f}% over {len(rel)} pixels")
     assert np.median(rel) < 0.01 and np.percentile(rel, 95) < 0.03
     # the wall matters here: without visibility the answer differs (the test would not see a dropped term)
-    blind = pv.sample_packed(irr, vis, SPEC, n, n, visibility=False)
+    blind = pv.sample_packed(irr, vis, SPEC, n, n, visibility=False, cells=cells)
     assert np.abs(blind - want).max() > 0.02
+    # and so do the bricks: the grid alone reads the curving light otherwise
+    plain = _volume(bricks=False)
+    assert np.abs(pv.sample(plain, n, n) - want).max() > 0.02
 
 
 @pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
@@ -93,15 +110,14 @@ def test_local_light_group_lights_a_mesh_by_the_volume(blender, engine, tmp_path
     ll.set_object_grid(sphere, "object:Sphere")  # lit by a grid before (Lighting Auto)
     ll.store_grids({"object:Sphere": (pg.GridSpec((-1, -1, -1), (1, 1, 1), (2, 2, 2)), np.full((2, 2, 2, 9, 3), 0.1))})
     _sharp(scene)
-    irr, vis = pv.pack_atlas(_volume())
     ll.set_object_grid(sphere, ll.VOLUME_KEY)
     assert ll.prune_atlas() and not ll.prune_atlas()
-    store_volume(irr, vis, SPEC)
+    irr, vis, cells = _store(_volume())
     ll.light_object(sphere)
     assert ll.has_local_light(sphere) == "volume" and ll.GRID_ATTRS["tile"] not in sphere
     px = _render(scene, tmp_path, engine)
     rows, cols, n = _sphere_pixels()
-    want = pv.sample_packed(irr, vis, SPEC, n, n)
+    want = pv.sample_packed(irr, vis, SPEC, n, n, cells=cells)
     rel = np.abs(px[rows, cols] - want).max(-1) / np.abs(want).mean()
     print(f"\n{engine}: a mesh lit by the volume vs sample_packed: median {100 * np.median(rel):.3f}%, 95th pct "
           f"{100 * np.percentile(rel, 95):.3f}%, max {100 * rel.max():.2f}%")
@@ -140,6 +156,7 @@ def _follow_the_sphere(scene, sphere, path, hide, tmp_path) -> None:
     scene.collection.objects.link(cam)
     scene.camera = cam
     irr, vis, spec = _atlas_pixels(vn.volume_image()), _atlas_pixels(vn.visibility_image()), vn.volume_spec()
+    cells = _atlas_pixels(vn.cells_image())
     r = 0.2
     c = (np.arange(24) + 0.5) / 24 * 0.5 - 0.25
     zz, yy = np.meshgrid(c[::-1], c, indexing="ij")
@@ -151,7 +168,7 @@ def _follow_the_sphere(scene, sphere, path, hide, tmp_path) -> None:
         scene.frame_set(f)
         cam.location = (loc[0] + 3.0, loc[1], loc[2])
         px = _render(scene, tmp_path, f"frame{f}")
-        want = 0.8 * pv.sample_packed(irr, vis, spec, np.asarray(loc) + r * n, n).mean(0)
+        want = 0.8 * pv.sample_packed(irr, vis, spec, np.asarray(loc) + r * n, n, cells=cells).mean(0)
         got = px[inside].mean(0)
         means.append((got, want))
         print(f"frame {f} at {loc}: rendered mean {np.round(got, 4)}, 0.8 x sample_packed {np.round(want, 4)}, "
@@ -222,7 +239,7 @@ def test_every_visible_splat_object_lights_the_volume(blender, tmp_path, write_3
     from gs_ibl_addon.blender.lighting import volume_nodes as vn
     from gs_ibl_addon.core import synthetic
     shell = synthetic.shell_scene(lambda d: np.full(d.shape, 0.3), 1500, radius=3.0)
-    ball = synthetic._sphere_object((0.6, 0.0, 0.0), 0.2, (0.9, 0.05, 0.05), 0.05)
+    ball = synthetic.sphere_object((0.6, 0.0, 0.0), 0.2, (0.9, 0.05, 0.05), 0.05)
     for name, sc in (("shell", shell), ("ball", ball)):
         write_3dgs_ply(tmp_path / f"{name}.ply", sc)
         assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(tmp_path / f"{name}.ply"),
@@ -248,7 +265,8 @@ def test_every_visible_splat_object_lights_the_volume(blender, tmp_path, write_3
         vn.visibility_image().pixels.foreach_get(vis)
         vw, vh = vn.visibility_image().size
         return probe.gs_ibl_probe.local_report, pv.sample_packed(
-            irr.reshape(h, w, 4)[..., :3], vis.reshape(vh, vw, 4)[..., :3], vn.volume_spec(), *toward)[0]
+            irr.reshape(h, w, 4)[..., :3], vis.reshape(vh, vw, 4)[..., :3], vn.volume_spec(), *toward,
+            cells=_atlas_pixels(vn.cells_image()))[0]
     both_report, both = bake()
     ball_obj.hide_render = True
     one_report, one = bake()

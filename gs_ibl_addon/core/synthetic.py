@@ -299,7 +299,8 @@ def random_scene(n: int, seed: int = 0, sh_degree: int = 3, extent: float = 1.0)
                       colour_space=SYNTHETIC_COLOUR_SPACE)
 
 
-def _sphere_object(centre, radius: float, rgb, spacing: float) -> SplatScene:
+def sphere_object(centre, radius: float, rgb, spacing: float) -> SplatScene:
+    """Closed sphere surface of thin splats (normals outward)."""
     n = max(64, int(4 * np.pi * radius ** 2 / spacing ** 2))
     d = fibonacci_sphere(n)
     return _disks(np.asarray(centre) + radius * d, d, np.broadcast_to(np.asarray(rgb, np.float64), d.shape),
@@ -341,7 +342,7 @@ def sample_environment() -> SplatScene:
         *(_box_object((x - 0.04, y - 0.04, 0.0), (x + 0.04, y + 0.04, 0.7), (0.3, 0.2, 0.12), spacing * 0.5)
           for x in (-1.45, -0.35) for y in (-1.15, -0.25)),  # legs
         _box_object((1.8, 1.6, 0.0), (2.2, 2.0, 3.0), (0.8, 0.8, 0.78), spacing * 0.7),  # pillar
-        _sphere_object((-1.0, -0.7, 0.98), 0.22, (0.9, 0.75, 0.1), spacing * 0.5),  # on the table
-        _sphere_object((1.2, -1.5, 0.4), 0.4, (0.1, 0.35, 0.8), spacing * 0.6),  # on the floor
+        sphere_object((-1.0, -0.7, 0.98), 0.22, (0.9, 0.75, 0.1), spacing * 0.5),  # on the table
+        sphere_object((1.2, -1.5, 0.4), 0.4, (0.1, 0.35, 0.8), spacing * 0.6),  # on the floor
     ]
     return concat([room, sky, lamp, *objects], "<sample environment>")

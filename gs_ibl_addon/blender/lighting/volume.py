@@ -113,16 +113,18 @@ def _merged_renderer(locals_, progress):
 
 def _bake(renderer, boxes, within, where, budget, face_size, progress):
     """The worker's part: the World probe's SH at its place (the EEVEE output's World light), the region's plan and
-    the volume, packed. Returns (plan, volume, atlases, World coefficients)."""
-    from ...core.probe.volume_bake import bake_volume
+    the volume with its bricks, packed. Returns (plan, volume, (irradiance, visibility, cells) images, World
+    coefficients)."""
+    from ...core.probe.volume_refine import GRID_SHARE, bake_refined
     from ...core.probe.volume_region import choose_volume
     try:
         progress("measuring how fast the light changes", 0.0)
-        plan, _coarse = choose_volume(renderer, boxes, budget=budget, within=within)
-        vol = bake_volume(renderer, plan.spec, face_size=face_size, progress=lambda done, total: progress(
-            f"baking {done} of {total} light volume probes", 0.1 + 0.85 * done / max(total, 1)))
+        plan, _coarse = choose_volume(renderer, boxes, budget=budget, within=within, share=GRID_SHARE)
+        vol = bake_refined(renderer, plan.spec, budget, boxes=boxes, face_size=face_size,
+                           progress=lambda done, total: progress(f"baking {done} of about {total} light volume "
+                                                                 "probes", 0.1 + 0.85 * min(done / max(total, 1), 1)))
         world = point_coefficients(renderer, np.asarray(where, np.float64)[None])[0]
-        return plan, vol, pv.pack_atlas(vol), world
+        return plan, vol, (*pv.pack_atlas(vol), pv.pack_cells(vol)), world
     finally:
         renderer.trim()
 
@@ -152,7 +154,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         r = own = yield Work(_merged_renderer, locals_, span=(0.0, 0.1))
     where = np.array(probe.matrix_world.translation, np.float64)
     try:
-        plan, vol, (irr, vis), world = yield Work(_bake, r, boxes, within, where, BUDGET or DEFAULT_BUDGET,
+        plan, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, BUDGET or DEFAULT_BUDGET,
                                                    FACE or DEFAULT_FACE, span=(0.1, 0.97))
     finally:
         if own is not None:
@@ -167,7 +169,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         ll.set_object_grid(obj, ll.VOLUME_KEY)
     ll.prune_atlas()  # before the group is rebuilt: tiles nobody reads any more (volume_nodes.py says why)
     grids = sorted(o.name for o in bpy.data.objects if ll.has_local_light(o) in ("probe", "grid"))
-    store_volume(irr, vis, vol.spec, world, s.irradiance_image)
+    store_volume(irr, vis, cells, vol.spec, vol.tiles, world, s.irradiance_image)
     for obj in lit:
         ll.light_object(obj, float(s.strength))
         obj[AUTO_KEY] = probe.name
@@ -176,8 +178,8 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         if obj is not None and obj.get(AUTO_KEY) == probe.name:
             ll.unlight_object(obj)
             del obj[AUTO_KEY]
-    lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {vol.spec.count} probes "
-             f"({' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart), from "
+    lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {vol.timings.get('probes', vol.spec.count)} probes (a grid "
+             f"of {' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart, and bricks), from "
              f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
     lines += plan.messages + vol.report
     if outside:
@@ -190,25 +192,27 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
                      "those and the volume in one shader (the meshes render black there); use Lighting Volume on "
                      "that probe too, or Remove Local Light from them")
     s.local_report = "\n".join(lines)
-    return lines[0], {"lit": [o.name for o in lit], "outside": outside, "probes": vol.spec.count}
+    return lines[0], {"lit": [o.name for o in lit], "outside": outside, "probes": vol.timings.get("probes"),
+                      "grid": vol.spec.count, "bricks": vol.brick_count}
 
 
-def store_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, spec, world=None,
+def store_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, cells: np.ndarray, spec, tiles: int, world=None,
                  irradiance: bpy.types.Image | None = None) -> dict:
-    """Write the volume's two atlases (pack_atlas's) into the file's packed images (in place where they exist: the
-    groups' texture nodes keep pointing at them), the spec and the World's numbers beside them, and rebuild the
-    volume groups and the local-light group; returns the volume groups {engine: group}. ``world``: (9, 3)
-    monomial coefficients of the World probe's light; ``irradiance``: its irradiance image (local_light's
-    WORLD_COEFFS / WORLD_IRRADIANCE)."""
+    """Write the volume's three images (pack_atlas's two atlases of ``tiles`` maps, pack_cells') into the file's
+    packed images (in place where they exist: the groups' texture nodes keep pointing at them), the spec and the
+    World's numbers beside them, and rebuild the volume groups and the local-light group; returns the volume groups
+    {engine: group}. ``world``: (9, 3) monomial coefficients of the World probe's light; ``irradiance``: its
+    irradiance image (local_light's WORLD_COEFFS / WORLD_IRRADIANCE)."""
     irr = ll.atlas_image(irr_atlas, vn.volume_image(), vn.IRRADIANCE_ROLE, vn.IRRADIANCE_IMAGE)
     vis = ll.atlas_image(vis_atlas, vn.visibility_image(), vn.VISIBILITY_ROLE, vn.VISIBILITY_IMAGE)
+    cel = ll.atlas_image(cells, vn.cells_image(), vn.CELLS_ROLE, vn.CELLS_IMAGE)
     irr[vn.SPEC] = json.dumps({"lo": list(map(float, spec.lo)), "hi": list(map(float, spec.hi)),
-                               "shape": [int(x) for x in spec.shape]})
+                               "shape": [int(x) for x in spec.shape], "tiles": int(tiles)})
     if world is not None:
         irr[ll.WORLD_COEFFS] = json.dumps(np.asarray(world, np.float64).reshape(-1, 3).tolist())
     if isinstance(irradiance, bpy.types.Image):
         irr[ll.WORLD_IRRADIANCE] = irradiance
-    trees = vn.build_groups(irr, vis, spec)
+    trees = vn.build_groups(irr, vis, cel, spec, tiles)
     ll.rebuild_group()
     return trees
 

@@ -1,9 +1,11 @@
 """The light volume's node group: core/probe/volume.py ``sample_packed`` in shader nodes, for EEVEE and Cycles.
 
 One group per file, "GS-IBL Light Volume", made by Python from the core's numbers (``shader_constants``: box,
-shape, tile counts, map sizes, biases) and its two packed float images (irradiance and visibility atlases, Closest
-texels blended here: EEVEE's Linear filter reads a coarser mip level wherever the coordinates jump between
-neighbouring pixels, as they do at a cell's boundary when the corner probes change). Inputs: Position and Normal
+shape, tile counts, map sizes, biases) and its three packed float images: the irradiance and visibility atlases
+(Closest texels blended here in EEVEE: its Linear filter reads a coarser mip level wherever the coordinates jump
+between neighbouring pixels, as they do at a cell's boundary when the corner probes change) and the cells image
+(one Closest texel a cell of the grid: its brick's first probe and r; the corners are the brick's sub-cell's where
+r > 1). Inputs: Position and Normal
 (world space); outputs: Irradiance (E/pi, the core's sample_packed term for term: normal bias, eight corners'
 trilinear x Chebyshev weights with DDGI's crush, octahedral lookups with the atlas's borders) and
 Inside: 1 inside the volume's box, falling linearly to 0 one node spacing outside it, where the local-light group
@@ -11,7 +13,8 @@ Inside: 1 inside the volume's box, falling linearly to 0 one node spacing outsid
 
 Of the core's formula, two terms are written in a form that nodes have: ``w < CRUSH ? w^3 / CRUSH^2 : w`` is
 ``min(w, w^3 / CRUSH^2)`` (the same number: w^3 / CRUSH^2 < w exactly where w < CRUSH), and the Chebyshev test's
-``r <= m ? 1 : ...`` is ``max(..., 1 - (r > m))``. A bilinear lookup's fraction is the same in every tile (tile
+``r <= m ? 1 : ...`` is ``max(..., 1 - (r > m))``, and the corner's probe index ``r > 1 ? brick : grid`` is
+``grid + (r > 1) (brick - grid)``. A bilinear lookup's fraction is the same in every tile (tile
 origins are whole texels), so the normal's is computed once for the eight irradiance lookups.
 
 The images and the group's numbers live in datablocks (the images packed, the spec as JSON on the irradiance
@@ -35,9 +38,10 @@ from .node_math import NodeMath
 # where the corner probes change between neighbouring pixels; Closest: 0.4%, 3.3%)
 GROUPS = {"CYCLES": ("GS-IBL Light Volume", "light_volume", True),
           "EEVEE": ("GS-IBL Light Volume EEVEE", "light_volume_eevee", False)}
-IRRADIANCE_ROLE, VISIBILITY_ROLE = "volume_irradiance", "volume_visibility"
+IRRADIANCE_ROLE, VISIBILITY_ROLE, CELLS_ROLE = "volume_irradiance", "volume_visibility", "volume_cells"
 IRRADIANCE_IMAGE, VISIBILITY_IMAGE = "GS-IBL Volume Irradiance", "GS-IBL Volume Visibility"
-SPEC = "gs_ibl_volume_spec"  # irradiance image custom property: JSON {"lo", "hi", "shape"}
+CELLS_IMAGE = "GS-IBL Volume Cells"
+SPEC = "gs_ibl_volume_spec"  # irradiance image custom property: JSON {"lo", "hi", "shape", "tiles"}
 
 
 def volume_image() -> bpy.types.Image | None:
@@ -47,6 +51,10 @@ def volume_image() -> bpy.types.Image | None:
 
 def visibility_image() -> bpy.types.Image | None:
     return find_ours(bpy.data.images, VISIBILITY_ROLE)
+
+
+def cells_image() -> bpy.types.Image | None:
+    return find_ours(bpy.data.images, CELLS_ROLE)
 
 
 def volume_spec(image: bpy.types.Image | None = None) -> GridSpec | None:
@@ -59,24 +67,33 @@ def volume_spec(image: bpy.types.Image | None = None) -> GridSpec | None:
     return GridSpec(tuple(d["lo"]), tuple(d["hi"]), tuple(d["shape"]))
 
 
+def volume_tiles(image: bpy.types.Image | None = None) -> int | None:
+    """The maps in the file's atlases (the grid's probes and the bricks')."""
+    img = image if image is not None else volume_image()
+    raw = img.get(SPEC) if img is not None else None
+    return json.loads(raw).get("tiles") if raw else None
+
+
 def volume_group(engine: str = "CYCLES") -> bpy.types.ShaderNodeTree | None:
     """The file's volume group for ``engine`` ("CYCLES" or "EEVEE"), built for its images when missing (None: the
     file has no volume)."""
     tree = find_ours(bpy.data.node_groups, GROUPS[engine][1])
     if tree is not None:
         return tree
-    irr, vis, spec = volume_image(), visibility_image(), volume_spec()
-    if irr is None or vis is None or spec is None:
+    irr, vis, cells, spec = volume_image(), visibility_image(), cells_image(), volume_spec()
+    if irr is None or vis is None or cells is None or spec is None:
         return None
-    return build_groups(irr, vis, spec)[engine]
+    return build_groups(irr, vis, cells, spec, volume_tiles(irr))[engine]
 
 
-def build_groups(irr: bpy.types.Image, vis: bpy.types.Image, spec: GridSpec) -> dict:
-    """(Re)build the file's volume groups {engine: group} to read ``irr`` and ``vis`` (pack_atlas's) on ``spec``."""
-    return {engine: _group(engine, irr, vis, spec) for engine in GROUPS}
+def build_groups(irr: bpy.types.Image, vis: bpy.types.Image, cells: bpy.types.Image, spec: GridSpec,
+                 tiles: int | None = None) -> dict:
+    """(Re)build the file's volume groups {engine: group} to read ``irr`` and ``vis`` (pack_atlas's, ``tiles``
+    maps; None: the grid's alone) and ``cells`` (pack_cells') on ``spec``."""
+    return {engine: _group(engine, irr, vis, cells, spec, tiles) for engine in GROUPS}
 
 
-def _group(engine: str, irr, vis, spec: GridSpec) -> bpy.types.ShaderNodeTree:
+def _group(engine: str, irr, vis, cells, spec: GridSpec, tiles) -> bpy.types.ShaderNodeTree:
     name, role, linear = GROUPS[engine]
     tree = find_ours(bpy.data.node_groups, role)
     if tree is None:
@@ -87,7 +104,7 @@ def _group(engine: str, irr, vis, spec: GridSpec) -> bpy.types.ShaderNodeTree:
         iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
         iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketVector")
         iface.new_socket("Inside", in_out="OUTPUT", socket_type="NodeSocketFloat")
-    _build(tree, irr, vis, spec, linear)
+    _build(tree, irr, vis, cells, spec, tiles, linear)
     return tree
 
 
@@ -136,10 +153,10 @@ def _bilinear(b: NodeMath, image, origin, local, width: int, height: int, linear
     return lerp(lerp(t[0, 0], t[1, 0], fx), lerp(t[0, 1], t[1, 1], fx), fy)
 
 
-def _build(tree, irr, vis, spec: GridSpec, linear: bool) -> None:
+def _build(tree, irr, vis, cells, spec: GridSpec, tiles, linear: bool) -> None:
     """The nodes of sample_packed (the module docstring says which terms take another form)."""
     tree.nodes.clear()
-    k = pv.shader_constants(spec)
+    k = pv.shader_constants(spec, tiles)
     b = NodeMath(tree)
     gin, gout = b.N.new("NodeGroupInput"), b.N.new("NodeGroupOutput")
     lo, hi = np.asarray(k["lo"], np.float64), np.asarray(k["hi"], np.float64)
@@ -147,12 +164,13 @@ def _build(tree, irr, vis, spec: GridSpec, linear: bool) -> None:
     span = np.where(hi > lo, hi - lo, 1.0)
     top = shape - 1
     # probe positions per axis: lo + i (hi - lo) / (n - 1); one node: the box's middle
-    base = np.where(shape > 1, lo, (lo + hi) / 2)
+    base_pos = np.where(shape > 1, lo, (lo + hi) / 2)
     step = np.where(shape > 1, (hi - lo) / np.maximum(top, 1), 0.0)
     cols = float(k["cols"])
     iw, ih = k["irradiance_size"]
     vw, vh = k["visibility_size"]
-    for img, size, role in ((irr, (iw, ih), "irradiance"), (vis, (vw, vh), "visibility")):
+    for img, size, role in ((irr, (iw, ih), "irradiance"), (vis, (vw, vh), "visibility"),
+                            (cells, k["cells_size"], "cells")):
         if tuple(img.size) != tuple(size):
             raise ValueError(f"{img.name!r} is {tuple(img.size)} pixels; the volume's {role} atlas must be {size}")
 
@@ -160,21 +178,40 @@ def _build(tree, irr, vis, spec: GridSpec, linear: bool) -> None:
     p = b.vec("MULTIPLY_ADD", n, b.const([k["normal_bias"]] * 3), gin.outputs["Position"])
     g = b.vec("MINIMUM", b.vec("MAXIMUM", b.vec("MULTIPLY", b.vec("SUBTRACT", p, b.const(lo)),
                                                      b.const(top / span)), (0.0, 0.0, 0.0)), b.const(top))
-    i0 = b.vec("MINIMUM", b.vec("FLOOR", g), b.const(top))
-    i1 = b.vec("MINIMUM", b.vec("ADD", i0, (1.0, 1.0, 1.0)), b.const(top))
-    f = b.vec("SUBTRACT", g, i0)
-    i0s, i1s, fs = b.separate(i0), b.separate(i1), b.separate(f)
+    # the cell, its brick (the cells image: first brick probe, r) and the sub-cell's corner l0 and fractions
+    c = b.vec("MINIMUM", b.vec("FLOOR", g), b.const(np.maximum(top - 1, 0)))
+    ncx, ncy, _ = k["cells"]
+    ccols, crows = k["cells_size"]
+    cx, cy, cz = b.separate(c)
+    ci = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", cz, float(ncy), cy), float(ncx), cx)
+    crow = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", ci, 0.5), 1.0 / ccols))
+    ccol = b.math("MULTIPLY_ADD", crow, -float(ccols), ci)
+    base, r, _ = b.separate(b.texel(cells, b.math("MULTIPLY", b.math("ADD", ccol, 0.5), 1.0 / ccols),
+                                    b.math("MULTIPLY", b.math("ADD", crow, 0.5), 1.0 / crows)))
+    local = b.scale(b.vec("SUBTRACT", g, c), r)
+    rm1 = b.math("SUBTRACT", r, 1.0)
+    l0 = b.vec("MINIMUM", b.vec("FLOOR", local), b.combine(rm1, rm1, rm1))
+    f = b.vec("SUBTRACT", local, l0)
+    fs = b.separate(f)
     one_minus = [b.math("SUBTRACT", 1.0, fa) for fa in fs]
+    inv_r = b.math("DIVIDE", 1.0, r)
+    fine = b.math("GREATER_THAN", r, 1.0)
+    side = b.math("ADD", r, 1.0)
+    first_brick = b.math("ADD", base, float(k["grid_count"]))
     irr_local = _in_tile(b, _oct_uv(b, n), pv.IRR)
     num, den = None, None
-    for c in range(8):
-        bits = [(c >> a) & 1 for a in range(3)]
-        idx = [i1s[a] if bits[a] else i0s[a] for a in range(3)]
+    for corner in range(8):
+        bits = [(corner >> a) & 1 for a in range(3)]
         tri = b.math("MULTIPLY", b.math("MULTIPLY", *[fs[a] if bits[a] else one_minus[a] for a in range(2)]),
                      fs[2] if bits[2] else one_minus[2])
-        q = b.combine(*[b.math("MULTIPLY_ADD", idx[a], float(step[a]), float(base[a])) for a in range(3)])
-        # i = ix + nx (iy + ny iz); its tile's column and row
-        i = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", idx[2], float(shape[1]), idx[1]), float(shape[0]), idx[0])
+        ll = b.vec("ADD", l0, tuple(map(float, bits)))
+        # q = first node + (c + L / r) step; the grid's index of node min(c + L, top); the brick's base + L's
+        q = b.vec("MULTIPLY_ADD", b.vec("ADD", c, b.scale(ll, inv_r)), b.const(step), b.const(base_pos))
+        nx_, ny_, nz_ = b.separate(b.vec("MINIMUM", b.vec("ADD", c, ll), b.const(top)))
+        coarse = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", nz_, float(shape[1]), ny_), float(shape[0]), nx_)
+        lx, ly, lz = b.separate(ll)
+        brick = b.math("ADD", b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", lz, side, ly), side, lx), first_brick)
+        i = b.math("MULTIPLY_ADD", b.math("SUBTRACT", brick, coarse), fine, coarse)
         row = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", i, 0.5), 1.0 / cols))
         col = b.math("MULTIPLY_ADD", row, -cols, i)
         away = b.vec("SUBTRACT", p, q)

@@ -288,17 +288,25 @@ def _node_frame(spec: GridSpec) -> tuple[np.ndarray, np.ndarray]:
     return np.where(n > 1, lo, (lo + hi) / 2), np.where(n > 1, (hi - lo) / np.maximum(n - 1, 1), 0.0)
 
 
+def brick_keys_of(cell, r: int) -> np.ndarray:
+    """((r + 1)^3, 3) int: the probes of cell ``cell``'s brick of ``r``, in KEY_UNITS of a cell from the first node,
+    in the brick's order lx + (r + 1) (ly + (r + 1) lz)."""
+    lz, ly, lx = np.meshgrid(*(np.arange(r + 1),) * 3, indexing="ij")
+    return np.asarray(cell, int) * KEY_UNITS + np.stack([lx, ly, lz], -1).reshape(-1, 3) * (KEY_UNITS // r)
+
+
+def node_keys(spec: GridSpec) -> np.ndarray:
+    """(N, 3) int: the grid's nodes in brick keys' units, in linear order."""
+    nodes = np.stack(np.meshgrid(*(np.arange(n) for n in spec.shape), indexing="ij"), -1)
+    return flat_cells(nodes) * KEY_UNITS
+
+
 def brick_keys(spec: GridSpec, refine: np.ndarray) -> np.ndarray:
-    """(B, 3) int: every brick probe's position in KEY_UNITS of a cell from the first node, bricks in cell order
-    (the atlas's order): equal keys are one place (a brick's corners are grid nodes, neighbours share faces)."""
+    """(B, 3) int: every brick probe's place (brick_keys_of), bricks in cell order (the atlas's order): equal keys
+    are one place (a brick's corners are grid nodes, neighbours share faces)."""
     r = np.asarray(refine, int)
-    cells = np.stack(np.meshgrid(*(np.arange(k) for k in r.shape), indexing="ij"), -1)
-    out = []
-    for c, rc in zip(flat_cells(cells), flat_cells(r)):
-        if rc > 1:
-            lz, ly, lx = np.meshgrid(*(np.arange(rc + 1),) * 3, indexing="ij")
-            local = np.stack([lx, ly, lz], -1).reshape(-1, 3)
-            out.append(c * KEY_UNITS + local * (KEY_UNITS // rc))
+    cells = flat_cells(np.stack(np.meshgrid(*(np.arange(k) for k in r.shape), indexing="ij"), -1))
+    out = [brick_keys_of(c, rc) for c, rc in zip(cells, flat_cells(r)) if rc > 1]
     return np.concatenate(out) if out else np.zeros((0, 3), int)
 
 

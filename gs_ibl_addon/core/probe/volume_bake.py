@@ -131,27 +131,24 @@ def far_distance(spec: GridSpec) -> float:
     return FAR_FACTOR * (float(np.linalg.norm(np.subtract(spec.hi, spec.lo))) + spec_spacing(spec))
 
 
-def bake_volume(renderer, spec: GridSpec, face_size: int = DEFAULT_FACE,
+def bake_probes(renderer, positions: np.ndarray, far: float, near: float, face_size: int = DEFAULT_FACE,
                 progress: Callable[[int, int], None] | None = None, hole_colour=(0.0, 0.0, 0.0),
-                inside_test: bool = True, lod_k: float = 0.0) -> LightVolume:
-    """The light volume of the splats ``renderer`` holds (world space), probes on ``spec``; ``face_size``^2 cube
-    faces; ``progress(done, total)`` after each submission; ``lod_k`` > 0 (a renderer built with a level of detail):
-    merged splats where a probe's pixel allows (SplatRenderer.render's). Timings (ms): render (GPU and read-back),
-    maps (numpy)."""
+                inside_test: bool = True, lod_k: float = 0.0) -> dict:
+    """Probes at (P, 3) ``positions`` -> {"irradiance" (P, IRR, IRR, 3), "moments" (P, VIS, VIS, 2) (zero for a probe
+    inside an object: splats within ``near`` metres over INSIDE_FRACTION of its sphere), "holes" (P,), "inside"
+    (P,), "render_ms", "maps_ms", "per_submission"}; ``far``: the distance of a direction with no splats."""
     from ..render.views import ViewBatch
     face = int(face_size)
     if face < 4 or face & (face - 1):
         raise ValueError(f"face size {face_size} must be a power of two, 4 or more")
-    pos = probe_positions(spec)
+    pos = np.asarray(positions, np.float64).reshape(-1, 3)
     n = len(pos)
-    chunk = probes_per_submission(renderer, n, face)
-    far = far_distance(spec)
+    chunk = probes_per_submission(renderer, max(n, 1), face)
     irr = np.empty((n, IRR, IRR, 3))
     mom = np.empty((n, VIS, VIS, 2))
     holes = np.empty(n)
     inside = np.zeros(n, bool)
     t_render = t_maps = 0.0
-    near = 0.5 * spec_spacing(spec)
     for start in range(0, n, chunk):
         t0 = time.perf_counter()
         part = pos[start:start + chunk]
@@ -159,26 +156,60 @@ def bake_volume(renderer, spec: GridSpec, face_size: int = DEFAULT_FACE,
         rgba = res.frame.read_probes()
         depth = res.frame.depth.read(np.float32, len(part) * 6 * face * face).reshape(len(part), 6, face, face)
         t1 = time.perf_counter()
-        irr[start:start + len(part)], mom[start:start + len(part)], holes[start:start + len(part)] = \
-            maps_from_cubes(rgba, depth, far, hole_colour)
+        sl = slice(start, start + len(part))
+        irr[sl], mom[sl], holes[sl] = maps_from_cubes(rgba, depth, far, hole_colour)
         if inside_test:
             sa = texel_solid_angles(face)
             close = (rgba[..., 3] >= COVERED) & (depth * _radial(face).reshape(6, face, face) < near)
-            inside[start:start + len(part)] = (close * sa).reshape(len(part), -1).sum(1) / (4 * np.pi) \
-                > INSIDE_FRACTION
+            inside[sl] = (close * sa).reshape(len(part), -1).sum(1) / (4 * np.pi) > INSIDE_FRACTION
         t_render += t1 - t0
         t_maps += time.perf_counter() - t1
         if progress is not None:
             progress(start + len(part), n)
     mom[inside] = 0.0
-    report = []
+    return {"irradiance": irr, "moments": mom, "holes": holes, "inside": inside, "render_ms": 1e3 * t_render,
+            "maps_ms": 1e3 * t_maps, "per_submission": chunk}
+
+
+def probe_report(holes: np.ndarray, inside: np.ndarray, hole_colour=(0.0, 0.0, 0.0)) -> list[str]:
+    """The user's lines about probes inside objects and probes that see holes."""
+    n, report = len(holes), []
     if inside.any():
         report.append(f"{int(inside.sum())} of {n} probes are inside splat objects: left out of the lookup")
     if (holes > HOLE_REPORT).any():
         report.append(f"{int((holes > HOLE_REPORT).sum())} of {n} probes see holes (up to "
                       f"{100 * holes.max():.0f}% of their sphere has no splats): filled with "
                       f"{tuple(map(float, hole_colour))}")
-    return LightVolume(spec, grid_maps(irr, spec.shape), grid_maps(mom, spec.shape),
-                       timings={"render": 1e3 * t_render, "maps": 1e3 * t_maps, "probes": n, "face": face,
-                                "per_submission": chunk, "lod_k": float(lod_k)},
-                       report=report)
+    return report
+
+
+def bake_volume(renderer, spec: GridSpec, face_size: int = DEFAULT_FACE,
+                progress: Callable[[int, int], None] | None = None, hole_colour=(0.0, 0.0, 0.0),
+                inside_test: bool = True, lod_k: float = 0.0) -> LightVolume:
+    """The light volume of the splats ``renderer`` holds (world space), probes on ``spec`` (no bricks:
+    volume_refine.bake_refined adds them); ``face_size``^2 cube faces; ``progress(done, total)`` after each
+    submission; ``lod_k`` > 0 (a renderer built with a level of detail): merged splats where a probe's pixel allows
+    (SplatRenderer.render's). Timings (ms): render (GPU and read-back), maps (numpy)."""
+    b = bake_probes(renderer, probe_positions(spec), far_distance(spec), 0.5 * spec_spacing(spec), face_size,
+                    progress, hole_colour, inside_test, lod_k)
+    n = spec.count
+    return LightVolume(spec, grid_maps(b["irradiance"], spec.shape), grid_maps(b["moments"], spec.shape),
+                       timings={"render": b["render_ms"], "maps": b["maps_ms"], "probes": n, "face": int(face_size),
+                                "per_submission": b["per_submission"], "lod_k": float(lod_k)},
+                       report=probe_report(b["holes"], b["inside"], hole_colour))
+
+
+def point_irradiance(renderer, points: np.ndarray, normals: np.ndarray, face_size: int = 32,
+                     chunk: int = 24) -> np.ndarray:
+    """The reference a volume is measured against: E/pi (M, 3) at each point from its own cube (``face_size``^2,
+    every splat), the exact cosine integral of its texels at the point's unit normal."""
+    w = face_directions(face_size).reshape(-1, 3)
+    sa = np.broadcast_to(texel_solid_angles(face_size), (6, face_size, face_size)).reshape(-1)
+    pts, nrm = np.asarray(points, np.float64).reshape(-1, 3), np.asarray(normals, np.float64).reshape(-1, 3)
+    out = np.empty((len(pts), 3))
+    for s in range(0, len(pts), chunk):
+        cubes = renderer.render_probes(pts[s:s + chunk], face_size).frame.read_probes()[..., :3]
+        lobe = np.maximum(nrm[s:s + chunk] @ w.T, 0.0) * sa / np.pi
+        out[s:s + chunk] = np.einsum("pk,pkc->pc", lobe, cubes.reshape(len(lobe), -1, 3).astype(np.float64))
+    return out
+

@@ -71,9 +71,10 @@ def nodes_for(lo, hi, spacing: float) -> tuple[int, int, int]:
 
 
 def plan_volume(boxes, spacing: float, budget: int = DEFAULT_BUDGET, margin: float = MARGIN, within=None,
-                coarsen: bool = False) -> VolumePlan:
-    """The grid over ``boxes`` at ``spacing`` (metres), within ``budget`` probes: refused (VolumeTooLarge, naming
-    the spacing that fits and the box that fits this spacing) or, with ``coarsen``, coarsened and said so."""
+                coarsen: bool = False, share: float = 1.0) -> VolumePlan:
+    """The grid over ``boxes`` at ``spacing`` (metres), within ``share`` of ``budget`` probes (the rest: the
+    bricks', volume_refine.py): refused (VolumeTooLarge, naming the spacing that fits and the box that fits this
+    spacing) or, with ``coarsen``, coarsened and said so."""
     if not (spacing > 0 and math.isfinite(spacing)):
         raise ValueError(f"volume spacing {spacing!r} must be a positive number of metres")
     if int(budget) < 8:
@@ -83,20 +84,22 @@ def plan_volume(boxes, spacing: float, budget: int = DEFAULT_BUDGET, margin: flo
     shape = nodes_for(lo, hi, s)
     messages = []
     fits = s
-    while int(np.prod(shape)) > budget or max(shape) > MAX_NODES:
+    limit = max(8, int(budget * share))
+    what = f"the budget of {budget}" if limit == budget else f"the grid's {limit} of the budget of {budget}"
+    while int(np.prod(shape)) > limit or max(shape) > MAX_NODES:
         fits *= 1.05
         shape = nodes_for(lo, hi, fits)
     if fits > s:
         count = int(np.prod(nodes_for(lo, hi, s)))
         ext = hi - lo
-        side = (budget ** (1 / 3) - 1) * s
+        side = (limit ** (1 / 3) - 1) * s
         if not coarsen:
             raise VolumeTooLarge(f"a light volume over {ext[0]:.1f} x {ext[1]:.1f} x {ext[2]:.1f} m at {s:.2f} m "
-                                 f"spacing needs {count} probes, over the budget of {budget}: use a spacing of "
-                                 f"{fits:.2f} m or more, a budget of {count} or more, or light a region of about "
-                                 f"{side:.1f} m a side")
+                                 f"spacing needs {count} probes, over {what}: use a spacing of {fits:.2f} m or "
+                                 f"more, a budget of {math.ceil(count / share)} or more, or light a region of "
+                                 f"about {side:.1f} m a side")
         messages.append(f"light volume coarsened from {s:.2f} m to {fits:.2f} m spacing: {count} probes were over "
-                        f"the budget of {budget}")
+                        f"{what}")
     spec = GridSpec(tuple(map(float, lo)), tuple(map(float, hi)), shape)
     messages.append(f"light volume: {spec.count} probes ({shape[0]} x {shape[1]} x {shape[2]}) over "
                     f"{hi[0] - lo[0]:.1f} x {hi[1] - lo[1]:.1f} x {hi[2] - lo[2]:.1f} m, {fits:.2f} m apart")
@@ -132,16 +135,18 @@ def spacing_from_light(volume: LightVolume, tolerance: float = DEFAULT_TOLERANCE
 
 
 def choose_volume(renderer, boxes, tolerance: float = DEFAULT_TOLERANCE, budget: int = DEFAULT_BUDGET,
-                  margin: float = MARGIN, within=None, coarsen: bool = True) -> tuple[VolumePlan, LightVolume]:
-    """The plan for ``boxes`` from the light the splats in ``renderer`` give: a coarse volume measured first (also
-    returned: a caller whose plan keeps the coarse spacing need not bake again)."""
+                  margin: float = MARGIN, within=None, coarsen: bool = True,
+                  share: float = 1.0) -> tuple[VolumePlan, LightVolume]:
+    """The plan for ``boxes`` from the light the splats in ``renderer`` give, the grid within ``share`` of
+    ``budget``: a coarse volume measured first (also returned: a caller whose plan keeps the coarse spacing need not
+    bake again)."""
     from .volume_bake import bake_volume
     lo, hi = region_box(boxes, margin, within)
     coarse_spacing = max(float(np.max(hi - lo)) / (COARSE_NODES - 1), MIN_SPACING)
     coarse = plan_volume([(lo, hi)], coarse_spacing, budget=max(budget, 8), margin=0.0, coarsen=True)
     measured = bake_volume(renderer, coarse.spec, face_size=COARSE_FACE, inside_test=False)
     spacing = spacing_from_light(measured, tolerance)
-    plan = plan_volume([(lo, hi)], spacing, budget, margin=0.0, coarsen=coarsen)
+    plan = plan_volume([(lo, hi)], spacing, budget, margin=0.0, coarsen=coarsen, share=share)
     plan.messages.insert(0, f"light changes {100 * tolerance:.0f}% over {spacing:.2f} m (measured on "
                             f"{coarse.spec.count} probes)")
     return plan, measured

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..scene import SplatScene
-from ..synthetic import WALL_COLOURS, concat, fibonacci_sphere, room_scene
+from ..synthetic import WALL_COLOURS, concat, fibonacci_sphere, room_scene, sphere_object
 from .grid import GridSpec
 
 SIZE = (3.0, 3.0, 2.5)
@@ -73,3 +73,19 @@ def sphere_points(n: int = 400) -> tuple[np.ndarray, np.ndarray]:
     """(points, normals) on the leak test's sphere."""
     d = fibonacci_sphere(n)
     return np.asarray(SPHERE_CENTRE) + SPHERE_RADIUS * d, d
+
+
+# The bricks' scene (volume_refine.py): a closed room with a small bright ball where the grid's nodes are 0.9-1 m
+# apart. LAMP_SPEC's nodes: x, y -1, 0, 1; z 0.5, 1.4, 2.3; the ball sits inside cell (1, 1, 1), the sphere of
+# points 0.4 m below it in the same cell, where the light falls as ~1/d^2 between the nodes.
+LAMP, LAMP_RADIUS, LAMP_RADIANCE = (0.3, 0.35, 1.95), 0.08, 40.0
+LAMP_SPEC = GridSpec((-1.0, -1.0, 0.5), (1.0, 1.0, 2.3), (3, 3, 3))
+BELOW_LAMP, BELOW_RADIUS = (0.3, 0.35, 1.5), 0.15
+
+
+def lamp_room(seed: int = 0) -> SplatScene:
+    """A closed 3 x 3 x 2.5 m room (walls WALL_COLOURS x DIM x 2) with a ball of radiance LAMP_RADIANCE at LAMP;
+    storage order shuffled."""
+    room = _room(0.0, {k: tuple(2 * DIM * c for c in v) for k, v in WALL_COLOURS.items()})
+    scene = concat([room, sphere_object(LAMP, LAMP_RADIUS, (LAMP_RADIANCE,) * 3, 0.03)], "<lamp room>")
+    return scene.subset(np.random.default_rng(seed).permutation(scene.count))

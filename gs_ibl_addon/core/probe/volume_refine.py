@@ -1,0 +1,168 @@
+"""Bricks where the light changes inside a cell: "model no more than a scene needs" (issue 37).
+
+A regular grid follows the light only as well as its spacing: 512 probes over the sample room are 0.54 m apart,
+and 0.5 m below its lamp the light changes 10% over 0.25 m, so a sphere there read +10..+47%. Finer everywhere
+costs the whole room for a few cells. Here each cell is asked instead:
+
+- Measure: the grid's nodes and every cell's centre are baked together (volume_bake.bake_probes). At a centre the
+  lookup (volume.sample: eight corners, trilinear x Chebyshev) is compared with the centre's own map over the map's
+  texel directions: the mean absolute luminance error over the mean is the cell's error. The centre is where
+  trilinear interpolation errs most for a smooth field, and it sees what the corners miss: a lamp or a wall inside
+  the cell.
+- Choose: linear interpolation errs as the square of the spacing, so a brick of r (volume.BRICK_LEVELS: 2 or 4;
+  its nodes r + 1 a side, the centre one of them) cuts the error about r^2 times: each cell gets the smallest r
+  whose error / r^2 is within the tolerance. Cells are taken worst first while the budget holds the probes they add
+  (bricks share their faces and corners with the grid and each other: a probe is rendered once).
+- Bake: the new probes, in batched submissions; the bricks' maps are gathered from grid nodes, centres and new
+  probes by place (volume.brick_keys).
+
+A brick's face meets an unrefined neighbour's face at different nodes: the light is continuous only where both
+agree, so the seam is at most the coarse cell's own interpolation error (what the brick was made for). Nested
+levels keep r = 2 and r = 4 faces on shared nodes.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+
+from .grid import GridSpec
+from .variation import LUMINANCE
+from .volume import (BRICK_LEVELS, IRR, KEY_UNITS, NORMAL_BIAS, LightVolume, brick_keys, brick_keys_of, cell_shape,
+                     flat_cells, grid_maps, key_positions, node_keys, probe_positions, sample, spec_spacing,
+                     texel_directions)
+from .volume_bake import DEFAULT_FACE, bake_probes, far_distance, probe_report
+
+# The grid's share of the probe budget; the cells' centres and the bricks take the rest. Over the sample room's five
+# places (volume_bench.py, 2026-12-05, 64 points a sphere): the grid at 0.6 m (300 probes) and bricks to 512 put
+# every place's camera-facing mean within 3% (the grid alone: 3 of 5; at 1.0 m with 430 probes of bricks: 4 of 5,
+# the lamp's 4.7% low), per point 1.3-3.3% mean (the grid alone 1.3-16%).
+GRID_SHARE = 0.6
+REFINE_TOLERANCE = 0.02  # a cell's error at its centre (mean absolute luminance error over the mean) a brick is for
+CENTRE_CHUNK = 64  # cells a numpy lookup at a time (x IRR^2 normals x 8 corners)
+
+
+def cell_keys(spec: GridSpec) -> np.ndarray:
+    """(C, 3) every cell's centre in brick_keys' units, cells in linear order."""
+    cells = np.stack(np.meshgrid(*(np.arange(k) for k in cell_shape(spec)), indexing="ij"), -1)
+    return flat_cells(cells) * KEY_UNITS + KEY_UNITS // 2
+
+
+def cells_touching(spec: GridSpec, boxes) -> np.ndarray:
+    """(C,) bool in cell order: cells whose box meets any of ``boxes`` ((lo, hi) pairs; None: every cell)."""
+    keys = cell_keys(spec)
+    if boxes is None:
+        return np.ones(len(keys), bool)
+    lo = key_positions(spec, keys - KEY_UNITS // 2)
+    hi = key_positions(spec, keys + KEY_UNITS // 2)
+    out = np.zeros(len(keys), bool)
+    for blo, bhi in boxes:
+        out |= np.all(lo <= np.asarray(bhi, np.float64) + 1e-9, 1) & np.all(hi >= np.asarray(blo, np.float64) - 1e-9,
+                                                                            1)
+    return out
+
+
+def centre_errors(volume: LightVolume, centre_irradiance: np.ndarray, cells: np.ndarray | None = None) -> np.ndarray:
+    """(C,) the error of each of ``cells`` ((C,) indices in cell order; None: all): the lookup at its centre against
+    the centre's own map (C, IRR, IRR, 3), over the map's texel directions, mean |luminance difference| / mean
+    luminance."""
+    spec = volume.spec
+    keys = cell_keys(spec)
+    centres = key_positions(spec, keys if cells is None else keys[cells])
+    normals = texel_directions(IRR).reshape(-1, 3)
+    back = NORMAL_BIAS * spec_spacing(spec) * normals  # the lookup moves a point along its normal: start it back
+    out = np.empty(len(centres))
+    for s in range(0, len(centres), CENTRE_CHUNK):
+        c = centres[s:s + CENTRE_CHUNK]
+        pts = (c[:, None, :] - back[None]).reshape(-1, 3)
+        got = sample(volume, pts, np.broadcast_to(normals, (len(c), *normals.shape)).reshape(-1, 3))
+        got = (got @ LUMINANCE).reshape(len(c), -1)
+        want = centre_irradiance[s:s + CENTRE_CHUNK].reshape(len(c), -1, 3) @ LUMINANCE
+        out[s:s + len(c)] = np.abs(got - want).mean(1) / np.maximum(np.abs(want).mean(1), 1e-12)
+    return out
+
+
+def choose_bricks(spec: GridSpec, errors: np.ndarray, tolerance: float, budget: int) -> np.ndarray:
+    """(cx, cy, cz) r per cell from (C,) ``errors`` in cell order (0: a cell not measured): the smallest level with
+    error / r^2 <= ``tolerance`` (the largest where none is), worst cells first while their new probes (not grid
+    nodes, centres or another brick's) fit ``budget``; a cell whose level does not fit tries the levels below it."""
+    shape = cell_shape(spec)
+    refine = np.ones(shape, int)
+    if min(spec.shape) < 2 or budget <= 0:
+        return refine
+    taken = {tuple(k) for k in np.vstack([node_keys(spec), cell_keys(spec)])}
+    cells = flat_cells(np.stack(np.meshgrid(*(np.arange(k) for k in shape), indexing="ij"), -1))
+    added = 0
+    for i in np.argsort(-errors, kind="stable"):
+        if errors[i] <= tolerance:
+            break
+        want = next((r for r in BRICK_LEVELS if errors[i] / r ** 2 <= tolerance), BRICK_LEVELS[-1])
+        for r in [x for x in BRICK_LEVELS if x <= want][::-1]:
+            new = {tuple(k) for k in brick_keys_of(cells[i], r)} - taken
+            if added + len(new) <= budget:
+                refine[tuple(cells[i])] = r
+                taken |= new
+                added += len(new)
+                break
+    return refine
+
+
+def bake_refined(renderer, spec: GridSpec, budget: int, tolerance: float = REFINE_TOLERANCE, boxes=None,
+                 face_size: int = DEFAULT_FACE, progress: Callable[[int, int], None] | None = None,
+                 hole_colour=(0.0, 0.0, 0.0), lod_k: float = 0.0) -> LightVolume:
+    """The light volume on ``spec`` with bricks where its cells' centres say the grid misses the light, in the cells
+    that meet ``boxes`` (the lit meshes' boxes, over an animation; None: every cell): at most ``budget`` probes
+    rendered in all (grid, centres, bricks; the grid and centres always). Timings as bake_volume's, plus the probe
+    counts; the report says what was refined."""
+    far, near = far_distance(spec), 0.5 * spec_spacing(spec)
+    cells = np.flatnonzero(cells_touching(spec, boxes)) if min(spec.shape) >= 2 else np.zeros(0, int)
+    n, centre_keys = spec.count, cell_keys(spec)[cells]
+    centres = key_positions(spec, centre_keys)
+    first = bake_probes(renderer, np.vstack([probe_positions(spec), centres]), far, near, face_size,
+                        None if progress is None else lambda d, t: progress(d, t + max(budget - t, 0)),
+                        hole_colour, True, lod_k)
+    grid = LightVolume(spec, grid_maps(first["irradiance"][:n], spec.shape), grid_maps(first["moments"][:n],
+                                                                                      spec.shape))
+    errors = np.zeros(len(cell_keys(spec)))
+    errors[cells] = np.where(first["inside"][n:], 0.0,  # a centre inside an object: no mesh stands there
+                             centre_errors(grid, first["irradiance"][n:], cells))
+    refine = choose_bricks(spec, errors, tolerance, budget - len(first["holes"]))
+    keys = brick_keys(spec, refine)
+    known = {tuple(k): i for i, k in enumerate(np.vstack([node_keys(spec), centre_keys]))}
+    new = sorted({tuple(k) for k in keys} - set(known))
+    done = len(first["holes"])
+    second = bake_probes(renderer, key_positions(spec, np.array(new, int).reshape(-1, 3)), far, near, face_size,
+                         None if progress is None else lambda d, t: progress(done + d, done + t),
+                         hole_colour, True, lod_k) if new else None
+    irr, mom = first["irradiance"], first["moments"]
+    holes, inside = first["holes"], first["inside"]
+    if second is not None:
+        irr, mom = np.concatenate([irr, second["irradiance"]]), np.concatenate([mom, second["moments"]])
+        holes, inside = np.concatenate([holes, second["holes"]]), np.concatenate([inside, second["inside"]])
+        known.update({k: done + j for j, k in enumerate(new)})
+    at = np.array([known[tuple(k)] for k in keys], int)
+    vol = LightVolume(spec, grid.irradiance, grid.moments, refine=refine if len(keys) else None,
+                      brick_irradiance=irr[at] if len(keys) else None, brick_moments=mom[at] if len(keys) else None)
+    levels = {r: int((refine == r).sum()) for r in BRICK_LEVELS if (refine == r).any()}
+    worst = float(errors.max()) if len(errors) else 0.0
+    if levels:
+        report = [f"bricks in {sum(levels.values())} of {refine.size} cells (" + ", ".join(
+            f"{c} at {r}x" for r, c in levels.items()) + f"), {len(new)} probes more: the light changed up to "
+            f"{100 * worst:.0f}% inside a cell"]
+    elif min(spec.shape) < 2:
+        report = ["no bricks: the volume is one node thick on an axis"]
+    elif worst <= tolerance:
+        report = [f"no bricks: the light inside every cell is within {100 * tolerance:.0f}% of the grid's"]
+    else:
+        report = []
+    over = int(((errors > tolerance) & (flat_cells(refine) == 1)).sum())
+    if over and min(spec.shape) >= 2:
+        report.append(f"{over} cells over the {100 * tolerance:.0f}% tolerance kept no brick: over the probe budget "
+                      f"of {budget}")
+    vol.report = report + probe_report(holes, inside, hole_colour)
+    rs = [first] + ([second] if second is not None else [])
+    vol.timings = {"render": sum(b["render_ms"] for b in rs), "maps": sum(b["maps_ms"] for b in rs),
+                   "probes": len(holes), "grid": n, "centres": len(centres), "bricks": len(new),
+                   "face": int(face_size), "per_submission": first["per_submission"], "lod_k": float(lod_k),
+                   "cell_error_max": worst}
+    return vol
