@@ -11,7 +11,7 @@ import pytest
 
 from gs_ibl_addon.core import bake
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe
-from gs_ibl_addon.core.probe.gpu_assemble import GpuFaces, HostFaces
+from gs_ibl_addon.core.probe.gpu_assemble import GpuFaces, HostFaces, KeptCube
 from gs_ibl_addon.core.render.renderer import SplatRenderer
 from gs_ibl_addon.core.synthetic import sample_environment
 from gs_ibl_addon.core.vk import Buffer, get_context
@@ -32,6 +32,9 @@ class _Frame:
     def wait(self) -> bool:
         return False
 
+    def check(self) -> None:
+        pass
+
 
 @pytest.mark.parametrize("start, rounds, out", [
     (64, [{4: 128}, {4: 256, 0: 128}], 128),  # the World probe's rounds: one face finer, then two
@@ -41,11 +44,14 @@ class _Frame:
 def test_gpu_faces_equal_the_numpy_reference(start, rounds, out):
     ctx = get_context()
     rng = np.random.default_rng(start + out)
-    first = rng.random((6, start, start, 4)).astype(np.float32)
-    frame = _Frame(ctx, list(first))
-    gpu, host = GpuFaces(frame), HostFaces(first)
-    frames = [frame]
+    first = rng.random((6, 32, 32, 4)).astype(np.float32)
+    last = rng.random((6, start, start, 4)).astype(np.float32)
+    frames = [_Frame(ctx, list(first)), _Frame(ctx, list(last))]
+    kept = [KeptCube(f) for f in frames]
+    gpu, host = GpuFaces(*kept, 32), HostFaces(first, last, 32)
     try:
+        np.testing.assert_allclose(gpu.first_level(), host.first_level(), rtol=0, atol=2e-6)
+        np.testing.assert_allclose(gpu.level(), host.level(), rtol=0, atol=2e-6)
         for todo in rounds:
             images = [rng.random((todo[f], todo[f], 4)).astype(np.float32) for f in sorted(todo)]
             drawn = _Frame(ctx, images)
@@ -59,6 +65,8 @@ def test_gpu_faces_equal_the_numpy_reference(start, rounds, out):
             assert gpu.sizes == host.sizes
     finally:
         gpu.close()
+        for k in kept:
+            k.close()
         for f in frames:
             f.image.destroy()
 

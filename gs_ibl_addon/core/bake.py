@@ -20,13 +20,12 @@ import numpy as np
 from .probe import ProbeResult, filter_probe
 from .probe.ggx import DEFAULT_ROUGHNESS as GLOSSY_ROUGHNESS
 from .probe.gpu_filters import gpu_ggx_prefilter
-from .probe.gpu_assemble import GpuFaces, HostFaces
+from .probe.gpu_assemble import GpuFaces, HostFaces, KeptCube
 from .probe.gpu_holes import GPU_FILLS, covered_means, fill_frame_holes
 from .probe.highlights import gain_clipped_splats, recover_highlights
 from .probe.holes import fill_holes
 from .probe.lights import extract_lights
 from .probe.near import near_splats
-from .probe.box import faces_to_size
 from .cubemap import FACE_NAMES
 from .render.renderer import SplatRenderer
 from .render.views import ViewBatch
@@ -214,8 +213,8 @@ def irradiance_parts(change: np.ndarray, size: int, ctx=None) -> np.ndarray:
 
 def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], object],
                       filter_cube: Callable[[object], ProbeResult], model: ErrorModel, s: ProbeSettings,
-                      say: Callable[[str, float], None], ctx=None,
-                      faces_from: Callable[[np.ndarray], object] = HostFaces
+                      say: Callable[[str, float], None], keep: Callable[[], object],
+                      faces_from: Callable[[object, object, int], object], ctx=None
                       ) -> tuple[ProbeResult, list[int], list, dict]:
     """Face size 0: "model no more than the probe needs", per cube face.
 
@@ -224,17 +223,17 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
     size its part predicts it needs (a lamp's face finer, a dim wall's kept at 64^2: ErrorModel.plan_faces), those
     faces are rendered again one doubling finer, and their parts, and from the second on their fall per doubling,
     are measured again from what they changed.
-    ``render_faces({face: size})`` renders those faces' views, in face order (a RenderResult);
-    ``faces_from(cube)`` keeps the six faces of the last probe rendered (``cube``, read back: HostFaces; or its
-    frame, still on the GPU: probe/gpu_assemble.py GpuFaces), which put together each round's cube at one size
-    for ``filter_cube`` and the small cube of the parts; ``ctx``: the device that splits the change into faces'
-    parts (irradiance_parts). Returns (the probe, per-face sizes, trials, the tolerance plan)."""
+    ``render_faces({face: size})`` renders those faces' views, in face order (a RenderResult); ``keep()`` keeps
+    the cube just rendered (read back; or on the GPU: probe/gpu_assemble.py KeptCube); ``faces_from(first, last,
+    level)`` takes the search's two kept cubes (HostFaces; GpuFaces) and puts together each round's cube at one
+    size for ``filter_cube`` and the small cubes of the parts; ``ctx``: the device that splits the change into
+    faces' parts (irradiance_parts). Returns (the probe, per-face sizes, trials, the tolerance plan)."""
     limit = int(s.max_face_size)
-    cubes: dict[int, np.ndarray] = {}
+    cubes: dict[int, object] = {}
 
-    def kept(face: int) -> ProbeResult:  # the search's two cubes are small: read back for the per-face parts
+    def kept(face: int) -> ProbeResult:  # the search's two cubes are small: kept for the per-face parts
         probe = probe_at(face)
-        cubes[face] = probe_at.last_frame().read_cube()
+        cubes[face] = keep()
         return probe
 
     result, face, trials, est = search_face(kept, model, s.tolerance, AUTO_FIRST_FACE, min(PER_FACE_BASE, limit),
@@ -242,13 +241,9 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
     sizes = [face] * 6
     if est > s.tolerance and face < limit and len(cubes) == 2:
         first, m = min(cubes), int(result.irradiance.shape[1])
-
-        def level(images) -> np.ndarray:  # where the exact filter integrates (its default downsample)
-            return np.stack([faces_to_size(np.asarray(img[..., :3], np.float64)[None], first)[0] for img in images])
-
-        faces = faces_from(cubes[face])
-        low = level(cubes[face])
-        model.take_parts(irradiance_parts(low - level(cubes[first]), m, ctx), [first] * 6, sizes,
+        faces = faces_from(cubes[first], cubes[face], first)  # level first: where the exact filter integrates
+        low = faces.level()
+        model.take_parts(irradiance_parts(low - faces.first_level(), m, ctx), [first] * 6, sizes,
                          result.irradiance)
         for _ in range(PER_FACE_ROUNDS):
             plan = model.next_sizes(s.tolerance, limit)
@@ -300,14 +295,18 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     lod_k = float(s.lod_k) if s.lod == "auto" and r.lod is not None else 0.0
     m_search = int(s.irradiance_size) or DEFAULT_IRRADIANCE_SIZE  # the size 0 chooses from is picked at the end
 
-    def probe_at(face: int, lod: float = lod_k) -> ProbeResult:
+    def probe_at(face: int, lod: float = lod_k, keep: bool = False) -> ProbeResult:
         cube = ViewBatch.cubemap(pos, face)
         if face < FACE_BY_FACE_FROM:
             # The frame stays on the GPU: the filter reads back the irradiance only, the radiance is read once,
             # for the face size kept (below).
             # wait=False: the filter is queued behind the render and the host waits once for both.
             res = r.render(cube, timestamps=True, wait=False, lod_k=lod)
-            probe = filter_probe(res.frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
+            source = res.frame
+            if keep and GPU_ASSEMBLE:  # copied on the GPU for the per-face search, in the filter's submission
+                source = KeptCube(res.frame)
+                faces.append(source)
+            probe = filter_probe(source, irradiance_size=m_search, method=method, sh_order=s.sh_order,
                                  roughness=None, read_radiance=False, splat_count=splat_count,
                                  device=r.ctx.device_name, **s.extra)
             probe.timings_ms.update({f"render_{k}": v for k, v in res.timings_ms.items()})
@@ -338,13 +337,15 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                             use_gpu=True, vk_context=r.ctx, read_radiance=False, splat_count=splat_count,
                             device=r.ctx.device_name, **s.extra)
 
-    def faces_from(cube: np.ndarray):
-        faces.append(GpuFaces(r.last_frame) if GPU_ASSEMBLE else HostFaces(cube))
+    def keep():  # the cube probe_at(..., keep=True) just rendered
+        return faces[-1] if GPU_ASSEMBLE else r.last_frame.read_cube()
+
+    def faces_from(first, last, level: int):
+        faces.append((GpuFaces if GPU_ASSEMBLE else HostFaces)(first, last, level))
         return faces[-1]
 
-    probe_at.last_frame = lambda: r.last_frame
     rendered: list = []  # renders of single faces (per-face sizes): their GPU times go to the kept probe's
-    faces: list = []  # the per-face search's faces (GpuFaces: closed when the bake is done with its cube)
+    faces: list = []  # the search's kept cubes and faces (on the GPU: closed when the bake is done with them)
     try:
         trials: list[dict] = []
         plan: dict = {}
@@ -355,8 +356,9 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                 say(f"rendering a {face}x{face} cubemap", 0.2)
                 result = probe_at(face)
             elif lod_k == 0:
-                result, face_sizes, trials, plan = choose_face_sizes(probe_at, render_faces, filter_cube,
-                                                                     ErrorModel(), s, say, r.ctx, faces_from)
+                result, face_sizes, trials, plan = choose_face_sizes(
+                    lambda f: probe_at(f, keep=True), render_faces, filter_cube, ErrorModel(), s, say, keep,
+                    faces_from, r.ctx)
                 for res in rendered:
                     for k, v in res.timings_ms.items():
                         result.timings_ms[f"render_{k}"] = result.timings_ms.get(f"render_{k}", 0.0) + v
@@ -364,7 +366,8 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                 result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
         # the kept probe's radiance: on the host (per-face cube put together there), else on the GPU in the last
         # frame rendered or the per-face cube put together there
-        kept = faces[-1].cube if faces and faces[-1].cube is not None else r.last_frame
+        assembled = [held.cube for held in faces if getattr(held, "cube", None) is not None]
+        kept = assembled[-1] if assembled else r.last_frame
         if face_sizes is not None:
             face = int(np.shape(result.radiance)[1]) if result.radiance is not None else kept.face_size
         frame = None

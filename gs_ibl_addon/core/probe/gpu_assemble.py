@@ -1,11 +1,14 @@
 """A cube whose six faces were rendered at different sizes (face size 0's per-face search, core/bake.py
 choose_face_sizes), kept and put together on the GPU: no face is read back, resized on the host and uploaded again.
 
-``GpuFaces`` keeps the faces at their own sizes in one buffer; ``put`` takes the faces a render just drew (its
-GpuFrame, still in flight) and records, in one program queued behind the render: the new faces copied in beside
-the kept ones, the cube at one size for the filters (``cube``: a frame-like AssembledCube that filter_probe, the
-GPU hole fill and the GGX prefilter take as they take a renderer's frame) and the small cube the search splits into
-faces' parts (``level``, read back from a host-visible copy). The filter queued after it makes one submission.
+The search's two uniform cubes (32^2, 64^2) are kept on the GPU as they are rendered (``KeptCube``: a copy queued
+between the render and its filter, no readback: a search that meets the tolerance with them never reads them).
+``GpuFaces`` keeps the faces at their own sizes in one buffer, starting from the last of them, and gives both
+cubes' small levels for the first parts in one readback. ``put`` takes the faces a render just drew (its GpuFrame,
+still in flight) and records, in one program queued behind the render: the new faces copied in beside the kept
+ones, the cube at one size for the filters (``cube``: a frame-like AssembledCube that filter_probe, the GPU hole
+fill and the GGX prefilter take as they take a renderer's frame) and the small cube the search splits into faces'
+parts (``level``, read back from a host-visible copy). The filter queued after it makes one submission.
 
 ``HostFaces`` is the same on the host, the plain numpy reference (``faces_cube``: box.faces_to_size per face);
 tests/test_gpu_assemble.py compares the two.
@@ -31,9 +34,10 @@ def faces_cube(images, size: int) -> np.ndarray:
 class HostFaces:
     """The six faces on the host (read back), resized and stacked in numpy: the reference of GpuFaces."""
 
-    def __init__(self, cube: np.ndarray) -> None:
-        self.images = list(cube)
+    def __init__(self, first: np.ndarray, last: np.ndarray, level: int) -> None:
+        self.images = list(last)
         self.sizes = [int(img.shape[0]) for img in self.images]
+        self._first, self._level = first, level
 
     def put(self, rendered, todo: dict[int, int], out: int, level: int) -> None:
         """As GpuFaces.put, from the render's images read back."""
@@ -43,24 +47,30 @@ class HostFaces:
         self._level = level
 
     def level(self) -> np.ndarray:
-        """(6, level, level, 3) float64: the faces' RGB at put's ``level``."""
-        return np.stack([faces_to_size(np.asarray(img[..., :3], np.float64)[None], self._level)[0]
-                         for img in self.images])
+        """(6, level, level, 3) float64: the faces' RGB at ``level`` (made or put with it)."""
+        return _levelled(self.images, self._level)
+
+    def first_level(self) -> np.ndarray:
+        """(6, level, level, 3) float64: the first cube's RGB at the level made with."""
+        return _levelled(self._first, self._level)
 
     def close(self) -> None:
         pass
 
 
-class AssembledCube:
-    """A one-probe RGBA cube (6, n, n, 4) on the GPU, made by GpuFaces.put: read like a renderer's GpuFrame by the
-    filters (gpu_filters: ``image``, ``face_size``, ``wait``), the hole fill (gpu_holes) and read_cube. Valid until
-    its GpuFaces closes."""
+def _levelled(images, level: int) -> np.ndarray:
+    return np.stack([faces_to_size(np.asarray(img[..., :3], np.float64)[None], level)[0] for img in images])
 
-    batch = None  # frame-like (gpu_filters._is_frame): made from views, not one batch of them
+
+class CubeOnGpu:
+    """A one-probe RGBA cube (6, n, n, 4) on the GPU, read like a renderer's GpuFrame by the filters (gpu_filters:
+    ``image``, ``face_size``, ``wait``), the hole fill (gpu_holes) and ``read_cube``."""
+
+    batch = None  # frame-like (gpu_filters._is_frame), though not one render's batch of views
     probes = 1
 
-    def __init__(self, owner: "GpuFaces", image: Buffer, size: int) -> None:
-        self.owner, self.image, self.face_size = owner, image, size
+    def __init__(self, image: Buffer, size: int) -> None:
+        self.image, self.face_size = image, size
 
     @property
     def ctx(self):
@@ -76,13 +86,12 @@ class AssembledCube:
 
     def check(self) -> None:
         if not self.image.alive:
-            raise RuntimeError("this assembled cube was closed with its faces (GpuFaces.close)")
+            raise RuntimeError("this cube's buffer was given back (its bake is done with it)")
 
     def wait(self) -> bool:
-        """Finish the render the faces came from and the assembly; True when either had to run again, so work
-        queued on the cube meanwhile must run again (as GpuFrame.wait)."""
-        self.check()
-        return self.owner.finish()
+        """Finish the work that makes the cube; True when it had to run again, so work queued on the cube meanwhile
+        must run again (as GpuFrame.wait)."""
+        raise NotImplementedError
 
     def read_cube(self) -> np.ndarray:
         self.wait()
@@ -90,21 +99,74 @@ class AssembledCube:
         return self.image.read(np.float32, self.pixels * 4).reshape(6, n, n, 4)
 
 
-class GpuFaces:
-    """The six faces at their own sizes on the GPU, from a one-probe cubemap frame of the renderer (copied at once,
-    queued: the renderer's next render reuses the frame's buffer)."""
+class KeptCube(CubeOnGpu):
+    """A render's cube copied on the GPU, queued behind the render (still in flight): filter this instead of the
+    frame and the copy goes to the GPU with the filter, in one submission, and outlives the renderer's next render
+    (which reuses, or grows, the frame's buffer)."""
 
     def __init__(self, frame) -> None:
-        frame.wait()
-        self.ctx, n = frame.ctx, frame.face_size
+        frame.check()
+        n = frame.face_size
+        super().__init__(scratch(frame.ctx, 6 * n * n * TEXEL, "probe-kept"), n)
+        self.size, self._frame = n, frame
+        rec = Recorder(frame.ctx, reusable=True)
+        rec.copy(frame.image, self.image, 6 * n * n * TEXEL)
+        self.program = rec.program()
+        self.program.start()
+
+    @property
+    def buffer(self) -> Buffer:
+        return self.image
+
+    def wait(self) -> bool:
+        self.check()
+        redrawn = self._frame.wait() if self._frame is not None else False
+        self._frame = None  # settled: the renderer may render again
+        if self.program.running:
+            self.program.wait()
+        if redrawn:
+            self.program.run()
+        return redrawn
+
+    def close(self) -> None:
+        self.program.close()  # waits for it if it still runs
+        self.image.close()
+
+
+class AssembledCube(CubeOnGpu):
+    """GpuFaces.put's cube: valid until its GpuFaces closes."""
+
+    def __init__(self, owner: "GpuFaces", image: Buffer, size: int) -> None:
+        super().__init__(image, size)
+        self.owner = owner
+
+    def wait(self) -> bool:
+        """Finish the render the faces came from and the assembly (GpuFaces.finish)."""
+        self.check()
+        return self.owner.finish()
+
+
+class GpuFaces:
+    """The six faces at their own sizes on the GPU, from the search's last cube (``last``, a KeptCube: the store
+    starts as its buffer) and with the first one (``first``) for the parts; both stay their owner's to close. The
+    levels of both (``level()``, ``first_level()``) are made in one program queued behind their copies."""
+
+    def __init__(self, first: KeptCube, last: KeptCube, level: int) -> None:
+        self.ctx, n = last.ctx, last.size
         self.sizes = [n] * 6
+        self.store = last.buffer
         self._buffers: list[Buffer] = []
-        self.store = self._buffer(6 * n * n * TEXEL, "probe-faces")
-        self.cube: AssembledCube | None = None
-        self._render, self._results, self._level = None, None, 0
         self._programs: list = []  # queued, not waited for: closed (waited) at close()
-        rec = Recorder(self.ctx)
-        rec.copy(frame.image, self.store, 6 * n * n * TEXEL)
+        self.cube: AssembledCube | None = None
+        self._render, self._level = None, level
+        level_bytes = 6 * level * level * TEXEL
+        self._results = Buffer.staging(self.ctx, 2 * level_bytes, cached=True)  # [level | first's level]
+        small, first_small = (self._buffer(level_bytes, "probe-assembled-level") for _ in range(2))
+        rec = Recorder(self.ctx, reusable=True)
+        self._record_resize(rec, self.store, self.sizes, small, level)
+        self._record_resize(rec, first.buffer, [first.size] * 6, first_small, level)
+        rec.copy(small, self._results, level_bytes)
+        rec.copy(first_small, self._results, level_bytes, 0, level_bytes)
         self._start(rec.program())
 
     def _buffer(self, nbytes: int, name: str) -> Buffer:
@@ -116,26 +178,35 @@ class GpuFaces:
         self._programs.append(program)
         program.start()
 
-    def _offsets(self, sizes: list[int]) -> list[int]:
+    @staticmethod
+    def _offsets(sizes: list[int]) -> list[int]:
         return [sum(n * n for n in sizes[:f]) for f in range(6)]
+
+    def _record_resize(self, rec: Recorder, src: Buffer, sizes: list[int], dst: Buffer, m: int) -> None:
+        """Record the faces of ``src`` (``sizes``, one after another) to one cube of m^2 faces in ``dst``."""
+        at = self._offsets(sizes)
+        for f, n in enumerate(sizes):
+            if n == m:
+                rec.copy(src, dst, n * n * TEXEL, at[f] * TEXEL, f * m * m * TEXEL)
+            else:
+                rec.dispatch(KERNELS["probe_faces_to_size"], [src, omega_table(self.ctx, n), dst],
+                             groups(m * m, 64, self.ctx), n=n, m=m, src_at=at[f], dst_at=f * m * m)
 
     def put(self, rendered, todo: dict[int, int], out: int, level: int) -> None:
         """Keep the faces ``todo`` ({face: size}) that ``rendered`` (the RenderResult of those faces' views, in
         face order; it may still be in flight) drew, and record the cube at ``out`` (``self.cube``) and at
-        ``level`` (``level()``), queued behind the render."""
+        ``level`` (``level()``, as made), queued behind the render."""
+        if level != self._level:
+            raise ValueError(f"GpuFaces made for level {self._level} was put level {level}")
         frame = rendered.frame
         old, old_at = self.store, self._offsets(self.sizes)
         sizes = list(self.sizes)
-        for f in sorted(todo):
+        for f in todo:
             sizes[f] = int(todo[f])
         at = self._offsets(sizes)
         store = self._buffer(sum(n * n for n in sizes) * TEXEL, "probe-faces")
         image = self._buffer(6 * out * out * TEXEL, "probe-assembled")
         small = self._buffer(6 * level * level * TEXEL, "probe-assembled-level")
-        if self._results is None or self._results.nbytes < small.nbytes:
-            if self._results is not None:
-                self._results.destroy()
-            self._results = Buffer.staging(self.ctx, small.nbytes, cached=True)
         rec = Recorder(self.ctx, reusable=True)
         drawn = 0
         for f in range(6):  # the new faces from the frame (its views in face order), the others kept
@@ -145,18 +216,12 @@ class GpuFaces:
                 drawn += n * n
             else:
                 rec.copy(old, store, n * n * TEXEL, old_at[f] * TEXEL, at[f] * TEXEL)
-        for dst, m in ((image, out), (small, level)):
-            for f in range(6):
-                n = sizes[f]
-                if n == m:
-                    rec.copy(store, dst, n * n * TEXEL, at[f] * TEXEL, f * m * m * TEXEL)
-                else:
-                    rec.dispatch(KERNELS["probe_faces_to_size"], [store, omega_table(self.ctx, n), dst],
-                                 groups(m * m, 64, self.ctx), n=n, m=m, src_at=at[f], dst_at=f * m * m)
+        self._record_resize(rec, store, sizes, image, out)
+        self._record_resize(rec, store, sizes, small, level)
         rec.copy(small, self._results, 6 * level * level * TEXEL)
         self._start(rec.program())
         # the old store goes back to the pool at close(), once nothing queued reads it
-        self.store, self.sizes, self._render, self._level = store, sizes, frame, level
+        self.store, self.sizes, self._render = store, sizes, frame
         self.cube = AssembledCube(self, image, out)
 
     def finish(self) -> bool:
@@ -171,11 +236,19 @@ class GpuFaces:
             self._programs[-1].run()
         return redrawn
 
-    def level(self) -> np.ndarray:
-        """(6, level, level, 3) float64: the faces' RGB at put's ``level`` (the search's parts)."""
+    def _read_level(self, k: int) -> np.ndarray:
         self.finish()
         m = self._level
-        return self._results.read(np.float32, 6 * m * m * 4).reshape(6, m, m, 4)[..., :3].astype(np.float64)
+        return (self._results.read(np.float32, 6 * m * m * 4, k * 6 * m * m * TEXEL)
+                .reshape(6, m, m, 4)[..., :3].astype(np.float64))
+
+    def level(self) -> np.ndarray:
+        """(6, level, level, 3) float64: the faces' RGB at ``level`` (made or put with it; the search's parts)."""
+        return self._read_level(0)
+
+    def first_level(self) -> np.ndarray:
+        """(6, level, level, 3) float64: the first cube's RGB at ``level``."""
+        return self._read_level(1)
 
     def close(self) -> None:
         for program in self._programs:
