@@ -9,8 +9,9 @@ shading points on each sphere (Fibonacci, normals outward) the reference is a de
 - world: the World probe (order-2 SH at auto_light_bench's PROBE, 64^2) for every point;
 - auto: Lighting Auto of today: the 9-point measurement with the World probe's place, then the World probe, the mesh's
   own probe or its order-2 SH grid (3^3 or 5^3), as auto_bake_core.py / blender/lighting do;
-- volume S:F:K: one light volume over all five spheres (volume_region.plan_volume, spacing S m), F^2 faces,
-  level of detail k = K (0: every splat), read by volume.sample;
+- volume S:F:K[:B]: one light volume over all five spheres (volume_region.plan_volume, spacing S m), F^2 faces,
+  level of detail k = K (0: every splat), read by volume.sample; with B, bricks (volume_refine.bake_refined) in the
+  cells the spheres touch, up to B probes in all;
 - volume at auto's nodes: a volume per sphere on the nodes of Auto's grid for it (3^3, or 5^3 where Auto takes it),
   16^2 faces: octahedral maps and visibility against order-2 SH at equal density.
 Numbers per place and method: the per-point luminance error relative to the reference (mean, 95th percentile) and
@@ -23,7 +24,8 @@ lavapipe against 64 on the H100 read as a 15% device difference; at 64 points la
 to 4 digits).
 
 Cost: the World probe's bake as the panel's Bake does it (bake_probe with the panel's defaults, warm), and the
-volume's bake (bake_volume, default configuration) over 3 meshes (centre, window, table) and 10 meshes (the five
+volume's bake as Lighting Volume runs it (the light's measurement, the grid at its share of the budget, centres
+and bricks) over 3 meshes (centre, window, table) and 10 meshes (the five
 places and five more about the room); ratio = (World + volume) / World, issue 37's target <= 2x and <= 4x. Also
 Lighting Auto's measurement + grids for the same 3 meshes. All on one renderer built with a level of detail (the
 World probe renders every splat of it). The load average is on every row: timings on a shared CPU are noisy; the
@@ -54,14 +56,14 @@ from gs_ibl_addon.core.probe.grid import (bake_sh_points, eval_irradiance, inter
                                           monomial_coefficients)
 from gs_ibl_addon.core.probe.variation import LUMINANCE  # noqa: E402
 from gs_ibl_addon.core.probe.volume_bake import bake_volume, point_irradiance  # noqa: E402
-from gs_ibl_addon.core.probe.volume_region import plan_volume  # noqa: E402
+from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
+from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume, plan_volume  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.synthetic import fibonacci_sphere  # noqa: E402
 
 RADIUS = 0.25
 REF_FACE = 32
 TOLERANCE = 0.05  # the panel's Variation Tolerance (Auto)
-DEFAULT = (0.6, 16, 0.0)  # spacing, face, lod k: the default configuration timed for the cost rows
 MORE_PLACES = [(-1.5, 1.5, 1.0), (1.5, 1.0, 1.0), (0.8, -1.8, 1.2), (-2.0, -1.8, 1.5), (2.0, -0.8, 0.6)]
 COST_SETS = {"3 meshes": ["centre", "window", "table"], "10 meshes": list(PLACES) + MORE_PLACES}
 
@@ -129,13 +131,15 @@ def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
     refs = {p: reference(r, *data[p][:2]) for p in PLACES}
     print(f"references: {len(PLACES) * n_points} per-point probes in {time.perf_counter() - t0:.1f} s", flush=True)
     volumes = {}
-    for spacing, face, k in configs:
+    for cfg in configs:
+        spacing, face, k = cfg[:3]
         plan = plan_volume(boxes_of(PLACES), spacing, budget=4096)
         t0 = time.perf_counter()
-        volumes[(spacing, face, k)] = (bake_volume(r, plan.spec, face_size=face, lod_k=k), plan,
-                                       time.perf_counter() - t0)
-        print(f"volume {spacing}:{face}:{k}: {plan.messages[-1]}, {volumes[(spacing, face, k)][2]:.1f} s",
-              flush=True)
+        v = (bake_volume(r, plan.spec, face_size=face, lod_k=k) if len(cfg) == 3 else
+             bake_refined(r, plan.spec, int(cfg[3]), boxes=boxes_of(PLACES), face_size=face, lod_k=k))
+        volumes[cfg] = (v, plan, time.perf_counter() - t0)
+        print(f"volume {':'.join(f'{x:g}' for x in cfg)}: {plan.messages[-1]}, {volumes[cfg][2]:.1f} s, "
+              f"{v.timings['probes']} probes {v.report}", flush=True)
     for p in PLACES:
         pts, nrm, facing = data[p]
         want = refs[p]
@@ -150,8 +154,10 @@ def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
         brick = bake_volume(r, spec, face_size=16)
         rows.append({"place": p, "method": "volume at auto's nodes", "probes": spec.count,
                      "bake_s": round(time.perf_counter() - t0, 2), **errors(vol.sample(brick, pts, nrm), want, facing)})
-        for (spacing, face, k), (v, plan, secs) in volumes.items():
-            rows.append({"place": p, "method": f"volume {spacing}:{face}:{k:g}", "probes": plan.spec.count,
+        for cfg, (v, _plan, secs) in volumes.items():
+            name = "volume " + ":".join(f"{x:g}" for x in cfg[:3]) + (f" + bricks to {cfg[3]:g}" if len(cfg) > 3
+                                                                       else "")
+            rows.append({"place": p, "method": name, "probes": v.timings["probes"],
                          "bake_s": round(secs, 2), **errors(vol.sample(v, pts, nrm), want, facing)})
     return rows
 
@@ -163,11 +169,12 @@ def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
         return time.perf_counter() - t0
 
     def volume(names) -> tuple[float, int]:
-        spacing, face, k = DEFAULT
-        plan = plan_volume(boxes_of(names), spacing, coarsen=True)
+        """Lighting Volume's bake as blender/lighting/volume.py runs it: the light's measurement and the grid's plan
+        (its share of the budget), then grid, centres and bricks."""
         t0 = time.perf_counter()
-        bake_volume(r, plan.spec, face_size=face, lod_k=k)
-        return time.perf_counter() - t0, plan.spec.count
+        plan, _ = choose_volume(r, boxes_of(names), share=GRID_SHARE)
+        v = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes_of(names))
+        return time.perf_counter() - t0, v.timings["probes"]
 
     def auto(names) -> float:
         t0 = time.perf_counter()
@@ -246,14 +253,16 @@ def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--points", type=int, default=256, help="shading points per sphere")
-    ap.add_argument("--configs", default="0.6:16:0,0.6:16:1,0.4:16:0,0.6:32:0",
-                    help="volume configurations spacing:face:lod_k, comma separated")
+    ap.add_argument("--configs", default="0.6:16:0,0.4:16:0,0.6:16:0:512,1.0:16:0:512",
+                    help="volume configurations spacing:face:lod_k[:budget], comma separated (a budget: bricks up "
+                         "to that many probes in all, volume_refine.py)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--skip-accuracy", action="store_true")
     ap.add_argument("--out-csv", default=None)
     ap.add_argument("--png", default=os.path.join(REPO, "docs", "img", "volume_bench.png"))
     a = ap.parse_args()
-    configs = [tuple(float(x) if i != 1 else int(x) for i, x in enumerate(c.split(":"))) for c in a.configs.split(",")]
+    configs = [tuple(float(x) if i != 1 else int(x) for i, x in enumerate(c.split(":"))) for c in
+               a.configs.split(",")]
     scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
     t0 = time.perf_counter()
     r = SplatRenderer(scene, lod=True)

@@ -40,8 +40,10 @@ def _synthetic():
     def irradiance(p, n):
         return np.stack([0.5 + 0.15 * p[..., 0] + 0.1 * n[..., 1], 0.4 + 0.3 * n[..., 2] + 0.1 * p[..., 2],
                          0.3 + 0.2 * n[..., 0] - 0.05 * p[..., 1]], -1)
-    irr, vis = pv.pack_atlas(pv.synthetic_volume(spec, irradiance, wall_x=0.5))
-    return spec, irr, vis
+    refine = np.ones(pv.cell_shape(spec), int)
+    refine[1, 0, 0], refine[2, 1, 1] = 4, 2  # bricks where the sphere is: the group's brick path in every Blender
+    v = pv.synthetic_volume(spec, irradiance, wall_x=0.5, refine=refine)
+    return spec, (*pv.pack_atlas(v), pv.pack_cells(v)), v.tiles
 
 
 def _sphere_points(size: int, scale: float, radius: float, max_r: float = 0.85):
@@ -57,28 +59,29 @@ def _sphere_points(size: int, scale: float, radius: float, max_r: float = 0.85):
 def volume_run(tmp_path_factory):
     matrix.require_root(ENTRY.root)
     runner = matrix.Runner(ENTRY, tmp_path_factory.mktemp("volume"))
-    spec, irr, vis = _synthetic()
+    spec, (irr, vis, cells), tiles = _synthetic()
     try:
         bs.write_room_for_blender(runner.host / "room.ply", REPO / "samples" / "room.ply")
         np.save(runner.host / "irr.npy", irr)
         np.save(runner.host / "vis.npy", vis)
+        np.save(runner.host / "cells.npy", cells)
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": SIZE, "threads": 2,
                 "samples": 16, "eevee_samples": 16, "albedo": 0.8, "radius": RADIUS, "path": PATH,
                 "probe": [0.0, 0.0, 1.2], "follow_scale": FOLLOW,
-                "spec": {"lo": list(spec.lo), "hi": list(spec.hi), "shape": list(spec.shape)}}
+                "spec": {"lo": list(spec.lo), "hi": list(spec.hi), "shape": list(spec.shape)}, "tiles": tiles}
         result = matrix.run_script(runner, HERE / "volume_scene.py", args, "GSIBL-VOLUME-RESULT", "volume")
         arrays = {p.stem: np.load(p) for p in runner.host.glob("*.npy")}
-        yield result, arrays, (spec, irr, vis)
+        yield result, arrays, (spec, irr, vis, cells)
     finally:
         runner.close()
 
 
 def test_group_matches_sample_packed(volume_run):
     from gs_ibl_addon.core.probe import volume as pv
-    result, arrays, (spec, irr, vis) = volume_run
+    result, arrays, (spec, irr, vis, cells) = volume_run
     assert result.get("ok"), result.get("error")
     mask, n = _sphere_points(SIZE, 2.4, 1.0)
-    want = pv.sample_packed(irr, vis, spec, n, n)
+    want = pv.sample_packed(irr, vis, spec, n, n, cells=cells)
     for engine in ("EEVEE", "CYCLES"):
         got = arrays[f"group_{engine}"][..., :3][mask]
         rel = np.abs(got - want).max(-1) / np.abs(want).mean()
@@ -97,6 +100,7 @@ def test_a_moving_sphere_is_lit_where_it_stands(volume_run):
     s = result["volume_spec"]
     spec = GridSpec(tuple(s["lo"]), tuple(s["hi"]), tuple(s["shape"]))
     irr, vis = arrays["atlas_irr"].astype(np.float64), arrays["atlas_vis"].astype(np.float64)
+    cells = arrays["atlas_cells"].astype(np.float64)
     mask, n = _sphere_points(SIZE, FOLLOW, RADIUS)
     wants = []
     for f, loc in enumerate(PATH, 1):
@@ -104,7 +108,7 @@ def test_a_moving_sphere_is_lit_where_it_stands(volume_run):
         keep = mask & (px[..., 3] > 0.999)
         nn = n[keep[mask]]
         got = px[..., :3][keep].mean(0)
-        want = 0.8 * pv.sample_packed(irr, vis, spec, np.asarray(loc) + RADIUS * nn, nn).mean(0)
+        want = 0.8 * pv.sample_packed(irr, vis, spec, np.asarray(loc) + RADIUS * nn, nn, cells=cells).mean(0)
         wants.append(want)
         print(f"frame {f} at {loc}: EEVEE mean {np.round(got, 4)}, 0.8 x sample_packed {np.round(want, 4)}, "
               f"ratio {np.round(got / want, 4)}")

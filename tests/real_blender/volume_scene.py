@@ -1,13 +1,13 @@
 """The light volume in a real Blender (issue 37): run by tests/real_blender/test_volume_light.py inside a Blender
 root with the built zip installed by Blender's installer, never by pytest itself:
     python volume_scene.py ARGS.json
-1. The volume group against the core: the host's synthetic atlases (irr.npy, vis.npy, ARGS["spec"]) stored by the
-   installed extension (lighting/volume.py store_volume); a unit sphere at the origin with the engine's volume group
-   into an Emission, seen by an orthographic camera on +X; rendered in EEVEE and Cycles (group_<engine>.npy).
+1. The volume group against the core: the host's synthetic images (irr.npy, vis.npy, cells.npy, ARGS["spec"],
+   ARGS["tiles"]) stored by the installed extension (lighting/volume.py store_volume); a unit sphere at the origin
+   with the engine's volume group into an Emission, seen by an orthographic camera on +X; rendered in EEVEE and Cycles (group_<engine>.npy).
 2. Motion: the sample room (Blender's PLY importer, native splats hidden from the camera), a white sphere keyframed
    over ARGS["path"] (one frame each), the probe at ARGS["probe"] with Lighting Volume: one bake; then at each frame
    an orthographic camera 3 m along +X of the sphere renders it in EEVEE (frame_<n>.npy); the file's atlases are
-   saved (atlas_irr.npy, atlas_vis.npy, rows bottom first) with the spec, for the host's sample_packed.
+   saved (atlas_irr.npy, atlas_vis.npy, atlas_cells.npy, rows bottom first) with the spec, for the host's sample_packed.
 A line RESULT_TAG + JSON gives the reports and times.
 """
 from __future__ import annotations
@@ -73,8 +73,8 @@ def main() -> dict:
         bs.reference_render_settings(ARGS["size"], ARGS["threads"])
         sp = ARGS["spec"]
         spec = grid.GridSpec(tuple(sp["lo"]), tuple(sp["hi"]), tuple(sp["shape"]))
-        vol.store_volume(np.load(os.path.join(ARGS["work"], "irr.npy")),
-                         np.load(os.path.join(ARGS["work"], "vis.npy")), spec)
+        vol.store_volume(*(np.load(os.path.join(ARGS["work"], f"{k}.npy")) for k in ("irr", "vis", "cells")), spec,
+                         ARGS["tiles"])
         bpy.ops.mesh.primitive_uv_sphere_add(segments=96, ring_count=48, radius=1.0)
         sphere = bpy.context.active_object
         bpy.ops.object.shade_smooth()
@@ -122,6 +122,7 @@ def main() -> dict:
         rec["volume_spec"] = {"lo": list(s.lo), "hi": list(s.hi), "shape": list(s.shape)}
         np.save(os.path.join(ARGS["work"], "atlas_irr.npy"), _pixels(vn.volume_image()))
         np.save(os.path.join(ARGS["work"], "atlas_vis.npy"), _pixels(vn.visibility_image()))
+        np.save(os.path.join(ARGS["work"], "atlas_cells.npy"), _pixels(vn.cells_image()))
         cam = _ortho("follow", ARGS["follow_scale"], (0.0, 0.0, 0.0))
         for f, loc in enumerate(ARGS["path"], 1):
             scene.frame_set(f)

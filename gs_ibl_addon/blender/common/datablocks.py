@@ -6,6 +6,9 @@ same name is left alone and ours gets Blender's .001 suffix.
 """
 from __future__ import annotations
 
+import bpy
+import numpy as np
+
 MARKER = "gs_ibl"
 
 
@@ -25,3 +28,26 @@ PROBE_NAME = "GS-IBL Probe"  # the name Add Probe gives; probes are recognised b
 def is_probe(obj) -> bool:
     """Whether ``obj`` (an Object or None) is a GS-IBL probe: an Empty whose settings say so."""
     return obj is not None and obj.type == "EMPTY" and obj.gs_ibl_probe.is_probe
+
+
+def packed_float_image(pixels: np.ndarray, image: bpy.types.Image | None, role: str, name: str) -> bpy.types.Image:
+    """Our packed float image of ``role`` (pixels (H, W, 3), row 0 at the bottom: the grid's atlas, the light
+    volume's images), ``image`` updated in place when it is ours (scaled when the size changed), else a new one."""
+    px = np.asarray(pixels, np.float32)
+    h, w = px.shape[:2]
+    img = image if is_ours(image, role) else None
+    if img is not None and (tuple(img.size) != (w, h) or not img.is_float):
+        img.scale(w, h)  # same datablock: the group's texture nodes keep pointing at it
+    if img is None:
+        img = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
+        img[MARKER] = role
+        # data, not colour: no view transform may touch the coefficients (set before the pixels: setting the
+        # colour space afterwards empties the buffer, blender/world.py _save_exr)
+        img.colorspace_settings.is_data = True
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :3] = px
+    img.pixels.foreach_set(rgba.ravel())
+    img.file_format = "OPEN_EXR"  # packed as float: the coefficients are signed
+    img.pack()
+    img.update()
+    return img

@@ -40,7 +40,7 @@ import numpy as np
 from ...core.probe.grid import COEFFS, GridSpec
 from ...core.probe.local_mix import EPS, eevee_world_order1
 from ..common.compat import node_tree
-from ..common.datablocks import MARKER, find_ours, is_ours
+from ..common.datablocks import MARKER, find_ours, is_ours, packed_float_image
 from .node_math import NodeMath as _Nodes
 from .world import albedo_strength_inputs, latlong_lookup
 
@@ -131,7 +131,7 @@ def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray
         row += px.shape[0]
     old_world = img.get(WORLD_COEFFS) if img is not None else None
     old_irr = img.get(WORLD_IRRADIANCE) if img is not None else None
-    img = atlas_image(atlas, img)
+    img = packed_float_image(atlas, img, "grid", GRID_IMAGE)
     img[TILES] = json.dumps(tiles)
     if world is not None:
         img[WORLD_COEFFS] = json.dumps(np.asarray(world, np.float64).reshape(COEFFS, 3).tolist())
@@ -164,30 +164,6 @@ def prune_atlas() -> bool:
         return False
     bpy.data.images.remove(img)
     return True
-
-
-def atlas_image(pixels: np.ndarray, image: bpy.types.Image | None, role: str = "grid",
-                 name: str = GRID_IMAGE) -> bpy.types.Image:
-    """Our packed float atlas (H, W, 3; row 0 at the bottom), updated in place when the size allows: the grid's,
-    or another ``role`` of ours (the light volume's images)."""
-    px = np.asarray(pixels, np.float32)
-    h, w = px.shape[:2]
-    img = image if is_ours(image, role) else None
-    if img is not None and (tuple(img.size) != (w, h) or not img.is_float):
-        img.scale(w, h)  # same datablock: the group's texture nodes keep pointing at it
-    if img is None:
-        img = bpy.data.images.new(name, w, h, alpha=False, float_buffer=True)
-        img[MARKER] = role
-        # data, not colour: no view transform may touch the coefficients (set before the pixels: setting the
-        # colour space afterwards empties the buffer, blender/world.py _save_exr)
-        img.colorspace_settings.is_data = True
-    rgba = np.ones((h, w, 4), np.float32)
-    rgba[..., :3] = px
-    img.pixels.foreach_set(rgba.ravel())
-    img.file_format = "OPEN_EXR"  # packed as float: the coefficients are signed
-    img.pack()
-    img.update()
-    return img
 
 
 def rebuild_group() -> bpy.types.ShaderNodeTree:

@@ -21,6 +21,7 @@ import numpy as np
 from ...core.probe import volume as pv
 from . import local_light as ll
 from . import volume_nodes as vn
+from ..common.datablocks import packed_float_image
 from ..common.jobs import Job, Step, Work
 from ..splats.object import is_splat_object
 from .auto_light import AUTO_KEY
@@ -203,9 +204,9 @@ def store_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, cells: np.ndarray
     World's numbers beside them, and rebuild the volume groups and the local-light group; returns the volume groups
     {engine: group}. ``world``: (9, 3) monomial coefficients of the World probe's light; ``irradiance``: its
     irradiance image (local_light's WORLD_COEFFS / WORLD_IRRADIANCE)."""
-    irr = ll.atlas_image(irr_atlas, vn.volume_image(), vn.IRRADIANCE_ROLE, vn.IRRADIANCE_IMAGE)
-    vis = ll.atlas_image(vis_atlas, vn.visibility_image(), vn.VISIBILITY_ROLE, vn.VISIBILITY_IMAGE)
-    cel = ll.atlas_image(cells, vn.cells_image(), vn.CELLS_ROLE, vn.CELLS_IMAGE)
+    irr = packed_float_image(irr_atlas, vn.volume_image(), vn.IRRADIANCE_ROLE, vn.IRRADIANCE_IMAGE)
+    vis = packed_float_image(vis_atlas, vn.visibility_image(), vn.VISIBILITY_ROLE, vn.VISIBILITY_IMAGE)
+    cel = packed_float_image(cells, vn.cells_image(), vn.CELLS_ROLE, vn.CELLS_IMAGE)
     irr[vn.SPEC] = json.dumps({"lo": list(map(float, spec.lo)), "hi": list(map(float, spec.hi)),
                                "shape": [int(x) for x in spec.shape], "tiles": int(tiles)})
     if world is not None:

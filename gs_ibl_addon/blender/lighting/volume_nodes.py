@@ -29,7 +29,7 @@ import numpy as np
 
 from ...core.probe import volume as pv
 from ...core.probe.grid import GridSpec
-from ..common.datablocks import MARKER, find_ours
+from ..common.datablocks import MARKER, find_ours, packed_float_image
 from .node_math import NodeMath
 
 # one group per engine: Cycles reads Linear texels (Closest texels blended in nodes overflowed its shader stack, the
@@ -81,8 +81,10 @@ def volume_group(engine: str = "CYCLES") -> bpy.types.ShaderNodeTree | None:
     if tree is not None:
         return tree
     irr, vis, cells, spec = volume_image(), visibility_image(), cells_image(), volume_spec()
-    if irr is None or vis is None or cells is None or spec is None:
+    if irr is None or vis is None or spec is None:
         return None
+    if cells is None:  # a file baked before bricks: every cell its grid's own
+        cells = packed_float_image(pv.pack_cells(pv.LightVolume(spec, None, None)), None, CELLS_ROLE, CELLS_IMAGE)
     return build_groups(irr, vis, cells, spec, volume_tiles(irr))[engine]
 
 
