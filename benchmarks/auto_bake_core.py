@@ -2,7 +2,7 @@
 costs (issue 22, goal 3).
 
 Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
-     python benchmarks/auto_bake_core.py --stages [--ab] [--repeats 5] [--out CSV]
+     python benchmarks/auto_bake_core.py --stages [--ab] [--gpu-paths] [--repeats 5] [--out CSV]
 
 The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3: blender_scene.ROOM_SPHERE), the panel's
 defaults and Lighting Auto's work as blender/lighting/bake.py bake_into_world and blender/lighting/auto_light.py do
@@ -22,7 +22,9 @@ of --repeats after one warm-up. With --ab every run is also made with the host w
 (host_paths: holes filled in numpy, numpy per-face parts, the enclosure masks made anew, the per-face cube put
 together on the host), the two alternating, so
 "before" and "after" share the machine's load. Prints a table; appends to --out (default
-docs/bench/bake_stages_<device>.csv).
+docs/bench/bake_stages_<device>.csv). ``--gpu-paths`` (a CPU device): where a bake picks its path by device, the
+one a GPU takes (the per-face search's parts as a filter, bake.parts_on_gpu, not numpy), so lavapipe's host time
+is a GPU's code's (rows marked config "... gpu-paths").
 """
 from __future__ import annotations
 
@@ -150,14 +152,19 @@ def main_stages(a, info: dict) -> None:
     process = {"context": {"wall": (t1 - t0) * 1e3, "gpu": 0.0, "submits": 0},
                "read and upload": {"wall": (t2 - t1) * 1e3, "gpu": 0.0, "submits": 0},
                "first default bake": first["default bake"]["all"], "first auto bake": first["auto bake"]["all"]}
+    if a.gpu_paths:
+        from gs_ibl_addon.core import bake
+        bake.parts_on_gpu = lambda ctx: True
     configs = {"after": [], "before": []} if a.ab else {"": []}
+    if a.gpu_paths:
+        configs = {f"{k} gpu-paths".strip(): v for k, v in configs.items()}
     for _ in range(a.repeats):
         for config, runs in configs.items():
-            with host_paths() if config == "before" else contextlib.nullcontext():
+            with host_paths() if config.startswith("before") else contextlib.nullcontext():
                 runs.append(stage_runs(r, scene))
     r.close()
     rows = []
-    print(f"{'config':<7} {'work':<14} {'stage':<20} {'wall ms':>9} {'GPU ms':>9} {'host ms':>9} {'submits':>8}")
+    print(f"{'config':<16} {'work':<14} {'stage':<20} {'wall ms':>9} {'GPU ms':>9} {'host ms':>9} {'submits':>8}")
     for config, runs in configs.items():
         for run in runs:
             run["new process"] = process
@@ -171,7 +178,7 @@ def main_stages(a, info: dict) -> None:
                        "gpu_ms": round(med["gpu"], 2), "host_ms": round(max(0.0, med["wall"] - med["gpu"]), 2),
                        "submits": int(med["submits"])}
                 rows.append(row)
-                print(f"{config:<7} {work:<14} {stage:<20} {row['wall_ms']:>9.2f} {row['gpu_ms']:>9.2f} "
+                print(f"{config:<16} {work:<14} {stage:<20} {row['wall_ms']:>9.2f} {row['gpu_ms']:>9.2f} "
                       f"{row['host_ms']:>9.2f} {row['submits']:>8}")
     append_csv(a.out or os.path.join(REPO, "docs", "bench", f"bake_stages_{device_label(info['device'])}.csv"), rows)
 
@@ -188,6 +195,8 @@ def main() -> None:
     ap.add_argument("--stages", action="store_true", help="per-stage wall beside GPU time (issue 38)")
     ap.add_argument("--ab", action="store_true", help="with --stages: each run also with the host paths issue 38 "
                                                       "replaced (before), alternating")
+    ap.add_argument("--gpu-paths", action="store_true", help="with --stages on a CPU device: the code paths a GPU "
+                                                             "takes where a bake picks by device")
     ap.add_argument("--out", default=None)
     a = ap.parse_args()
     keep = hold_gpu_clock()  # noqa: F841 (the context holds the clock while it lives)

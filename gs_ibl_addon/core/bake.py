@@ -195,13 +195,20 @@ def choose_face(probe_at: Callable[[int, float], object], model, s: ProbeSetting
     return result, face, trials, plan, lod_k
 
 
+def parts_on_gpu(ctx) -> bool:
+    """Whether irradiance_parts (and the per-face search's GpuFaces) split a change on the device: a GPU, not a CPU
+    device (lavapipe), where numpy's integral is the faster. Benchmarks set it to time a GPU's host work on lavapipe
+    (auto_bake_core.py --gpu-paths)."""
+    return ctx is not None and not ctx.is_cpu
+
+
 def irradiance_parts(change: np.ndarray, size: int, ctx=None) -> np.ndarray:
     """probe/reference.py exact_irradiance_parts of a (6, n, n, 3) cube change: on a GPU the exact filter of six
     cubes, each holding one face of the change (one submission; equal to the reference within float32 rounding,
     1e-9 of a 3e-3 part), where numpy's (normals x texels) cosine blocks took 25-80 ms of the host per call (32^2
     faces into 8^2-16^2); on a CPU device (ctx None or lavapipe) the reference itself, which runs there 3x faster
     than the same integral as a filter."""
-    if ctx is None or ctx.is_cpu:
+    if not parts_on_gpu(ctx):
         return exact_irradiance_parts(change, size)
     from .probe.gpu_filters import filter_probes
     n = change.shape[1]
@@ -214,7 +221,7 @@ def irradiance_parts(change: np.ndarray, size: int, ctx=None) -> np.ndarray:
 def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Callable[[dict], object],
                       filter_cube: Callable[[object], ProbeResult], model: ErrorModel, s: ProbeSettings,
                       say: Callable[[str, float], None], keep: Callable[[], object],
-                      faces_from: Callable[[object, object, int], object], ctx=None
+                      faces_from: Callable[[object, object, int, int], object]
                       ) -> tuple[ProbeResult, list[int], list, dict]:
     """Face size 0: "model no more than the probe needs", per cube face.
 
@@ -225,9 +232,9 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
     are measured again from what they changed.
     ``render_faces({face: size})`` renders those faces' views, in face order (a RenderResult); ``keep()`` keeps
     the cube just rendered (read back; or on the GPU: probe/gpu_assemble.py KeptCube); ``faces_from(first, last,
-    level)`` takes the search's two kept cubes (HostFaces; GpuFaces) and puts together each round's cube at one
-    size for ``filter_cube`` and the small cubes of the parts; ``ctx``: the device that splits the change into
-    faces' parts (irradiance_parts). Returns (the probe, per-face sizes, trials, the tolerance plan)."""
+    level, size)`` takes the search's two kept cubes (HostFaces; GpuFaces), puts together each round's cube at one
+    size for ``filter_cube`` and splits what the faces changed into their parts of the irradiance (size^2, the
+    change taken at level^2: irradiance_parts). Returns (the probe, per-face sizes, trials, the tolerance plan)."""
     limit = int(s.max_face_size)
     cubes: dict[int, object] = {}
 
@@ -241,10 +248,8 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
     sizes = [face] * 6
     if est > s.tolerance and face < limit and len(cubes) == 2:
         first, m = min(cubes), int(result.irradiance.shape[1])
-        faces = faces_from(cubes[first], cubes[face], first)  # level first: where the exact filter integrates
-        low = faces.level()
-        model.take_parts(irradiance_parts(low - faces.first_level(), m, ctx), [first] * 6, sizes,
-                         result.irradiance)
+        faces = faces_from(cubes[first], cubes[face], first, m)  # level first: where the exact filter integrates
+        model.take_parts(faces.parts(), [first] * 6, sizes, result.irradiance)
         for _ in range(PER_FACE_ROUNDS):
             plan = model.next_sizes(s.tolerance, limit)
             todo = {f: plan[f] for f in range(6) if plan[f] > sizes[f]}
@@ -255,12 +260,10 @@ def choose_face_sizes(probe_at: Callable[[int], ProbeResult], render_faces: Call
             before = list(sizes)
             for f in todo:
                 sizes[f] = todo[f]
-            faces.put(render_faces(todo), todo, min(max(sizes), RADIANCE_OUT_MAX), first)
+            faces.put(render_faces(todo), todo, min(max(sizes), RADIANCE_OUT_MAX))
             finer = filter_cube(faces.cube)
             change = float(np.max(model.change(result.irradiance, finer.irradiance)))
-            finer_low = faces.level()
-            model.take_parts(irradiance_parts(finer_low - low, m, ctx), before, sizes, finer.irradiance)
-            low = finer_low
+            model.take_parts(faces.parts(), before, sizes, finer.irradiance)
             est = model.estimate_faces(sizes)
             trials.append({"face_size": max(sizes), "face_sizes": list(sizes), "change": change, "estimate": est})
             say(f"faces {'/'.join(map(str, sizes))}: irradiance moved {100 * change:.2f}%; estimated error "
@@ -340,8 +343,13 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
     def keep():  # the cube probe_at(..., keep=True) just rendered
         return faces[-1] if GPU_ASSEMBLE else r.last_frame.read_cube()
 
-    def faces_from(first, last, level: int):
-        faces.append((GpuFaces if GPU_ASSEMBLE else HostFaces)(first, last, level))
+    def faces_from(first, last, level: int, size: int):
+        def on_host(change, size):
+            return irradiance_parts(change, size, r.ctx)
+        if not GPU_ASSEMBLE:
+            faces.append(HostFaces(first, last, level, size, on_host))
+        else:  # the parts where irradiance_parts takes them: the same filter on a GPU, else numpy
+            faces.append(GpuFaces(first, last, level, size, None if parts_on_gpu(r.ctx) else on_host))
         return faces[-1]
 
     rendered: list = []  # renders of single faces (per-face sizes): their GPU times go to the kept probe's
@@ -358,7 +366,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             elif lod_k == 0:
                 result, face_sizes, trials, plan = choose_face_sizes(
                     lambda f: probe_at(f, keep=True), render_faces, filter_cube, ErrorModel(), s, say, keep,
-                    faces_from, r.ctx)
+                    faces_from)
                 for res in rendered:
                     for k, v in res.timings_ms.items():
                         result.timings_ms[f"render_{k}"] = result.timings_ms.get(f"render_{k}", 0.0) + v

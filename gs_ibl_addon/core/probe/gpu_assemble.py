@@ -32,27 +32,26 @@ def faces_cube(images, size: int) -> np.ndarray:
 
 
 class HostFaces:
-    """The six faces on the host (read back), resized and stacked in numpy: the reference of GpuFaces."""
+    """The six faces on the host (read back), resized and stacked in numpy: the reference of GpuFaces.
+    ``host_parts(change, size)``: the bake's irradiance_parts."""
 
-    def __init__(self, first: np.ndarray, last: np.ndarray, level: int) -> None:
+    def __init__(self, first: np.ndarray, last: np.ndarray, level: int, parts_size: int, host_parts) -> None:
         self.images = list(last)
         self.sizes = [int(img.shape[0]) for img in self.images]
-        self._first, self._level = first, level
+        self._level, self._size, self._host_parts = level, parts_size, host_parts
+        self._low = _levelled(first, level)
 
-    def put(self, rendered, todo: dict[int, int], out: int, level: int) -> None:
+    def put(self, rendered, todo: dict[int, int], out: int) -> None:
         """As GpuFaces.put, from the render's images read back."""
         for f, image in zip(sorted(todo), rendered.images):
             self.images[f], self.sizes[f] = image, int(image.shape[0])
         self.cube = faces_cube(self.images, out)
-        self._level = level
 
-    def level(self) -> np.ndarray:
-        """(6, level, level, 3) float64: the faces' RGB at ``level`` (made or put with it)."""
-        return _levelled(self.images, self._level)
-
-    def first_level(self) -> np.ndarray:
-        """(6, level, level, 3) float64: the first cube's RGB at the level made with."""
-        return _levelled(self._first, self._level)
+    def parts(self) -> np.ndarray:
+        """As GpuFaces.parts."""
+        low = _levelled(self.images, self._level)
+        change, self._low = low - self._low, low
+        return self._host_parts(change, self._size)
 
     def close(self) -> None:
         pass
@@ -148,25 +147,34 @@ class AssembledCube(CubeOnGpu):
 
 class GpuFaces:
     """The six faces at their own sizes on the GPU, from the search's last cube (``last``, a KeptCube: the store
-    starts as its buffer) and with the first one (``first``) for the parts; both stay their owner's to close. The
-    levels of both (``level()``, ``first_level()``) are made in one program queued behind their copies."""
+    starts as its buffer) and its first (``first``); both stay their owner's to close.
 
-    def __init__(self, first: KeptCube, last: KeptCube, level: int) -> None:
+    ``parts()`` gives what the faces changed since the last call (first: since ``first``) split into each face's
+    part of the irradiance at ``parts_size`` (bake.irradiance_parts of the change of the faces' RGB at ``level``):
+    the levels, their change as six one-face cubes (probe_face_parts.comp) and the exact filter of those are queued
+    with the faces' own work, so they go to the GPU in its submission. ``host_parts(change, size)``: take them on
+    the host instead, from the levels read back (a CPU device, where numpy's integral is the faster)."""
+
+    def __init__(self, first: KeptCube, last: KeptCube, level: int, parts_size: int, host_parts=None) -> None:
         self.ctx, n = last.ctx, last.size
         self.sizes = [n] * 6
         self.store = last.buffer
         self._buffers: list[Buffer] = []
         self._programs: list = []  # queued, not waited for: closed (waited) at close()
         self.cube: AssembledCube | None = None
-        self._render, self._level = None, level
+        self._render, self._level, self._size, self._host_parts = None, level, parts_size, host_parts
         level_bytes = 6 * level * level * TEXEL
-        self._results = Buffer.staging(self.ctx, 2 * level_bytes, cached=True)  # [level | first's level]
-        small, first_small = (self._buffer(level_bytes, "probe-assembled-level") for _ in range(2))
+        # the levels now and before (the change between them is what parts() splits): swapped at each put
+        self._low = [self._buffer(level_bytes, "probe-assembled-level") for _ in range(2)]
+        if host_parts is None:
+            self._change = self._buffer(6 * level_bytes, "probe-face-parts")
+            self._plan = None
+        else:
+            self._results = Buffer.staging(self.ctx, 2 * level_bytes, cached=True)
         rec = Recorder(self.ctx, reusable=True)
-        self._record_resize(rec, self.store, self.sizes, small, level)
-        self._record_resize(rec, first.buffer, [first.size] * 6, first_small, level)
-        rec.copy(small, self._results, level_bytes)
-        rec.copy(first_small, self._results, level_bytes, 0, level_bytes)
+        self._record_resize(rec, first.buffer, [first.size] * 6, self._low[1], level)
+        self._record_resize(rec, self.store, self.sizes, self._low[0], level)
+        self._record_change(rec)
         self._start(rec.program())
 
     def _buffer(self, nbytes: int, name: str) -> Buffer:
@@ -177,6 +185,11 @@ class GpuFaces:
     def _start(self, program) -> None:
         self._programs.append(program)
         program.start()
+        if self._host_parts is None:  # the parts' filter, queued behind: one plan, recorded once (its source kept)
+            from .gpu_filters import plan_for
+            self._plan = plan_for(self.ctx, self._change, True, self._level, "exact", self._size, 6,
+                                  phi_steps=64, theta_steps=16, box_level_size=1, downsample_to=self._level)
+            self._plan.program.start()
 
     @staticmethod
     def _offsets(sizes: list[int]) -> list[int]:
@@ -192,12 +205,20 @@ class GpuFaces:
                 rec.dispatch(KERNELS["probe_faces_to_size"], [src, omega_table(self.ctx, n), dst],
                              groups(m * m, 64, self.ctx), n=n, m=m, src_at=at[f], dst_at=f * m * m)
 
-    def put(self, rendered, todo: dict[int, int], out: int, level: int) -> None:
+    def _record_change(self, rec: Recorder) -> None:
+        """Record what parts() takes of the levels now (_low[0]) and before (_low[1])."""
+        m = self._level
+        if self._host_parts is None:
+            rec.dispatch(KERNELS["probe_face_parts"], [self._low[0], self._low[1], self._change],
+                         groups(36 * m * m, 64, self.ctx), n=m)
+        else:
+            for k in range(2):
+                rec.copy(self._low[k], self._results, 6 * m * m * TEXEL, 0, k * 6 * m * m * TEXEL)
+
+    def put(self, rendered, todo: dict[int, int], out: int) -> None:
         """Keep the faces ``todo`` ({face: size}) that ``rendered`` (the RenderResult of those faces' views, in
-        face order; it may still be in flight) drew, and record the cube at ``out`` (``self.cube``) and at
-        ``level`` (``level()``, as made), queued behind the render."""
-        if level != self._level:
-            raise ValueError(f"GpuFaces made for level {self._level} was put level {level}")
+        face order; it may still be in flight) drew, and record the cube at ``out`` (``self.cube``) and what
+        parts() takes, queued behind the render."""
         frame = rendered.frame
         old, old_at = self.store, self._offsets(self.sizes)
         sizes = list(self.sizes)
@@ -206,7 +227,7 @@ class GpuFaces:
         at = self._offsets(sizes)
         store = self._buffer(sum(n * n for n in sizes) * TEXEL, "probe-faces")
         image = self._buffer(6 * out * out * TEXEL, "probe-assembled")
-        small = self._buffer(6 * level * level * TEXEL, "probe-assembled-level")
+        self._low.reverse()  # the level now becomes the one before
         rec = Recorder(self.ctx, reusable=True)
         drawn = 0
         for f in range(6):  # the new faces from the frame (its views in face order), the others kept
@@ -217,16 +238,16 @@ class GpuFaces:
             else:
                 rec.copy(old, store, n * n * TEXEL, old_at[f] * TEXEL, at[f] * TEXEL)
         self._record_resize(rec, store, sizes, image, out)
-        self._record_resize(rec, store, sizes, small, level)
-        rec.copy(small, self._results, 6 * level * level * TEXEL)
+        self._record_resize(rec, store, sizes, self._low[0], self._level)
+        self._record_change(rec)
         self._start(rec.program())
         # the old store goes back to the pool at close(), once nothing queued reads it
         self.store, self.sizes, self._render = store, sizes, frame
         self.cube = AssembledCube(self, image, out)
 
     def finish(self) -> bool:
-        """Wait for the render and the assembly queued behind it; run the assembly again (True) when the render
-        had to be drawn again (GpuFrame.wait)."""
+        """Wait for the render and the work queued behind it; run the assembly (and the parts' filter) again
+        (True) when the render had to be drawn again (GpuFrame.wait)."""
         redrawn = self._render.wait() if self._render is not None else False
         self._render = None  # settled: the renderer may render again without this cube going stale
         for program in self._programs:
@@ -234,29 +255,29 @@ class GpuFaces:
                 program.wait()
         if redrawn:
             self._programs[-1].run()
+            if self._host_parts is None:
+                self._plan.program.wait()
+                self._plan.program.start()
         return redrawn
 
-    def _read_level(self, k: int) -> np.ndarray:
+    def parts(self) -> np.ndarray:
+        """(6, 6, size, size, 3) float64: the change of the faces since the last call, per face's part of the
+        irradiance (bake.irradiance_parts)."""
         self.finish()
+        if self._host_parts is None:
+            return self._plan.finish_all()[1].astype(np.float64)
         m = self._level
-        return (self._results.read(np.float32, 6 * m * m * 4, k * 6 * m * m * TEXEL)
-                .reshape(6, m, m, 4)[..., :3].astype(np.float64))
-
-    def level(self) -> np.ndarray:
-        """(6, level, level, 3) float64: the faces' RGB at ``level`` (made or put with it; the search's parts)."""
-        return self._read_level(0)
-
-    def first_level(self) -> np.ndarray:
-        """(6, level, level, 3) float64: the first cube's RGB at ``level``."""
-        return self._read_level(1)
+        low = self._results.read(np.float32, 2 * 6 * m * m * 4).reshape(2, 6, m, m, 4)[..., :3].astype(np.float64)
+        return self._host_parts(low[0] - low[1], self._size)
 
     def close(self) -> None:
         for program in self._programs:
             program.close()  # waits for it if it still runs
         self._programs = []
+        if self._host_parts is None and self._plan is not None and self._plan.program.running:
+            self._plan.program.wait()
         for b in self._buffers:
             b.close()
         self._buffers = []
-        if self._results is not None:
+        if self._host_parts is not None:
             self._results.destroy()
-            self._results = None

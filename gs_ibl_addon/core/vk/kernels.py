@@ -88,6 +88,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("probe_convolve", "Cube Out", "n m phi_steps theta_steps", (64,)),
     _k("probe_downsample", "Src Omega Dst", "n", (64,)),
     _k("probe_faces_to_size", "Src Omega Dst", "n m src_at dst_at", (64,)),  # probe/gpu_assemble.py
+    _k("probe_face_parts", "A B Out", "n", (64,)),  # probe/gpu_assemble.py
     _k("probe_cube_read", "Cube Out", "n m", (64,)),
     _k("probe_integrate", "Cube Texels Out", "n m", (128,)),
     _k("probe_ggx", "Mips Samples Lods Levels Out", "n n_mips n_levels total", (64,)),
