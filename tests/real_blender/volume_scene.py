@@ -3,7 +3,8 @@ root with the built zip installed by Blender's installer, never by pytest itself
     python volume_scene.py ARGS.json
 1. The volume group against the core: the host's synthetic images (irr.npy, vis.npy, cells.npy, ARGS["spec"],
    ARGS["tiles"]) stored by the installed extension (lighting/volume.py store_volume); a unit sphere at the origin
-   with the engine's volume group into an Emission, seen by an orthographic camera on +X; rendered in EEVEE and Cycles (group_<engine>.npy).
+   with the engine's volume group into an Emission, seen by an orthographic camera on +X; rendered in EEVEE and
+   Cycles (group_<engine>.npy).
 2. Motion: the sample room (Blender's PLY importer, native splats hidden from the camera), a white sphere keyframed
    over ARGS["path"] (one frame each), the probe at ARGS["probe"] with Lighting Volume: one bake; then at each frame
    an orthographic camera 3 m along +X of the sphere renders it in EEVEE (frame_<n>.npy); the file's atlases are

@@ -1,10 +1,15 @@
-"""The light volume (issue 37): DDGI-style probes on a grid, each an octahedral irradiance map and an octahedral map
-of distance moments, packed into two float images that one node group reads at a shading point (EEVEE and Cycles).
+"""The light volume (issue 37): DDGI-style probes on a grid with bricks of finer probes in some of its cells, each
+probe an octahedral irradiance map and an octahedral map of distance moments, packed into three float images that
+one node group reads at a shading point (EEVEE and Cycles).
 
 This module is the layout and its lookup, the contract with blender/ (docs/architecture.md "Light volume"); the bake
-is volume_bake.py, the choice of region and spacing volume_region.py.
+is volume_bake.py, the choice of region and spacing volume_region.py, of the bricks volume_refine.py.
 
 Grid: grid.GridSpec; probe (ix, iy, iz) at spec.points()[ix, iy, iz], linear index i = ix + nx (iy + ny iz).
+Cells: cell_shape(spec) = nodes - 1 a side (1 on an axis of one node), cell (cx, cy, cz) between nodes c and c + 1,
+linear index c = cx + ncx (cy + ncy cz). A cell holds r = 1 (its eight grid nodes) or a brick of r (BRICK_LEVELS)
+with (r + 1)^3 probes of its own, local (lx, ly, lz) at node c + l / r, in the order lx + (r + 1) (ly + (r + 1) lz);
+the bricks' probes follow the grid's in the atlases, brick after brick in cell order (brick_bases).
 
 Octahedral map (world directions, Z up): ``oct_encode(d)`` = d.xy / (|x| + |y| + |z|), folded where z < 0 to
 (1 - |p.yx|) sign(p.xy) with sign(0) = +1. A map of n x n texels (array [row, column], row 0 at v = -1, the bottom)
@@ -20,12 +25,17 @@ images). Borders repeat the map's texels across the octahedral fold (an edge (1,
 the four corners are -Z), so a bilinear lookup inside a tile is seamless. Texel lookup for direction d in tile t:
 pixel = tile_origin(t) + 1 + (oct_encode(d) 0.5 + 0.5) n, continuous, texel centres at +0.5; u = pixel_x / width,
 v = pixel_y / height; bilinear, clamped at the image's edge (Blender's Image Texture: Linear, Extend).
+Cells image (pack_cells): one texel a cell, tiled ceil(sqrt(cells)) wide, of (the brick's first probe among the
+bricks', r, 0), read at the texel's centre (Closest).
 
 The lookup (sample_packed: the node group's numpy twin, term for term; sample: the same on the unpacked maps):
     P' = P + NORMAL_BIAS s n          s = spec_spacing(spec): the smallest node spacing; n the unit normal
     g  = clamp((P' - lo) / (hi - lo) (shape - 1), 0, shape - 1)      (0 on an axis of one node)
-    i0 = min(floor(g), shape - 1), i1 = min(i0 + 1, shape - 1), f = g - i0
-    for each of the 8 corners c (i0 or i1 per axis), probe position q_c:
+    c  = min(floor(g), max(shape - 2, 0))                            the cell; (base, r) its cells texel
+    l0 = min(floor((g - c) r), r - 1), f = (g - c) r - l0            the brick's sub-cell (r = 1: the cell)
+    for each of the 8 corners L = l0 + (0 or 1 per axis):
+        q_c        = first node + (c + L / r) step                   (the node's place)
+        index      = r > 1 ? N + base + Lx + (r + 1) (Ly + (r + 1) Lz) : the grid's index of min(c + L, shape - 1)
         trilinear  = prod over axes (f or 1 - f)
         r          = |P' - q_c|
         (m, m2)    = VIS map of c at P' - q_c                             (+Z where r = 0)
