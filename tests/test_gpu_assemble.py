@@ -50,7 +50,7 @@ def test_gpu_faces_equal_the_numpy_reference(start, rounds, out, parts_on):
     first = rng.random((6, 32, 32, 4)).astype(np.float32)
     last = rng.random((6, start, start, 4)).astype(np.float32)
     frames = [_Frame(ctx, list(first)), _Frame(ctx, list(last))]
-    kept = [KeptCube(f) for f in frames]
+    kept = [KeptCube(f, slot) for slot, f in enumerate(frames)]
     # the parts: on the GPU (the filter of six one-face cubes made there) or from the levels read back (a CPU device)
     gpu = GpuFaces(*kept, 32, 8, None if parts_on == "gpu" else exact_irradiance_parts)
     host = HostFaces(first, last, 32, 8, exact_irradiance_parts)

@@ -307,7 +307,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
             res = r.render(cube, timestamps=True, wait=False, lod_k=lod)
             source = res.frame
             if keep and GPU_ASSEMBLE:  # copied on the GPU for the per-face search, in the filter's submission
-                source = KeptCube(res.frame)
+                source = KeptCube(res.frame, sum(isinstance(held, KeptCube) for held in faces))
                 faces.append(source)
             probe = filter_probe(source, irradiance_size=m_search, method=method, sh_order=s.sh_order,
                                  roughness=None, read_radiance=False, splat_count=splat_count,

@@ -25,6 +25,19 @@ from .gpu_filters import omega_table
 TEXEL = 16  # bytes of one RGBA float32 texel
 
 
+def _held(ctx, key: tuple, nbytes: int) -> Buffer:
+    """A buffer kept in the context's cache under ``key``, for a source that filter plans are recorded on
+    (gpu_filters.plan_for keys a plan by its source buffer): the next bake finds them, where pooled buffers came
+    back in another order and each bake recorded its plans anew (ms of host time). One bake at a time per context,
+    as its filter plans already are."""
+    b = ctx.cache.get(key)
+    if b is None or not b.alive or b.nbytes < nbytes:
+        if b is not None:
+            b.destroy()
+        b = ctx.cache[key] = Buffer(ctx, nbytes, key[0])
+    return b
+
+
 def faces_cube(images, size: int) -> np.ndarray:
     """(6, size, size, C) float32 of six (n_f, n_f, C) faces of any power-of-two sizes: each face by itself to
     ``size`` (box.faces_to_size: the solid-angle mean of the texels a target texel covers, or bilinear doubling)."""
@@ -101,16 +114,21 @@ class CubeOnGpu:
 class KeptCube(CubeOnGpu):
     """A render's cube copied on the GPU, queued behind the render (still in flight): filter this instead of the
     frame and the copy goes to the GPU with the filter, in one submission, and outlives the renderer's next render
-    (which reuses, or grows, the frame's buffer)."""
+    (which reuses, or grows, the frame's buffer). ``slot``: which of a search's kept cubes (each its own buffer)."""
 
-    def __init__(self, frame) -> None:
+    def __init__(self, frame, slot: int = 0) -> None:
         frame.check()
         n = frame.face_size
-        super().__init__(scratch(frame.ctx, 6 * n * n * TEXEL, "probe-kept"), n)
+        super().__init__(_held(frame.ctx, ("probe-kept", slot), 6 * n * n * TEXEL), n)
         self.size, self._frame = n, frame
-        rec = Recorder(frame.ctx, reusable=True)
-        rec.copy(frame.image, self.image, 6 * n * n * TEXEL)
-        self.program = rec.program()
+        ctx, key = frame.ctx, ("kept-copy", frame.image.serial, self.image.serial, n)
+        self.program = ctx.cache.get(key)
+        if self.program is None or not self.program.valid:  # recorded once per frame buffer, kept buffer and size
+            for old in [k for k, v in ctx.cache.items() if k[0] == "kept-copy" and not v.valid]:
+                ctx.cache.pop(old).close()
+            rec = Recorder(ctx, reusable=True)
+            rec.copy(frame.image, self.image, 6 * n * n * TEXEL)
+            self.program = ctx.cache[key] = rec.program()
         self.program.start()
 
     @property
@@ -128,8 +146,8 @@ class KeptCube(CubeOnGpu):
         return redrawn
 
     def close(self) -> None:
-        self.program.close()  # waits for it if it still runs
-        self.image.close()
+        if self.program.running:  # the program and the buffer stay the context's
+            self.program.wait()
 
 
 class AssembledCube(CubeOnGpu):
@@ -167,7 +185,7 @@ class GpuFaces:
         # the levels now and before (the change between them is what parts() splits): swapped at each put
         self._low = [self._buffer(level_bytes, "probe-assembled-level") for _ in range(2)]
         if host_parts is None:
-            self._change = self._buffer(6 * level_bytes, "probe-face-parts")
+            self._change = _held(self.ctx, ("probe-face-parts", level), 6 * level_bytes)
             self._plan = None
         else:
             self._results = Buffer.staging(self.ctx, 2 * level_bytes, cached=True)
@@ -226,7 +244,7 @@ class GpuFaces:
             sizes[f] = int(todo[f])
         at = self._offsets(sizes)
         store = self._buffer(sum(n * n for n in sizes) * TEXEL, "probe-faces")
-        image = self._buffer(6 * out * out * TEXEL, "probe-assembled")
+        image = _held(self.ctx, ("probe-assembled", out), 6 * out * out * TEXEL)  # a round's cube replaces the last
         self._low.reverse()  # the level now becomes the one before
         rec = Recorder(self.ctx, reusable=True)
         drawn = 0
