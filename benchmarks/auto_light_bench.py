@@ -7,6 +7,10 @@ Run:  .venv/bin/python benchmarks/auto_light_bench.py [--native-samples 8192] [-
       [--places centre,window] [--meshes sphere] [--steps native,world,auto,volume]  (without native: the last
       run's) [--volume-budget 64 --volume-face 16]  (a trial of Lighting Volume's size)
       .venv/bin/python benchmarks/auto_light_bench.py --replot build/auto-light/run   (tables and chart again)
+      .venv/bin/python benchmarks/auto_light_bench.py --animate window,lamp [--frames 48 --at 1,12,24,36,48]
+      (issue 37's animation: both meshes move from the window to below the lamp, one Lighting Volume bake at frame
+      1 for the whole range; native Cycles, 2,048 spp, and ours at the --at frames, each mesh alone from a camera
+      moving with them; docs/bench/volume_animation.csv, docs/img/volume_animation.png)
 Needs the trixie root (scripts/blender_roots.sh ensure trixie). The Blender side is benchmarks/auto_light_scene.py,
 run in bpy 5.3 with the built zip installed by Blender's own installer through tests/real_blender/test_matrix.py's
 machinery (built_zip, Runner, run_script), with the scene and set-up of tests/real_blender/blender_scene.py.
@@ -46,6 +50,8 @@ WORK = REPO / "build" / "auto-light"
 CSV = REPO / "docs" / "auto_light.csv"
 PNG = REPO / "docs" / "img" / "auto_light.png"
 RENDERS = REPO / "docs" / "img" / "auto_light_renders.png"
+ANIM_CSV = REPO / "docs" / "bench" / "volume_animation.csv"  # --animate (issue 37's animation target)
+ANIM_PNG = REPO / "docs" / "img" / "volume_animation.png"
 TOL = 0.03
 
 # samples/room.ply (core/synthetic.py sample_environment): 6 x 5 x 3 m centred on the origin, floor z = 0, window
@@ -93,12 +99,12 @@ def cells(arrays: dict, result: dict, places, meshes) -> list[dict]:
     return rows
 
 
-def plot(rows: list[dict], path: Path, title: str) -> None:
+def plot(rows: list[dict], path: Path, title: str, keys=PLACES) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(2, 1, figsize=(10, 6.6), sharex=True)
-    groups = [(p, m) for p in PLACES for m in MESHES]
+    groups = [(p, m) for p in keys for m in MESHES]
     x = np.arange(len(groups))
     for ax, engine in zip(axes, ENGINES):
         ax.axhspan(1 - TOL, 1 + TOL, color="tab:green", alpha=0.18, lw=0, label="±3%")
@@ -130,7 +136,7 @@ def plot(rows: list[dict], path: Path, title: str) -> None:
         ax.minorticks_off()
         ax.set_ylabel(f"{'Cycles' if engine == 'cycles' else 'EEVEE'}: ours / native")
         ax.grid(True, axis="y", alpha=0.3)
-        for i in range(1, len(PLACES)):
+        for i in range(1, len(keys)):
             ax.axvline(2 * i - 0.5, color="k", lw=0.4, alpha=0.4)
     axes[0].legend(fontsize=7, loc="upper left", ncol=3)
     axes[1].set_xticks(x)
@@ -187,7 +193,7 @@ def report(rows: list[dict], result: dict, args: dict) -> str:
             return "–"
         s = f"{r['ratio_r']:.3f} / {r['ratio_g']:.3f} / {r['ratio_b']:.3f}"
         return f"**{s}**" if light != "world" and r["within_3pct"] else s
-    for p in PLACES:
+    for p in args.get("keys", PLACES):
         for m in MESHES:
             choice = result.get("choice", {}).get(f"{m}_{p}", "")
             if any(r["place"] == p and r["mesh"] == m for r in rows):
@@ -226,21 +232,47 @@ def _kept_natives(run: Path, args: dict) -> dict:
             and prev_args.get("cycles_settings", {}) == args["cycles_settings"])
     if not same:
         return {}
-    keys = {f"native_{m}_{p}" for m in args["meshes"] for p in args["places"]
-            if prev_args.get("places", {}).get(p) == args["places"][p]}
+    if prev_args.get("animation") != args.get("animation"):
+        return {}
+    keys = {f"native_{m}_{p}" for m in args["meshes"] for p in args.get("keys", args["places"])
+            if args.get("animation") or prev_args.get("places", {}).get(p) == args["places"][p]}
     return {"files": {f"{k}.npy": (run / f"{k}.npy").read_bytes() for k in keys if (run / f"{k}.npy").exists()},
             "times": {k: v for k, v in prev.get("times", {}).items() if k in keys}, "blender": prev.get("blender")}
+
+
+def _write_animation(rows: list[dict], result: dict, args: dict) -> None:
+    """The animation's CSV and chart (ANIM_CSV, ANIM_PNG): per frame and mesh, ours / native in both engines."""
+    anim, date = args["animation"], args.get("date", time.strftime("%Y-%m-%d"))
+    meta = {"date": date, "blender": result["blender"], "size": args["size"], "native_spp": args["native_samples"],
+            "cycles_spp": args["samples"], "eevee_samples": args["eevee_samples"], "from": anim["from"],
+            "to": anim["to"], "frames": anim["frames"]}
+    with open(ANIM_CSV, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=[*meta, *rows[0]])
+        w.writeheader()
+        for r in rows:
+            w.writerow({**meta, **r})
+    t = result["times"]
+    plot(rows, ANIM_PNG, f"A white sphere and a Suzanne moving from the {anim['from']} to the {anim['to']} over "
+                         f"{anim['frames']} frames, one Lighting Volume bake ({t.get('volume_bake_s', 0):.0f} s): "
+                         f"mean of ours / native Cycles {args['native_samples']} spp at frames "
+                         f"{', '.join(map(str, anim['at']))}\nours: Cycles {args['samples']} spp, EEVEE "
+                         f"{args['eevee_samples']} samples; Blender {result['blender']}, 2-core CPU, {date}",
+         keys=args["keys"])
+    print(f"\n{ANIM_CSV}\n{ANIM_PNG}")
 
 
 def _finish(run: Path, write: bool) -> None:
     result = json.loads((run / "result.json").read_text())
     args = json.loads((run / "args.json").read_text())
     arrays = {p.stem: np.load(p) for p in run.glob("*.npy")}
-    rows = cells(arrays, result, args["places"], args["meshes"])
+    keys = args.get("keys", args["places"])
+    rows = cells(arrays, result, keys, args["meshes"])
     text = report(rows, result, args)
     print(text)
     (run / "report.md").write_text(text + "\n")
-    if write and rows:
+    if write and rows and args.get("animation"):
+        _write_animation(rows, result, args)
+    elif write and rows:
         date = args.get("date", time.strftime("%Y-%m-%d"))
         meta = {"date": date, "blender": result["blender"], "size": args["size"],
                 "native_spp": args["native_samples"], "cycles_spp": args["samples"],
@@ -266,20 +298,26 @@ def _finish(run: Path, write: bool) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--native-samples", type=int, default=8192)
+    ap.add_argument("--native-samples", type=int, default=None, help="8,192 (2,048 with --animate)")
     ap.add_argument("--samples", type=int, default=256)
     ap.add_argument("--eevee-samples", type=int, default=16)
     ap.add_argument("--size", type=int, default=40)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--places", default=",".join(PLACES))
     ap.add_argument("--meshes", default=",".join(MESHES))
-    ap.add_argument("--steps", default="native,world,auto")
+    ap.add_argument("--steps", default=None, help="native,world,auto (native,volume with --animate)")
     ap.add_argument("--eevee-set", default="", metavar="KEY=VALUE,...",
                     help="EEVEE options for a trial (scene.eevee, e.g. use_fast_gi=False,clamp_surface_indirect=0)")
     ap.add_argument("--cycles-set", default="", metavar="KEY=VALUE,...",
                     help="Cycles options for a trial, every render (scene.cycles, e.g. diffuse_bounces=0)")
     ap.add_argument("--volume-budget", type=int, default=None, help="Lighting Volume's probe budget (a trial)")
     ap.add_argument("--volume-face", type=int, default=None, help="Lighting Volume's cube face (a trial)")
+    ap.add_argument("--animate", metavar="FROM,TO", default=None,
+                    help="issue 37's animation: the meshes move from one place to another (e.g. window,lamp) over "
+                         "--frames, one Lighting Volume bake, native and ours at --at frames (steps default "
+                         "native,volume; native 2,048 spp unless given)")
+    ap.add_argument("--frames", type=int, default=48)
+    ap.add_argument("--at", default="1,12,24,36,48", help="the frames rendered in an animation")
     ap.add_argument("--no-write", action="store_true", help="leave docs/ alone (a trial run)")
     ap.add_argument("--replot", metavar="RUN", help="tables, CSV and chart again from a kept run folder")
     a = ap.parse_args()
@@ -297,19 +335,32 @@ def main() -> None:
     unknown = [p for p in a.places.split(",") if p not in PLACES]
     if unknown:  # before the runner: a failed run replaces the last run's folder (and its references)
         sys.exit(f"unknown --places {','.join(unknown)}: choose from {','.join(PLACES)}")
+    anim = None
+    if a.animate:
+        ends = a.animate.split(",")
+        if len(ends) != 2 or any(p not in PLACES for p in ends):
+            sys.exit(f"--animate {a.animate}: two of {','.join(PLACES)}, FROM,TO")
+        at = sorted({int(x) for x in a.at.split(",")})
+        if at[0] < 1 or at[-1] > a.frames:
+            sys.exit(f"--at {a.at}: frames from 1 to --frames {a.frames}")
+        anim = {"from": ends[0], "to": ends[1], "frames": a.frames, "at": at}
+        a.places = a.animate
+    native_samples = a.native_samples or (2048 if anim else 8192)
+    steps = (a.steps or ("native,volume" if anim else "native,world,auto")).split(",")
     places = {p: PLACES[p] for p in a.places.split(",")}
     t_start = time.perf_counter()
     runner = matrix.Runner(entry, None)
-    run = WORK / "run"
+    run = WORK / ("animation" if anim else "run")
     result: dict = {}
     kept: dict = {}
     try:
         room = bs.write_room_for_blender(runner.host / "room.ply", REPO / "samples" / "room.ply")
         args = {"work": str(runner.inner), "ply": str(runner.inner / "room.ply"), "size": a.size, "albedo": 0.8,
                 "radius": 0.25, "suzanne_size": 0.4, "fov_deg": 40.0, "places": places,
-                "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": a.native_samples,
+                "meshes": a.meshes.split(","), "probe": PROBE, "native_samples": native_samples,
                 "samples": a.samples, "eevee_samples": a.eevee_samples, "threads": a.threads,
-                "steps": a.steps.split(","), "date": time.strftime("%Y-%m-%d"),
+                "steps": steps, "date": time.strftime("%Y-%m-%d"), "animation": anim,
+                "keys": [f"f{f:02d}" for f in anim["at"]] if anim else list(places),
                 "eevee_settings": _options(a.eevee_set), "cycles_settings": _options(a.cycles_set),
                 "volume_budget": a.volume_budget, "volume_face": a.volume_face}
         kept = _kept_natives(run, args) if "native" not in args["steps"] else {}

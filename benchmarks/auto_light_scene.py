@@ -91,14 +91,52 @@ def _render(name: str, engine: str, samples: int) -> float:
 
 
 def _each(meshes: dict, fn) -> None:
-    """fn(key) with the mesh ``key`` alone in the render (every other mesh hidden: no shadow, no bounce)."""
+    """fn(key) with the mesh ``key`` alone in the render (every other mesh hidden: no shadow, no bounce); in an
+    animation at the key's frame, seen by the camera on the path."""
     for key, obj in meshes.items():
         for other in meshes.values():
             other.hide_render = other is not obj
-        _camera(key[1])
+        if ARGS.get("animation"):
+            _at_frame(key)
+        else:
+            _camera(key[1])
         fn(key)
     for other in meshes.values():
         other.hide_render = False
+    if ARGS.get("animation"):
+        bpy.context.scene.frame_set(1)
+
+
+def _animate(meshes: dict, anim: dict) -> dict:
+    """Issue 37's animation: every mesh keyframed (linear) from place anim["from"] at frame 1 to anim["to"] at
+    anim["frames"], a camera moving from the first place's camera to the second's and tracking an Empty on the same
+    path. Returns {(kind, "fNN"): mesh} for the frames anim["at"] (cells() and the renders key on these)."""
+    scene = bpy.context.scene
+    a, b = (ARGS["places"][anim[k]] for k in ("from", "to"))
+    last = int(anim["frames"])
+    scene.frame_start, scene.frame_end = 1, last
+    target = bpy.data.objects.new("path_target", None)
+    bpy.context.collection.objects.link(target)
+    cam = bs.camera("cam_path", a["camera"], a["centre"], ARGS["fov_deg"])
+    track = cam.constraints.new("TRACK_TO")
+    track.target, track.track_axis, track.up_axis = target, "TRACK_NEGATIVE_Z", "UP_Y"
+    bpy.context.preferences.edit.keyframe_new_interpolation_type = "LINEAR"  # an even move (any Blender's API)
+    for obj in [*meshes.values(), target]:
+        start = Vector(obj.location) if obj is not target else Vector(a["centre"])
+        for frame, loc in ((1, start), (last, start + Vector(b["centre"]) - Vector(a["centre"]))):
+            obj.location = loc
+            obj.keyframe_insert("location", frame=frame)
+    for frame, loc in ((1, a["camera"]), (last, b["camera"])):
+        cam.location = loc
+        cam.keyframe_insert("location", frame=frame)
+    scene.frame_set(1)
+    return {(kind, f"f{f:02d}"): obj for (kind, _place), obj in meshes.items() for f in anim["at"]}
+
+
+def _at_frame(key) -> None:
+    """The frame of an animation key ("fNN"), the camera that follows the path."""
+    bpy.context.scene.frame_set(int(key[1][1:]))
+    bpy.context.scene.camera = bpy.data.objects["cam_path"]
 
 
 def main() -> dict:
@@ -117,7 +155,11 @@ def main() -> dict:
         splats.visible_camera = False  # the mesh alone in the picture; bounce and shadow rays still see the splats
         rec["positions_head"] = so.scene_from_object(splats).positions[:64].tolist()
         mat = bs.white_material("White", ARGS["albedo"])
-        meshes = {(kind, place): _mesh(kind, place, mat) for place in ARGS["places"] for kind in ARGS["meshes"]}
+        anim = ARGS.get("animation")
+        places = [anim["from"]] if anim else ARGS["places"]
+        meshes = {(kind, place): _mesh(kind, place, mat) for place in places for kind in ARGS["meshes"]}
+        if anim:
+            meshes = _animate(meshes, anim)
         rec["boxes"] = {f"{k[0]}_{k[1]}": [list(map(float, o.matrix_world @ Vector(c))) for c in o.bound_box]
                         for k, o in meshes.items()}
 
@@ -138,7 +180,7 @@ def main() -> dict:
                 times[name(f"{tag}_cycles", k)] = _render(name(f"{tag}_cycles", k), "CYCLES", ARGS["samples"])
                 times[name(f"{tag}_eevee", k)] = _render(name(f"{tag}_eevee", k), "EEVEE", ARGS["eevee_samples"])
             if "eevee_first_s" not in times:  # EEVEE's first frame compiles its shaders: not a frame's cost
-                _camera(next(iter(meshes))[1])
+                (_at_frame if ARGS.get("animation") else lambda k: _camera(k[1]))(next(iter(meshes)))
                 times["eevee_first_s"] = _render("eevee_warmup", "EEVEE", 1)
             _each(meshes, one)
 
