@@ -463,7 +463,14 @@ def test_the_panel_says_what_f12_will_contain(blender, tmp_path):
 
     scene, wall = build(bpy, tmp_path)
     text, props = draw()
-    assert "enabled" in props and "F12: meshes and the splats of Wall, by depth" in text, text
+    assert "enabled" in props and "F12: meshes and the splats of Wall, by depth; " in text, text
+    rs = scene.gs_ibl_render
+    kept = rs.transparent, rs.shadows
+    rs.transparent, rs.shadows = False, True
+    assert "by depth; the meshes' shadows on them, the World behind" in draw()[0]
+    rs.transparent, rs.shadows = True, False
+    assert "by depth; a transparent background" in draw()[0]
+    rs.transparent, rs.shadows = kept
     wall.hide_render = True
     text, _ = draw()
     assert "no GS-IBL splats" in text and "camera icon" in text and "Wall" in text, text

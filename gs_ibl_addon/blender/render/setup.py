@@ -76,7 +76,10 @@ def describe(scene, view_layer=None) -> tuple[str, list[str]]:
     if scene.camera.data.type != "PERSP":
         return "F12: no splats: the camera is not perspective", notes
     names = ", ".join(o.name for o in drawn)
-    return f"F12: meshes and the splats of {names}, by depth", notes
+    rs = scene.gs_ibl_render
+    extras = (["the meshes' shadows on them"] if getattr(rs, "shadows", False) else []) + [
+        "a transparent background" if compositor.transparent(scene) else "the World behind"]
+    return f"F12: meshes and the splats of {names}, by depth; " + ", ".join(extras), notes
 
 
 def on_depsgraph_update(scene, depsgraph) -> None:
