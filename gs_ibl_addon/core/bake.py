@@ -378,7 +378,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
         kept = assembled[-1] if assembled else r.last_frame
         if face_sizes is not None:
             face = int(np.shape(result.radiance)[1]) if result.radiance is not None else kept.face_size
-        frame = None
+        frame = filled_cube = None
         # Holes are filled on the kept probe (the search above compared the unfilled probes: a fill moves every
         # size alike) and it is filtered again; a probe without holes pays nothing. A one-colour fill of a probe
         # whose frame is still on the GPU, with nothing else to change on its cube, is filled there
@@ -390,7 +390,8 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                 frame = kept
                 value = (covered_means(np.asarray(result.sh_coefficients)[None], [result.hole_fraction])[0]
                          if s.hole_fill == "mean" else np.asarray(s.hole_colour, np.float64))
-                with fill_frame_holes(frame, value[None]):  # one submission with the filter
+                # one submission with the filter, the filled radiance's readback in it
+                with fill_frame_holes(frame, value[None], read=True) as filled_cube:
                     filled = filter_probe(frame, irradiance_size=m_search, method=method, sh_order=s.sh_order,
                                           roughness=None, read_radiance=False, **s.extra)
                 result.irradiance, result.sh_coefficients = filled.irradiance, filled.sh_coefficients
@@ -400,7 +401,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
         with times.stage("radiance readback"):
             if result.radiance is None:  # the kept probe's frame (or per-face cube) is still on the GPU
                 frame = kept
-                result.radiance = frame.read_cube()
+                result.radiance = filled_cube.read()[0] if filled_cube is not None else frame.read_cube()
         with times.stage("holes and lights"):
             if result.hole_fill is None and light_from_radiance(result, s, r.colour_space, hole_radiance,
                                                                 highlights_done):

@@ -14,7 +14,7 @@ from typing import Iterator
 
 import numpy as np
 
-from ..vk import Recorder, groups, scratch
+from ..vk import Buffer, Recorder, groups, scratch
 from ..vk.kernels import KERNELS
 
 Y00 = 0.5 / math.sqrt(math.pi)
@@ -29,26 +29,55 @@ def covered_means(sh: np.ndarray, holes: np.ndarray) -> np.ndarray:
     return np.where(covered[:, None] > 0, dc / np.maximum(covered, 1e-300)[:, None], 0.0)
 
 
+class FilledFrame:
+    """What ``fill_frame_holes(..., read=True)`` yields: ``read()`` gives the filled frame's RGBA, (P, 6, n, n, 4)
+    float32, once the work queued in the block is waited for. Where the frame's memory is not host-cached (a
+    discrete GPU, which reads it through a staging copy: one more submission) the fill's own program copies it to a
+    host-visible buffer the context keeps, so the read is a memcpy; valid until the next fill that reads."""
+
+    def __init__(self, frame, staged: Buffer | None) -> None:
+        self.frame, self.staged = frame, staged
+
+    def read(self) -> np.ndarray:
+        frame, n = self.frame, self.frame.cube_face_size
+        source = self.staged if self.staged is not None else frame.image
+        return source.read(np.float32, frame.pixels * 4).reshape(frame.probes, 6, n, n, 4)
+
+
+def _staging(ctx, nbytes: int) -> Buffer:
+    b = ctx.cache.get("hole-fill-read")
+    if b is None or not b.alive or b.nbytes < nbytes:
+        if b is not None:
+            b.destroy()
+        b = ctx.cache["hole-fill-read"] = Buffer.staging(ctx, nbytes, cached=True)
+    return b
+
+
 @contextlib.contextmanager
-def fill_frame_holes(frame, fills: np.ndarray) -> Iterator[None]:
+def fill_frame_holes(frame, fills: np.ndarray, read: bool = False) -> Iterator[FilledFrame | None]:
     """``with fill_frame_holes(frame, fills): filter(frame)``: add (1 - alpha) x fills[probe] to the RGB of every
     texel of a render_probes frame on the GPU (in place; alpha is kept, as holes.fill_holes keeps it). The fill is
-    queued, not waited for: the work started inside the block goes to the GPU with it, in one submission."""
+    queued, not waited for: the work started inside the block goes to the GPU with it, in one submission.
+    ``read``: yield a FilledFrame whose read() gives the filled cubes without a submission of its own."""
     frame.wait()
     ctx, probes = frame.ctx, frame.probes
     fill = np.zeros((probes, 4), np.float32)
     fill[:, :3] = np.asarray(fills, np.float64).reshape(probes, 3)
     total = frame.pixels
+    image = frame.image
+    staged = _staging(ctx, total * 16) if read and not (image.host_visible and image.host_cached) else None
     buf = scratch(ctx, fill.nbytes, "hole-fill")
     prog = None
     try:
         buf.write(fill)
         rec = Recorder(ctx)
-        rec.dispatch(KERNELS["probe_fill_holes"], [frame.image, buf], groups(total, 256, ctx), n=total,
+        rec.dispatch(KERNELS["probe_fill_holes"], [image, buf], groups(total, 256, ctx), n=total,
                      per_probe=total // probes)
+        if staged is not None:
+            rec.copy(image, staged, total * 16)
         prog = rec.program()
         prog.start()
-        yield
+        yield FilledFrame(frame, staged) if read else None
     finally:
         if prog is not None:
             prog.close()  # waits for it if the block did not
