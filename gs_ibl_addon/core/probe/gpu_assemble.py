@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..vk import Buffer, Recorder, groups, scratch
+from ..vk import Buffer, Recorder, groups
 from ..vk.kernels import KERNELS
 from .box import faces_to_size
 from .gpu_filters import omega_table
 
 TEXEL = 16  # bytes of one RGBA float32 texel
+PROGRAMS_KEPT = 16  # GpuFaces' recordings kept per context (a bake's search makes 2-5)
 
 
 def _held(ctx, key: tuple, nbytes: int) -> Buffer:
@@ -171,36 +172,55 @@ class GpuFaces:
     part of the irradiance at ``parts_size`` (bake.irradiance_parts of the change of the faces' RGB at ``level``):
     the levels, their change as six one-face cubes (probe_face_parts.comp) and the exact filter of those are queued
     with the faces' own work, so they go to the GPU in its submission. ``host_parts(change, size)``: take them on
-    the host instead, from the levels read back (a CPU device, where numpy's integral is the faster)."""
+    the host instead, from the levels read back (a CPU device, where numpy's integral is the faster).
+
+    Its buffers are the context's (_held) and its recordings kept there by the buffers and sizes they use: the next
+    bake of the same faces records nothing."""
 
     def __init__(self, first: KeptCube, last: KeptCube, level: int, parts_size: int, host_parts=None) -> None:
         self.ctx, n = last.ctx, last.size
         self.sizes = [n] * 6
         self.store = last.buffer
-        self._buffers: list[Buffer] = []
-        self._programs: list = []  # queued, not waited for: closed (waited) at close()
+        self._rounds = 0
+        self._programs: list = []  # started, maybe not yet waited for
         self.cube: AssembledCube | None = None
         self._render, self._level, self._size, self._host_parts = None, level, parts_size, host_parts
         level_bytes = 6 * level * level * TEXEL
         # the levels now and before (the change between them is what parts() splits): swapped at each put
-        self._low = [self._buffer(level_bytes, "probe-assembled-level") for _ in range(2)]
+        self._low = [_held(self.ctx, ("probe-faces-level", k), level_bytes) for k in range(2)]
         if host_parts is None:
             self._change = _held(self.ctx, ("probe-face-parts", level), 6 * level_bytes)
             self._plan = None
         else:
-            self._results = Buffer.staging(self.ctx, 2 * level_bytes, cached=True)
-        rec = Recorder(self.ctx, reusable=True)
-        self._record_resize(rec, first.buffer, [first.size] * 6, self._low[1], level)
-        self._record_resize(rec, self.store, self.sizes, self._low[0], level)
-        self._record_change(rec)
-        self._start(rec.program())
+            self._results = self.ctx.cache.get("probe-faces-level-read")
+            if self._results is None or not self._results.alive or self._results.nbytes < 2 * level_bytes:
+                if self._results is not None:
+                    self._results.destroy()
+                self._results = self.ctx.cache["probe-faces-level-read"] = Buffer.staging(
+                    self.ctx, 2 * level_bytes, cached=True)
 
-    def _buffer(self, nbytes: int, name: str) -> Buffer:
-        b = scratch(self.ctx, nbytes, name)
-        self._buffers.append(b)
-        return b
+        def record(rec: Recorder) -> None:
+            self._record_resize(rec, first.buffer, [first.size] * 6, self._low[1], level)
+            self._record_resize(rec, self.store, self.sizes, self._low[0], level)
+            self._record_change(rec)
+        self._start(("faces-init", first.buffer.serial, first.size, self.store.serial, n, level), record)
 
-    def _start(self, program) -> None:
+    def _start(self, key: tuple, record) -> None:
+        """Start the recording of ``record`` kept under ``key`` (with every buffer its commands bind), recorded
+        now if it is not; then the parts' filter behind it."""
+        key = key + tuple(b.serial for b in self._low) + (
+            self._change.serial if self._host_parts is None else self._results.serial,)
+        program = self.ctx.cache.pop(key, None)
+        if program is None or not program.valid:
+            if program is not None:
+                program.close()
+            rec = Recorder(self.ctx, reusable=True)
+            record(rec)
+            program = rec.program()
+            kept = [k for k in self.ctx.cache if isinstance(k, tuple) and k[0] in ("faces-init", "faces-put")]
+            for old in kept[:max(0, len(kept) - PROGRAMS_KEPT + 1)]:  # the least recently used
+                self.ctx.cache.pop(old).close()
+        self.ctx.cache[key] = program
         self._programs.append(program)
         program.start()
         if self._host_parts is None:  # the parts' filter, queued behind: one plan, recorded once (its source kept)
@@ -238,29 +258,32 @@ class GpuFaces:
         face order; it may still be in flight) drew, and record the cube at ``out`` (``self.cube``) and what
         parts() takes, queued behind the render."""
         frame = rendered.frame
-        old, old_at = self.store, self._offsets(self.sizes)
+        old, old_sizes = self.store, list(self.sizes)
         sizes = list(self.sizes)
         for f in todo:
             sizes[f] = int(todo[f])
-        at = self._offsets(sizes)
-        store = self._buffer(sum(n * n for n in sizes) * TEXEL, "probe-faces")
+        old_at, at = self._offsets(old_sizes), self._offsets(sizes)
+        # the stores of successive rounds alternate (a round copies the last one's kept faces)
+        store = _held(self.ctx, ("probe-faces", self._rounds % 2), sum(n * n for n in sizes) * TEXEL)
         image = _held(self.ctx, ("probe-assembled", out), 6 * out * out * TEXEL)  # a round's cube replaces the last
         self._low.reverse()  # the level now becomes the one before
-        rec = Recorder(self.ctx, reusable=True)
-        drawn = 0
-        for f in range(6):  # the new faces from the frame (its views in face order), the others kept
-            n = sizes[f]
-            if f in todo:
-                rec.copy(frame.image, store, n * n * TEXEL, drawn * TEXEL, at[f] * TEXEL)
-                drawn += n * n
-            else:
-                rec.copy(old, store, n * n * TEXEL, old_at[f] * TEXEL, at[f] * TEXEL)
-        self._record_resize(rec, store, sizes, image, out)
-        self._record_resize(rec, store, sizes, self._low[0], self._level)
-        self._record_change(rec)
-        self._start(rec.program())
-        # the old store goes back to the pool at close(), once nothing queued reads it
+
+        def record(rec: Recorder) -> None:
+            drawn = 0
+            for f in range(6):  # the new faces from the frame (its views in face order), the others kept
+                n = sizes[f]
+                if f in todo:
+                    rec.copy(frame.image, store, n * n * TEXEL, drawn * TEXEL, at[f] * TEXEL)
+                    drawn += n * n
+                else:
+                    rec.copy(old, store, n * n * TEXEL, old_at[f] * TEXEL, at[f] * TEXEL)
+            self._record_resize(rec, store, sizes, image, out)
+            self._record_resize(rec, store, sizes, self._low[0], self._level)
+            self._record_change(rec)
+        self._start(("faces-put", frame.image.serial, old.serial, store.serial, image.serial, tuple(old_sizes),
+                     tuple(sizes), out, self._level), record)
         self.store, self.sizes, self._render = store, sizes, frame
+        self._rounds += 1
         self.cube = AssembledCube(self, image, out)
 
     def finish(self) -> bool:
@@ -289,13 +312,10 @@ class GpuFaces:
         return self._host_parts(low[0] - low[1], self._size)
 
     def close(self) -> None:
+        """Wait for what it started (its buffers and recordings stay the context's)."""
         for program in self._programs:
-            program.close()  # waits for it if it still runs
+            if program.running:
+                program.wait()
         self._programs = []
         if self._host_parts is None and self._plan is not None and self._plan.program.running:
             self._plan.program.wait()
-        for b in self._buffers:
-            b.close()
-        self._buffers = []
-        if self._host_parts is not None:
-            self._results.destroy()
