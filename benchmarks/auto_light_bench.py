@@ -99,7 +99,8 @@ def cells(arrays: dict, result: dict, places, meshes) -> list[dict]:
     return rows
 
 
-def plot(rows: list[dict], path: Path, title: str, keys=PLACES) -> None:
+def plot(rows: list[dict], path: Path, title: str, keys=PLACES, ylim=(0.42, 1.85),
+         ticks=(0.5, 0.6, 0.7, 0.85, 1.0, 1.15, 1.3, 1.5, 1.75)) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -129,8 +130,7 @@ def plot(rows: list[dict], path: Path, title: str, keys=PLACES) -> None:
                     ax.annotate(f"{v:.2f}", (xi, v), textcoords="offset points", xytext=(0, 3 if v >= 1 else -9),
                                 ha="center", fontsize=6.5, color=colour)
         ax.set_yscale("log")
-        ax.set_ylim(0.42, 1.85)
-        ticks = [0.5, 0.6, 0.7, 0.85, 1.0, 1.15, 1.3, 1.5, 1.75]
+        ax.set_ylim(*ylim)
         ax.set_yticks(ticks)
         ax.set_yticklabels([f"{t:g}" for t in ticks])
         ax.minorticks_off()
@@ -253,11 +253,12 @@ def _write_animation(rows: list[dict], result: dict, args: dict) -> None:
             w.writerow({**meta, **r})
     t = result["times"]
     plot(rows, ANIM_PNG, f"A white sphere and a Suzanne moving from the {anim['from']} to the {anim['to']} over "
-                         f"{anim['frames']} frames, one Lighting Volume bake ({t.get('volume_bake_s', 0):.0f} s): "
+                         f"{anim['frames']} frames, one Lighting Volume bake ({t.get('volume_bake_s', 0):.0f} s)\n"
                          f"mean of ours / native Cycles {args['native_samples']} spp at frames "
-                         f"{', '.join(map(str, anim['at']))}\nours: Cycles {args['samples']} spp, EEVEE "
-                         f"{args['eevee_samples']} samples; Blender {result['blender']}, 2-core CPU, {date}",
-         keys=args["keys"])
+                         f"{', '.join(map(str, anim['at']))}, per-channel range as ticks\nours: Cycles "
+                         f"{args['samples']} spp, EEVEE {args['eevee_samples']} samples; Blender {result['blender']}, "
+                         f"2-core CPU, {date}", keys=args["keys"], ylim=(0.86, 1.2),
+         ticks=(0.9, 0.95, 0.97, 1.0, 1.03, 1.05, 1.1, 1.15))
     print(f"\n{ANIM_CSV}\n{ANIM_PNG}")
 
 
