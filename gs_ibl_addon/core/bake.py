@@ -374,7 +374,7 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                 result, face, trials, plan, lod_k = choose_face(probe_at, ErrorModel(), s, lod_k, say)
         # the kept probe's radiance: on the host (per-face cube put together there), else on the GPU in the last
         # frame rendered or the per-face cube put together there
-        assembled = [held.cube for held in faces if getattr(held, "cube", None) is not None]
+        assembled = [held.cube for held in faces if isinstance(held, GpuFaces) and held.cube is not None]
         kept = assembled[-1] if assembled else r.last_frame
         if face_sizes is not None:
             face = int(np.shape(result.radiance)[1]) if result.radiance is not None else kept.face_size
