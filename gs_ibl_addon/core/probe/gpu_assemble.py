@@ -24,6 +24,7 @@ from .gpu_filters import omega_table
 
 TEXEL = 16  # bytes of one RGBA float32 texel
 PROGRAMS_KEPT = 16  # GpuFaces' recordings kept per context (a bake's search makes 2-5)
+HELD_MAX = 8 << 20  # bytes: a store of faces larger than this is not kept between bakes
 
 
 def _held(ctx, key: tuple, nbytes: int) -> Buffer:
@@ -312,10 +313,15 @@ class GpuFaces:
         return self._host_parts(low[0] - low[1], self._size)
 
     def close(self) -> None:
-        """Wait for what it started (its buffers and recordings stay the context's)."""
+        """Wait for what it started; its buffers and recordings stay the context's, but for stores over
+        HELD_MAX (a face of 1024^2, or two of 512^2), which are given back."""
         for program in self._programs:
             if program.running:
                 program.wait()
         self._programs = []
         if self._host_parts is None and self._plan is not None and self._plan.program.running:
             self._plan.program.wait()
+        for k in range(2):
+            b = self.ctx.cache.get(("probe-faces", k))
+            if b is not None and b.nbytes > HELD_MAX:
+                self.ctx.cache.pop(("probe-faces", k)).destroy()

@@ -19,6 +19,9 @@ from ..vk.kernels import KERNELS
 
 Y00 = 0.5 / math.sqrt(math.pi)
 GPU_FILLS = ("mean", "constant")  # holes.py's fills of one colour over the sphere: the ones filled here
+# fill_frame_holes(read=True) copies a frame of at most this many bytes (a 64^2 cube: 0.4 MB, 128^2: 1.6 MB) into a
+# host-visible buffer the context keeps; a larger one is read as before, by its own staging copy
+READ_WITH_FILL_MAX = 16 << 20
 
 
 def covered_means(sh: np.ndarray, holes: np.ndarray) -> np.ndarray:
@@ -33,7 +36,8 @@ class FilledFrame:
     """What ``fill_frame_holes(..., read=True)`` yields: ``read()`` gives the filled frame's RGBA, (P, 6, n, n, 4)
     float32, once the work queued in the block is waited for. Where the frame's memory is not host-cached (a
     discrete GPU, which reads it through a staging copy: one more submission) the fill's own program copies it to a
-    host-visible buffer the context keeps, so the read is a memcpy; valid until the next fill that reads."""
+    host-visible buffer the context keeps (frames up to READ_WITH_FILL_MAX), so the read is a memcpy; valid until
+    the next fill that reads."""
 
     def __init__(self, frame, staged: Buffer | None) -> None:
         self.frame, self.staged = frame, staged
@@ -65,7 +69,8 @@ def fill_frame_holes(frame, fills: np.ndarray, read: bool = False) -> Iterator[F
     fill[:, :3] = np.asarray(fills, np.float64).reshape(probes, 3)
     total = frame.pixels
     image = frame.image
-    staged = _staging(ctx, total * 16) if read and not (image.host_visible and image.host_cached) else None
+    staged = (_staging(ctx, total * 16) if read and not (image.host_visible and image.host_cached)
+              and total * 16 <= READ_WITH_FILL_MAX else None)
     buf = scratch(ctx, fill.nbytes, "hole-fill")
     prog = None
     try:
