@@ -8,6 +8,8 @@ in x and a wall at x = 0.5 that the visibility moments see), so the corner weigh
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -207,10 +209,17 @@ def test_volume_bake_lights_every_mesh_and_follows_motion(blender, tmp_path):
     probe = bpy.context.active_object
     probe.gs_ibl_probe.face_size, probe.gs_ibl_probe.irradiance_size = 32, 8
     probe.gs_ibl_probe.lighting = "VOLUME"
+    probe.gs_ibl_probe.volume_probes = 160  # the panel's Volume Probes: the bake's budget
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     report = probe.gs_ibl_probe.local_report
     print("\n" + report + "\n" + probe.gs_ibl_probe.last_summary)
     assert scene.frame_current == 1
+    assert 8 <= int(re.search(r"share (\d+) probes", report).group(1)) <= 160, report
+    from gs_ibl_addon.blender.lighting.stale import stale_reasons
+    probe.gs_ibl_probe.volume_probes = 200
+    assert "its Volume Probes is now 200" in stale_reasons(scene, probe)
+    probe.gs_ibl_probe.volume_probes = 160
+    assert not stale_reasons(scene, probe)
     assert {o.name: ll.has_local_light(o) for o in (cube, sphere, away)} == {
         cube.name: "volume", sphere.name: "volume", away.name: None}
     assert "outside the splats keep the World probe: " + away.name in report

@@ -16,7 +16,8 @@ from ..common.jobs import set_notice
 from ..splats.object import splat_count
 
 BAKED_KEY = "gs_ibl_baked"  # on a probe: {"probe": xyz, "splats": name, "splats_matrix": 16 floats,
-# "splats_count": n, "meshes": {name: 16 floats}, "lighting": "AUTO" | "VOLUME" | "WORLD"} of its last bake
+# "splats_count": n, "meshes": {name: 16 floats}, "lighting": "AUTO" | "VOLUME" | "WORLD", "volume_probes": n} of its
+# last bake
 NOTICE = "stale"  # the status bar's line (common/jobs.py set_notice)
 _TOLERANCE = 1e-5  # metres (and matrix entries): float32 round trips and re-evaluation are far below
 _NAMED = 3  # meshes named at most in a reason
@@ -46,7 +47,7 @@ def record_bake(probe: bpy.types.Object, splats: bpy.types.Object) -> None:
     """What the bake just written was made from (Lighting Auto's meshes are added by record_meshes)."""
     probe[BAKED_KEY] = {"probe": [float(v) for v in probe.matrix_world.translation], "splats": splats.name,
                         "splats_matrix": _matrix(splats), "splats_count": splat_count(splats), "meshes": {},
-                        "lighting": probe.gs_ibl_probe.lighting}
+                        "lighting": probe.gs_ibl_probe.lighting, "volume_probes": probe.gs_ibl_probe.volume_probes}
 
 
 def record_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, names) -> None:
@@ -114,6 +115,9 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
     lighting = probe.gs_ibl_probe.lighting
     if rec.get("lighting", lighting) != lighting:  # a record from before it was kept: no mark
         out.append(f"its Lighting is now {probe.gs_ibl_probe.bl_rna.properties['lighting'].enum_items[lighting].name}")
+    elif lighting == "VOLUME" and rec.get("volume_probes", probe.gs_ibl_probe.volume_probes) != \
+            probe.gs_ibl_probe.volume_probes:
+        out.append(f"its Volume Probes is now {probe.gs_ibl_probe.volume_probes}")
     moved = [m for m, place in rec.get("meshes", {}).items()
              if m in scene.objects and _differs(_matrix(scene.objects[m]), place)]
     if moved:

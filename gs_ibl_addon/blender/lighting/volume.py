@@ -30,8 +30,8 @@ from .sources import require_splats, scene_splats
 
 REPORT_PREFIX = "Light volume: "
 MAX_FRAMES = 48  # frames of an animation whose boxes the region covers (evenly over the range, both ends in)
-# The volume's probe budget and cube face: None takes the core's (volume_region.DEFAULT_BUDGET, volume_bake.
-# DEFAULT_FACE); benchmarks/volume_light_bench.py sets them for its trials.
+# The volume's probe budget and cube face for a benchmark's trial: None takes the probe's Volume Probes and the
+# core's face (volume_bake.DEFAULT_FACE); benchmarks/volume_light_bench.py and auto_light_bench.py set them.
 BUDGET: int | None = None
 FACE: int | None = None
 
@@ -141,6 +141,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         return f"{REPORT_PREFIX}no lit mesh inside the splats: every mesh keeps the World probe", {
             "lit": [], "outside": outside, "probes": 0}
     scene_name, probe_name = scene.name, probe.name
+    budget = BUDGET or int(probe.gs_ibl_probe.volume_probes) or DEFAULT_BUDGET
     if len(splats) == 1:
         r = yield from probe_renderer_steps(scene, probe, need_world=True)
         own = None
@@ -155,7 +156,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         r = own = yield Work(_merged_renderer, locals_, span=(0.0, 0.1))
     where = np.array(probe.matrix_world.translation, np.float64)
     try:
-        plan, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, BUDGET or DEFAULT_BUDGET,
+        plan, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget,
                                                    FACE or DEFAULT_FACE, span=(0.1, 0.97))
     finally:
         if own is not None:

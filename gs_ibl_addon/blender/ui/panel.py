@@ -219,6 +219,8 @@ class GSIBL_PT_panel(bpy.types.Panel):
             _label_block(col, context, moving[0].upper() + moving[1:], icon="ANIM")
         col.prop(s, "splats")
         col.prop(s, "lighting")
+        if s.lighting == "VOLUME":
+            col.prop(s, "volume_probes")
         if s.splats is not None and not sources.in_scene(context.scene, s.splats):
             _label_block(col, context, f"{s.splats.name} is not in this scene: pick another", icon="ERROR")
         col.prop(s, "method")
