@@ -93,6 +93,10 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     _k("probe_integrate", "Cube Texels Out", "n m", (128,)),
     _k("probe_ggx", "Mips Samples Lods Levels Out", "n n_mips n_levels total", (64,)),
     _k("probe_latlong", "Cube Out", "n width height", (64,)),
+    # the light volume's maps from a frame with depth (probe/gpu_volume_maps.py)
+    _k("volume_maps_prep", "Frame Depth Omega IrrIn VisIn",
+       "n f g far:float near:float covered:float hole_r:float hole_g:float hole_b:float", (64,)),
+    _k("volume_maps_apply", "Matrix In Out", "n_in rows probes channels stride at extra", (64,)),
 )}
 
 
