@@ -48,7 +48,9 @@
 #                                        bake_stages.csv, stages.log. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
 #                                        volume's accuracy against per-point probes at the five places, its bake's
-#                                        cost against a World-only bake). Into $OUT: volume_accuracy.csv,
+#                                        cost against a World-only bake, and with host-made maps: GPU_MAPS A/B),
+#                                        after tests/test_gpu_volume_maps.py (the GPU maps against numpy's, on
+#                                        the device; its line "passed" in volume.log). Into $OUT: volume_accuracy.csv,
 #                                        volume_cost.csv, volume_bench.png, volume.log. Carry .gl and .whl
 #                                        VOLUME_POINTS=32 (default 256, volume_bench's): shading points per
 #                                        sphere; compare rows with lavapipe's only at the same count (the CSV's
@@ -151,6 +153,9 @@ trials|grid|full|final|refs|stages|volume)
     log="$out/volume.log"
     (
       set +e
+      # the GPU-made maps against their numpy reference on this device (volume_bake.GPU_MAPS; a few seconds)
+      timeout 60 python3 -m pytest -q -p no:cacheprovider tests/test_gpu_volume_maps.py \
+        || echo "[gpu_run] test_gpu_volume_maps: exit $?"
       timeout --signal=INT --kill-after=10 400 python3 benchmarks/volume_bench.py --points "${VOLUME_POINTS:-256}" --repeats 3 \
         --out-csv "$out/volume.csv" --png "$out/volume_bench.png" || echo "[gpu_run] volume_bench: exit $?"
       echo "[gpu_run] volume: $((SECONDS - t_start)) s"

@@ -51,6 +51,7 @@ from auto_light_bench import PLACES, PROBE  # noqa: E402
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.probe import volume as vol  # noqa: E402
+from gs_ibl_addon.core.probe import volume_bake  # noqa: E402
 from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
                                                 measured_nodes, mesh_grid)
 from gs_ibl_addon.core.probe.grid import (bake_sh_points, eval_irradiance, interpolate,  # noqa: E402
@@ -245,6 +246,12 @@ def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
             rows.append({"meshes": label, "world_s": round(tw, 3), "volume_s": round(tv, 3), "probes": probes,
                          "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2)})
             print(rows[-1], flush=True)
+        volume_bake.GPU_MAPS = False  # A/B: the maps from cubes read back (a GPU device's default makes them on it)
+        tv, probes = volume(COST_SETS["3 meshes"])
+        volume_bake.GPU_MAPS = None
+        rows.append({"meshes": "3 meshes, host maps", "world_s": round(tw, 3), "volume_s": round(tv, 3),
+                     "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2)})
+        print(rows[-1], flush=True)
         ta = auto(COST_SETS["3 meshes"])
         rows.append({"meshes": "3 meshes, Auto today", "world_s": round(tw, 3), "volume_s": round(ta, 3),
                      "probes": 0, "ratio": round((tw + ta) / tw, 2), "load": round(os.getloadavg()[0], 2)})
