@@ -9,6 +9,9 @@ root with the built zip installed by Blender's installer, never by pytest itself
    over ARGS["path"] (one frame each), the probe at ARGS["probe"] with Lighting Volume: one bake; then at each frame
    an orthographic camera 3 m along +X of the sphere renders it in EEVEE (frame_<n>.npy); the file's atlases are
    saved (atlas_irr.npy, atlas_vis.npy, atlas_cells.npy, rows bottom first) with the spec, for the host's sample_packed.
+3. Leaks: the host's two rooms (ARGS["rooms"]), Lighting Volume through the extension's own import and bake; the
+   file's images saved (rooms_irr.npy, rooms_vis.npy, rooms_cells.npy) with the spec, for the host's sample_packed
+   against the rooms' exact irradiance.
 A line RESULT_TAG + JSON gives the reports and times.
 """
 from __future__ import annotations
@@ -59,6 +62,33 @@ def _pixels(img) -> np.ndarray:
     buf = np.empty(w * h * 4, np.float32)
     img.pixels.foreach_get(buf)
     return buf.reshape(h, w, 4)[..., :3]
+
+
+def _two_rooms(rec: dict, vn) -> None:
+    """3. The leak scene (core/probe/volume_rooms.py, written by the host with its colour space) imported by our
+    importer in a new scene, in the core's frame; a sphere in the dark room, a cube in the bright one, Lighting Volume
+    at ARGS["rooms"]["probes"]: the file's three images and the spec saved for the host (rooms_*.npy)."""
+    bs.clear()
+    r = ARGS["rooms"]
+    assert bpy.ops.gs_ibl.import_splats(filepath=r["ply"]) == {"FINISHED"}
+    rooms = bpy.data.objects[os.path.splitext(os.path.basename(r["ply"]))[0]]
+    rooms.location, rooms.rotation_euler, rooms.scale = (0, 0, 0), (0, 0, 0), (1, 1, 1)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=r["radius"], location=r["sphere"])
+    bpy.ops.mesh.primitive_cube_add(size=0.3, location=r["cube"])
+    for o in bpy.context.view_layer.objects.selected:
+        o.select_set(False)
+    probe = bs.add_probe(r["probe"], rooms, "GS-IBL Probe", keep_background=False, lighting="VOLUME",
+                         volume_probes=r["probes"], face_size=32, irradiance_size=8)
+    gb = importlib.import_module(f"{MODULE}.blender.lighting.bake")
+    t0 = time.perf_counter()
+    gb.bake_into_world(bpy.context.scene, probe)
+    rec["times"]["rooms_bake"] = time.perf_counter() - t0
+    rec["rooms_report"] = probe.gs_ibl_probe.local_report.splitlines()
+    rec["rooms_colour_space"] = rooms.gs_ibl_splats.colour_space
+    s = vn.volume_spec()
+    rec["rooms_spec"] = {"lo": list(s.lo), "hi": list(s.hi), "shape": list(s.shape)}
+    for key, img in (("irr", vn.volume_image()), ("vis", vn.visibility_image()), ("cells", vn.cells_image())):
+        np.save(os.path.join(ARGS["work"], f"rooms_{key}.npy"), _pixels(img))
 
 
 def main() -> dict:
@@ -129,6 +159,8 @@ def main() -> dict:
             scene.frame_set(f)
             cam.location = (loc[0] + 3.0, loc[1], loc[2])
             rec["times"][f"frame_{f}"] = _render(f"frame_{f}", "EEVEE")
+        if ARGS.get("rooms"):
+            _two_rooms(rec, vn)
         rec["ok"] = True
     except Exception:  # noqa: BLE001 (reported to the host)
         rec.update(ok=False, error=traceback.format_exc())
