@@ -318,6 +318,7 @@ def main() -> None:
     a = ap.parse_args()
     configs = [tuple(float(x) if i != 1 else int(x) for i, x in enumerate(c.split(":"))) for c in
                a.configs.split(",")]
+    volume_bake.GPU_MAPS = None  # the maps on a GPU device (off by default until checked there): its A/B row below
     scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
     t0 = time.perf_counter()
     r = SplatRenderer(scene, lod=True)

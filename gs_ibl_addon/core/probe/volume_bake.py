@@ -45,7 +45,10 @@ HOLE_REPORT = 0.05
 # to VIS_FACE, False on the host (the cubes read back into maps_from_cubes), None: on the GPU unless the device is a
 # CPU. On lavapipe the host's BLAS wins: 300 probes of the sample room at 16^2 took 2.1 s of GPU maps against 49 ms
 # of numpy (the readback is a memcpy there), 2026-12-05, load ~4.6.
-GPU_MAPS: bool | None = None
+# Off by default until an NVIDIA run has checked it (gpu_run.sh volume runs tests/test_gpu_volume_maps.py on the
+# device, and volume_bench times both paths there): it passed on lavapipe only, and no device was lent after it was
+# written (2026-12-05). Then None.
+GPU_MAPS: bool | None = False
 
 
 @functools.lru_cache(maxsize=8)
