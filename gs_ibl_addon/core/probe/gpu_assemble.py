@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..vk import Buffer, Recorder, groups
+from ..vk import Buffer, Recorder, groups, kept
 from ..vk.kernels import KERNELS
 from .box import faces_to_size
 from .gpu_filters import omega_table
@@ -25,19 +25,6 @@ from .gpu_filters import omega_table
 TEXEL = 16  # bytes of one RGBA float32 texel
 PROGRAMS_KEPT = 16  # GpuFaces' recordings kept per context (a bake's search makes 2-5)
 HELD_MAX = 8 << 20  # bytes: a store of faces larger than this is not kept between bakes
-
-
-def _held(ctx, key: tuple, nbytes: int) -> Buffer:
-    """A buffer kept in the context's cache under ``key``, for a source that filter plans are recorded on
-    (gpu_filters.plan_for keys a plan by its source buffer): the next bake finds them, where pooled buffers came
-    back in another order and each bake recorded its plans anew (ms of host time). One bake at a time per context,
-    as its filter plans already are."""
-    b = ctx.cache.get(key)
-    if b is None or not b.alive or b.nbytes < nbytes:
-        if b is not None:
-            b.destroy()
-        b = ctx.cache[key] = Buffer(ctx, nbytes, key[0])
-    return b
 
 
 def faces_cube(images, size: int) -> np.ndarray:
@@ -121,7 +108,7 @@ class KeptCube(CubeOnGpu):
     def __init__(self, frame, slot: int = 0) -> None:
         frame.check()
         n = frame.face_size
-        super().__init__(_held(frame.ctx, ("probe-kept", slot), 6 * n * n * TEXEL), n)
+        super().__init__(kept(frame.ctx, ("probe-kept", slot), 6 * n * n * TEXEL), n)
         self.size, self._frame = n, frame
         ctx, key = frame.ctx, ("kept-copy", frame.image.serial, self.image.serial, n)
         self.program = ctx.cache.get(key)
@@ -188,17 +175,12 @@ class GpuFaces:
         self._render, self._level, self._size, self._host_parts = None, level, parts_size, host_parts
         level_bytes = 6 * level * level * TEXEL
         # the levels now and before (the change between them is what parts() splits): swapped at each put
-        self._low = [_held(self.ctx, ("probe-faces-level", k), level_bytes) for k in range(2)]
+        self._low = [kept(self.ctx, ("probe-faces-level", k), level_bytes) for k in range(2)]
         if host_parts is None:
-            self._change = _held(self.ctx, ("probe-face-parts", level), 6 * level_bytes)
+            self._change = kept(self.ctx, ("probe-face-parts", level), 6 * level_bytes)
             self._plan = None
         else:
-            self._results = self.ctx.cache.get("probe-faces-level-read")
-            if self._results is None or not self._results.alive or self._results.nbytes < 2 * level_bytes:
-                if self._results is not None:
-                    self._results.destroy()
-                self._results = self.ctx.cache["probe-faces-level-read"] = Buffer.staging(
-                    self.ctx, 2 * level_bytes, cached=True)
+            self._results = kept(self.ctx, "probe-faces-level-read", 2 * level_bytes, staging=True)
 
         def record(rec: Recorder) -> None:
             self._record_resize(rec, first.buffer, [first.size] * 6, self._low[1], level)
@@ -265,8 +247,8 @@ class GpuFaces:
             sizes[f] = int(todo[f])
         old_at, at = self._offsets(old_sizes), self._offsets(sizes)
         # the stores of successive rounds alternate (a round copies the last one's kept faces)
-        store = _held(self.ctx, ("probe-faces", self._rounds % 2), sum(n * n for n in sizes) * TEXEL)
-        image = _held(self.ctx, ("probe-assembled", out), 6 * out * out * TEXEL)  # a round's cube replaces the last
+        store = kept(self.ctx, ("probe-faces", self._rounds % 2), sum(n * n for n in sizes) * TEXEL)
+        image = kept(self.ctx, ("probe-assembled", out), 6 * out * out * TEXEL)  # a round's cube replaces the last
         self._low.reverse()  # the level now becomes the one before
 
         def record(rec: Recorder) -> None:

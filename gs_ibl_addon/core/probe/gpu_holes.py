@@ -14,7 +14,7 @@ from typing import Iterator
 
 import numpy as np
 
-from ..vk import Buffer, Recorder, groups, scratch
+from ..vk import Buffer, Recorder, groups, kept, scratch
 from ..vk.kernels import KERNELS
 
 Y00 = 0.5 / math.sqrt(math.pi)
@@ -48,15 +48,6 @@ class FilledFrame:
         return source.read(np.float32, frame.pixels * 4).reshape(frame.probes, 6, n, n, 4)
 
 
-def _staging(ctx, nbytes: int) -> Buffer:
-    b = ctx.cache.get("hole-fill-read")
-    if b is None or not b.alive or b.nbytes < nbytes:
-        if b is not None:
-            b.destroy()
-        b = ctx.cache["hole-fill-read"] = Buffer.staging(ctx, nbytes, cached=True)
-    return b
-
-
 @contextlib.contextmanager
 def fill_frame_holes(frame, fills: np.ndarray, read: bool = False) -> Iterator[FilledFrame | None]:
     """``with fill_frame_holes(frame, fills): filter(frame)``: add (1 - alpha) x fills[probe] to the RGB of every
@@ -69,7 +60,8 @@ def fill_frame_holes(frame, fills: np.ndarray, read: bool = False) -> Iterator[F
     fill[:, :3] = np.asarray(fills, np.float64).reshape(probes, 3)
     total = frame.pixels
     image = frame.image
-    staged = (_staging(ctx, total * 16) if read and not (image.host_visible and image.host_cached)
+    staged = (kept(ctx, "hole-fill-read", total * 16, staging=True)
+              if read and not (image.host_visible and image.host_cached)
               and total * 16 <= READ_WITH_FILL_MAX else None)
     buf = scratch(ctx, fill.nbytes, "hole-fill")
     prog = None

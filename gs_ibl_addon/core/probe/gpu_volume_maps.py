@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from ..vk import Buffer, Recorder, groups, scratch
+from ..vk import Buffer, Recorder, groups, kept, scratch
 from ..vk.kernels import KERNELS
 from .gpu_filters import omega_table
 from .volume import COVERED, IRR, VIS
@@ -51,15 +51,6 @@ def _face_of(m: np.ndarray, rows: int, what: str) -> int:
     return g
 
 
-def _readback(ctx, nbytes: int) -> Buffer:
-    b = ctx.cache.get("volume-maps-read")
-    if b is None or not b.alive or b.nbytes < nbytes:
-        if b is not None:
-            b.destroy()
-        b = ctx.cache["volume-maps-read"] = Buffer.staging(ctx, nbytes, cached=True)
-    return b
-
-
 def volume_maps(frame, irradiance: np.ndarray, visibility: np.ndarray, far: float, near: float,
                 hole_colour=(0.0, 0.0, 0.0)) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A render_probes frame with depth (P probes of f^2 faces) and the maps' matrices (volume_bake's
@@ -82,7 +73,7 @@ def volume_maps(frame, irradiance: np.ndarray, visibility: np.ndarray, far: floa
     nbytes = probes * STRIDE * 4
     out = scratch(ctx, nbytes, "volume-maps")
     direct = out.host_visible and out.host_cached
-    read = out if direct else _readback(ctx, nbytes)
+    read = out if direct else kept(ctx, "volume-maps-read", nbytes, staging=True)
     hr, hg, hb = (float(c) for c in hole_colour)
     try:
         with Recorder(ctx) as rec:

@@ -4,7 +4,8 @@
                 fences, query pools, staging and scratch buffers), transfer counts (``ctx.stats``)
   kernels.py    the kernel table: every shader's storage buffers, typed push constants and workgroup size
   constants.py  the numbers Python and GLSL share (written into shaders/constants.glsl)
-  buffers.py    Buffer (with-scoped), host transfers through the kept staging buffers, pooled scratch buffers
+  buffers.py    Buffer (with-scoped), host transfers through the kept staging buffers, pooled scratch buffers,
+                buffers kept by key between bakes (kept)
   pipelines.py  one compute pipeline per kernel and context, descriptor sets cached by buffer
   commands.py   Recorder (one-shot submissions), Program (a recording submitted again), groups()
 
@@ -12,9 +13,9 @@ Every pipeline has the same shape: set 0 holds only storage buffers (binding i =
 parameters travel as push constants (at most 128 bytes, the guaranteed minimum).
 """
 from .context import VulkanContext, VulkanUnavailable, get_context
-from .buffers import Buffer, scratch
+from .buffers import Buffer, kept, scratch
 from .commands import Program, Recorder, groups
 from .kernels import KERNELS, Kernel
 
-__all__ = ["VulkanContext", "VulkanUnavailable", "get_context", "Buffer", "Program", "Recorder", "groups",
+__all__ = ["VulkanContext", "VulkanUnavailable", "get_context", "Buffer", "kept", "Program", "Recorder", "groups",
            "scratch", "KERNELS", "Kernel"]

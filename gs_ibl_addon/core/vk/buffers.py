@@ -194,3 +194,18 @@ def scratch(ctx: VulkanContext, nbytes: int, name: str = "scratch") -> Buffer:
         b.name = name
         return b
     return Buffer(ctx, size, name, pooled=True)
+
+
+def kept(ctx: VulkanContext, key, nbytes: int, staging: bool = False) -> Buffer:
+    """A buffer the context keeps in ``ctx.cache`` under ``key``, made anew only when gone or smaller than
+    ``nbytes``: a device buffer named for the key, or with ``staging`` a host-visible one to read back into. Kept so
+    that what is recorded on it (filter plans, readback copies) is found again by the next bake; one bake at a time
+    per context, as its recordings are."""
+    b = ctx.cache.get(key)
+    if b is None or not b.alive or b.nbytes < nbytes:
+        if b is not None:
+            b.destroy()
+        name = key[0] if isinstance(key, tuple) else str(key)
+        b = ctx.cache[key] = Buffer.staging(ctx, nbytes, cached=True) if staging else Buffer(ctx, nbytes, name)
+    return b
+
