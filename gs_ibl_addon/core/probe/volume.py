@@ -283,6 +283,11 @@ def flat_cells(a: np.ndarray) -> np.ndarray:
     return a.transpose(2, 1, 0, *range(3, a.ndim)).reshape(-1, *a.shape[3:])
 
 
+def index_grid(shape) -> np.ndarray:
+    """(prod(shape), 3) int: every index (i, j, k) below ``shape`` in linear order (i fastest, as flat_cells)."""
+    return flat_cells(np.stack(np.meshgrid(*(np.arange(k) for k in shape), indexing="ij"), -1))
+
+
 def brick_bases(refine: np.ndarray) -> np.ndarray:
     """(cx, cy, cz) each refined cell's first brick probe among the bricks' (0 where r = 1)."""
     r = np.asarray(refine, int)
@@ -301,21 +306,19 @@ def _node_frame(spec: GridSpec) -> tuple[np.ndarray, np.ndarray]:
 def brick_keys_of(cell, r: int) -> np.ndarray:
     """((r + 1)^3, 3) int: the probes of cell ``cell``'s brick of ``r``, in KEY_UNITS of a cell from the first node,
     in the brick's order lx + (r + 1) (ly + (r + 1) lz)."""
-    lz, ly, lx = np.meshgrid(*(np.arange(r + 1),) * 3, indexing="ij")
-    return np.asarray(cell, int) * KEY_UNITS + np.stack([lx, ly, lz], -1).reshape(-1, 3) * (KEY_UNITS // r)
+    return np.asarray(cell, int) * KEY_UNITS + index_grid((r + 1,) * 3) * (KEY_UNITS // r)
 
 
 def node_keys(spec: GridSpec) -> np.ndarray:
     """(N, 3) int: the grid's nodes in brick keys' units, in linear order."""
-    nodes = np.stack(np.meshgrid(*(np.arange(n) for n in spec.shape), indexing="ij"), -1)
-    return flat_cells(nodes) * KEY_UNITS
+    return index_grid(spec.shape) * KEY_UNITS
 
 
 def brick_keys(spec: GridSpec, refine: np.ndarray) -> np.ndarray:
     """(B, 3) int: every brick probe's place (brick_keys_of), bricks in cell order (the atlas's order): equal keys
     are one place (a brick's corners are grid nodes, neighbours share faces)."""
     r = np.asarray(refine, int)
-    cells = flat_cells(np.stack(np.meshgrid(*(np.arange(k) for k in r.shape), indexing="ij"), -1))
+    cells = index_grid(r.shape)
     out = [brick_keys_of(c, rc) for c, rc in zip(cells, flat_cells(r)) if rc > 1]
     return np.concatenate(out) if out else np.zeros((0, 3), int)
 

@@ -5,8 +5,8 @@ and 0.5 m below its lamp the light changes 10% over 0.25 m, so a sphere there re
 costs the whole room for a few cells. Here each cell is asked instead:
 
 - Measure: the grid's nodes and every cell's centre are baked together (volume_bake.bake_probes). At a centre the
-  lookup (volume.sample: eight corners, trilinear x Chebyshev) is compared with the centre's own map over the map's
-  texel directions: the mean absolute luminance error over the mean is the cell's error. The centre is where
+  lookup (volume.sample: eight corners, trilinear x Chebyshev) is compared with the centre's own map over
+  ERROR_NORMALS directions: the mean absolute luminance error over the mean is the cell's error. The centre is where
   trilinear interpolation errs most for a smooth field, and it sees what the corners miss: a lamp or a wall inside
   the cell.
 - Choose: linear interpolation errs as the square of the spacing, so a brick of r (volume.BRICK_LEVELS: 2 or 4;
@@ -33,7 +33,7 @@ from .grid import GridSpec
 from .variation import LUMINANCE
 from ..synthetic import fibonacci_sphere
 from .volume import (BRICK_LEVELS, KEY_UNITS, NORMAL_BIAS, LightVolume, bilinear_map, brick_keys, brick_keys_of,
-                     cell_shape, flat_cells, grid_maps, key_positions, node_keys, probe_positions, sample,
+                     cell_shape, flat_cells, grid_maps, index_grid, key_positions, node_keys, probe_positions, sample,
                      spec_spacing)
 from .volume_bake import DEFAULT_FACE, bake_probes, far_distance, probe_report
 
@@ -52,8 +52,7 @@ ERROR_NORMALS = 64
 
 def cell_keys(spec: GridSpec) -> np.ndarray:
     """(C, 3) every cell's centre in brick_keys' units, cells in linear order."""
-    cells = np.stack(np.meshgrid(*(np.arange(k) for k in cell_shape(spec)), indexing="ij"), -1)
-    return flat_cells(cells) * KEY_UNITS + KEY_UNITS // 2
+    return index_grid(cell_shape(spec)) * KEY_UNITS + KEY_UNITS // 2
 
 
 def cells_touching(spec: GridSpec, boxes) -> np.ndarray:
@@ -101,7 +100,7 @@ def choose_bricks(spec: GridSpec, errors: np.ndarray, tolerance: float, budget: 
     if min(spec.shape) < 2 or budget <= 0:
         return refine
     taken = {tuple(k) for k in np.vstack([node_keys(spec), cell_keys(spec)])}
-    cells = flat_cells(np.stack(np.meshgrid(*(np.arange(k) for k in shape), indexing="ij"), -1))
+    cells = index_grid(shape)
     queue = [(-float(e), int(i), 1) for i, e in enumerate(errors) if e > tolerance]
     heapq.heapify(queue)
     added = 0
@@ -138,7 +137,7 @@ def bake_refined(renderer, spec: GridSpec, budget: int, tolerance: float = REFIN
                         hole_colour, True, lod_k)
     grid = LightVolume(spec, grid_maps(first["irradiance"][:n], spec.shape), grid_maps(first["moments"][:n],
                                                                                       spec.shape))
-    errors = np.zeros(len(cell_keys(spec)))
+    errors = np.zeros(int(np.prod(cell_shape(spec))))
     errors[cells] = np.where(first["inside"][n:], 0.0,  # a centre inside an object: no mesh stands there
                              centre_errors(grid, first["irradiance"][n:], cells))
     refine = choose_bricks(spec, errors, tolerance, budget - len(first["holes"]))
