@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import os
 import shutil
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -13,6 +12,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from gs_ibl_addon.core.synthetic import SkyGradient, random_scene, shell_scene  # noqa: E402
+from tests.panel_recorder import draw_panel  # noqa: E402
 
 SKY = SkyGradient()
 BEFORE_ROOMS = os.path.join(os.path.dirname(__file__), "data", "before_rooms.blend")
@@ -37,29 +37,6 @@ def _probe(place="CURSOR", **settings):
     for k, v in settings.items():
         setattr(s, k, v)
     return probe
-
-
-class _Layout:
-    """Records what a panel draws: labels (text, icon) and props (property name, the text shown)."""
-
-    def __init__(self, rec: dict):
-        self.rec = rec
-
-    def label(self, text="", icon="NONE", **_kw):
-        self.rec.setdefault("labels", []).append((text, icon))
-
-    def prop(self, data, name, text=None, **_kw):
-        self.rec.setdefault("props", []).append((name, text))
-
-    def __getattr__(self, _name):
-        return lambda *a, **kw: _Layout(self.rec)
-
-
-def _draw(context=None) -> dict:
-    from gs_ibl_addon.blender.ui.panel import GSIBL_PT_panel
-    rec: dict = {}
-    GSIBL_PT_panel.draw(SimpleNamespace(layout=_Layout(rec)), context or bpy.context)
-    return rec
 
 
 def _evaluated_points(obj) -> np.ndarray:
@@ -132,7 +109,7 @@ def test_a_saved_proxy_tree_gets_the_bounds_points_on_load(blender, tmp_path, wr
 def test_the_resolution_slider_has_a_label(blender):
     ov = bpy.context.scene.gs_ibl_overlay
     ov.show = True
-    shown = dict(_draw()["props"])
+    shown = dict(draw_panel()["props"])
     assert "resolution_scale" in shown
     text = shown["resolution_scale"]  # None: the property's own name
     assert (text if text is not None else ov.bl_rna.properties["resolution_scale"].name) == "Resolution"
@@ -342,13 +319,13 @@ def test_the_report_is_one_line_with_its_details_a_click_away(blender, tmp_path,
     assert len(s.last_report.split("\n")) >= 5 and "the total:" in s.last_report  # kept whole
     wm = bpy.context.window_manager
     assert "gs_ibl_report_details" in type(wm).bl_rna.properties and not wm.gs_ibl_report_details
-    rec = _draw()
+    rec = draw_panel()
     shown = _labels(rec).replace("\n", " ")
     assert line in shown or line.replace(", ", ",\n") in _labels(rec)
     assert "the total:" not in shown and "render " not in shown
     assert ("gs_ibl_report_details", "Details") in rec["props"]
     wm.gs_ibl_report_details = True
-    shown = _labels(_draw())
+    shown = _labels(draw_panel())
     assert "the total:" in shown and "face size by irradiance change" in shown
     wm.gs_ibl_report_details = False
     # Lighting Auto says what it chose
@@ -373,7 +350,7 @@ def test_an_out_of_date_bake_is_marked(blender, tmp_path, write_3dgs_ply):
     def marked() -> list[str]:
         bpy.context.view_layer.update()  # the depsgraph update whose handler refreshes the status bar
         reasons = stale_reasons(bpy.context.scene, probe)
-        rec = _draw()
+        rec = draw_panel()
         out_of_date = [t for t, icon in rec["labels"] if t.startswith("Out of date") and icon == "ERROR"]
         assert bool(out_of_date) == bool(reasons)
         in_status_bar = [n for n in notices() if "out of date" in n and repr(probe.name) in n]

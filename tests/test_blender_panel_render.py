@@ -10,50 +10,9 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
+from tests.panel_recorder import Rows, draw_panel  # noqa: E402
+
 RENDER_PROPS = ("enabled", "write_pass", "transparent", "shadows", "shadow_strength")
-
-
-class _Rows:
-    """Records what a draw function lays out: each prop with the text it would show and the row it is in (a row
-    holds the props drawn into it; a column gives each prop a row of its own)."""
-
-    def __init__(self, rec: dict, row: bool = False):
-        self.rec, self.is_row = rec, row
-        self.ident = len(rec.setdefault("containers", [])) if row else None
-        if row:
-            rec["containers"].append([])
-
-    def _slot(self) -> list:
-        if self.is_row:
-            return self.rec["containers"][self.ident]
-        self.rec.setdefault("containers", []).append([])
-        return self.rec["containers"][-1]
-
-    def prop(self, data, name, text=None, **_kw):
-        self._slot().append(name)
-        self.rec.setdefault("props", []).append((name, text if text is not None else
-                                                 data.bl_rna.properties[name].name))
-
-    def label(self, text="", icon="NONE", **_kw):
-        self.rec.setdefault("labels", []).append((text, icon))
-
-    def row(self, *_a, **_kw):
-        return _Rows(self.rec, row=True)
-
-    def column(self, *_a, **_kw):
-        return _Rows(self.rec)
-
-    box = split = column_flow = grid_flow = column
-
-    def __getattr__(self, _name):
-        return lambda *a, **kw: _Rows(self.rec)
-
-
-def _draw_sidebar(context=None) -> dict:
-    from gs_ibl_addon.blender.ui.panel import GSIBL_PT_panel
-    rec: dict = {}
-    GSIBL_PT_panel.draw(SimpleNamespace(layout=_Rows(rec)), context or bpy.context)
-    return rec
 
 
 def _render_settings_on():
@@ -65,7 +24,7 @@ def _render_settings_on():
 def test_every_render_setting_has_a_row_of_its_own(blender):
     """Side by side at the sidebar's default width the labels read "Splats i…", "Transpa…", "Shadows on Sp…"."""
     _render_settings_on()
-    rec = _draw_sidebar()
+    rec = draw_panel()
     shown = [name for name, _ in rec["props"]]
     for name in RENDER_PROPS:
         assert name in shown, name
@@ -78,7 +37,7 @@ def test_no_two_fields_share_a_name(blender):
     """The shadow strength read "Strength", like the probe's strength below it."""
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     _render_settings_on()
-    rec = _draw_sidebar()
+    rec = draw_panel()
     texts = [text for _, text in rec["props"] if text]
     assert ("shadow_strength", "Shadow Strength") in rec["props"]
     assert ("strength", "Strength") in rec["props"]
@@ -102,7 +61,7 @@ def test_a_bake_drops_the_last_renders_no_probe_world_message(blender, tmp_path,
     frame._last[scene.name] = {"messages": [other, why], "frames": {}, "cancelled": False}
 
     def shown() -> str:  # the panel's labels, wrapped lines joined again
-        return " ".join(t for t, _ in _draw_sidebar()["labels"])
+        return " ".join(t for t, _ in draw_panel()["labels"])
 
     assert f"Last render: {frame.NO_PROBE_WORLD}" in shown()
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
@@ -129,7 +88,7 @@ def test_a_running_bake_is_not_marked_out_of_date(blender, tmp_path, write_3dgs_
         bpy.context.view_layer.update()  # the probe's matrix_world follows its location
         refresh_notice(scene)
         in_bar = any("out of date" in n and repr(probe.name) in n for n in notices())
-        in_panel = any(t.startswith("Out of date") for t, _ in _draw_sidebar()["labels"])
+        in_panel = any(t.startswith("Out of date") for t, _ in draw_panel()["labels"])
         assert in_bar == in_panel == bool(stale_reasons(scene, probe))
         return in_bar
 
@@ -191,7 +150,7 @@ def test_an_animated_parent_is_said(blender, tmp_path, write_3dgs_ply):
     assert probe.parent is cube
 
     def labels() -> str:
-        return " ".join(t for t, _ in _draw_sidebar()["labels"])
+        return " ".join(t for t, _ in draw_panel()["labels"])
 
     assert "Follows MovingCube" in labels() and "animated" not in labels()
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
@@ -215,11 +174,11 @@ def test_the_render_tab_shows_the_same_settings(blender, monkeypatch):
     assert (cls.bl_space_type, cls.bl_region_type, cls.bl_context) == ("PROPERTIES", "WINDOW", "render")
     _render_settings_on()
     rec: dict = {}
-    cls.draw(SimpleNamespace(layout=_Rows(rec)), bpy.context)
-    sidebar = [p for p in _draw_sidebar()["props"] if p[0] in RENDER_PROPS + ("pass_path", "native_splats")]
+    cls.draw(SimpleNamespace(layout=Rows(rec)), bpy.context)
+    sidebar = [p for p in draw_panel()["props"] if p[0] in RENDER_PROPS + ("pass_path", "native_splats")]
     assert rec["props"] == sidebar and {name for name, _ in sidebar} >= set(RENDER_PROPS)
     calls = []
     monkeypatch.setattr(panel, "_draw_render_settings", lambda layout, context: calls.append(layout))
     cls.draw(SimpleNamespace(layout="render tab"), bpy.context)
-    panel.GSIBL_PT_panel.draw(SimpleNamespace(layout=_Rows({})), bpy.context)
+    panel.GSIBL_PT_panel.draw(SimpleNamespace(layout=Rows({})), bpy.context)
     assert calls[0] == "render tab" and len(calls) == 2

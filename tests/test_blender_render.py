@@ -434,32 +434,14 @@ def test_what_users_get_wrong(blender, tmp_path, monkeypatch):
         bpy.ops.render.render(write_still=True)
 
 
-class _Layout:
-    """Records the labels and properties a panel draws."""
-
-    def __init__(self, rec: dict):
-        self.rec = rec
-
-    def label(self, text="", icon="NONE", **_kw):
-        self.rec.setdefault("labels", []).append(text)
-
-    def prop(self, data, name, text=None, **_kw):
-        self.rec.setdefault("props", []).append(name)
-
-    def __getattr__(self, _name):
-        return lambda *a, **kw: _Layout(self.rec)
-
-
 def test_the_panel_says_what_f12_will_contain(blender, tmp_path):
     bpy = blender
-    from types import SimpleNamespace
-
-    from gs_ibl_addon.blender.ui.panel import GSIBL_PT_panel
+    from tests.panel_recorder import draw_panel
 
     def draw():
-        rec: dict = {}
-        GSIBL_PT_panel.draw(SimpleNamespace(layout=_Layout(rec)), bpy.context)
-        return " ".join(rec.get("labels", [])), rec.get("props", [])  # wrapped lines joined
+        rec = draw_panel()
+        return (" ".join(t for t, _ in rec.get("labels", [])),  # wrapped lines joined
+                [name for name, _ in rec.get("props", [])])
 
     scene, wall = build(bpy, tmp_path)
     text, props = draw()
