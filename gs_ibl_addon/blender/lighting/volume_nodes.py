@@ -165,9 +165,7 @@ def _build(tree, irr, vis, cells, spec: GridSpec, tiles, linear: bool) -> None:
     shape = np.asarray(k["shape"], np.float64)
     span = np.where(hi > lo, hi - lo, 1.0)
     top = shape - 1
-    # probe positions per axis: lo + i (hi - lo) / (n - 1); one node: the box's middle
-    base_pos = np.where(shape > 1, lo, (lo + hi) / 2)
-    step = np.where(shape > 1, (hi - lo) / np.maximum(top, 1), 0.0)
+    base_pos, step = np.asarray(k["first_node"]), np.asarray(k["node_step"])  # node i at first + i step
     cols = float(k["cols"])
     iw, ih = k["irradiance_size"]
     vw, vh = k["visibility_size"]

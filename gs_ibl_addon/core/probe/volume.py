@@ -357,11 +357,13 @@ def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
     (LightVolume.tiles; None: the grid's alone)."""
     cols, rows = atlas_tiles(spec.count if tiles is None else int(tiles))
     ccols, crows = atlas_tiles(int(np.prod(cell_shape(spec))))
+    first, step = _node_frame(spec)  # one node on an axis: the box's middle, step 0
     return {"lo": tuple(map(float, spec.lo)), "hi": tuple(map(float, spec.hi)), "shape": tuple(spec.shape),
             "cols": cols, "rows": rows, "irr": IRR, "vis": VIS,
             "irradiance_size": (cols * (IRR + 2), rows * (IRR + 2)),  # (width, height)
             "visibility_size": (cols * (VIS + 2), rows * (VIS + 2)),
             "cells": cell_shape(spec), "cells_size": (ccols, crows), "grid_count": spec.count,
+            "first_node": tuple(map(float, first)), "node_step": tuple(map(float, step)),
             "normal_bias": NORMAL_BIAS * spec_spacing(spec),
             "variance_floor": VARIANCE_FLOOR, "min_weight": MIN_WEIGHT, "crush": CRUSH}
 
