@@ -57,21 +57,23 @@ def cells_image() -> bpy.types.Image | None:
     return find_ours(bpy.data.images, CELLS_ROLE)
 
 
-def volume_spec(image: bpy.types.Image | None = None) -> GridSpec | None:
-    """The GridSpec the file's volume was baked on (None: no volume)."""
+def _stored(image: bpy.types.Image | None) -> dict | None:
+    """The JSON the irradiance image holds (SPEC), None without a volume."""
     img = image if image is not None else volume_image()
     raw = img.get(SPEC) if img is not None else None
-    if not raw:
-        return None
-    d = json.loads(raw)
-    return GridSpec(tuple(d["lo"]), tuple(d["hi"]), tuple(d["shape"]))
+    return json.loads(raw) if raw else None
+
+
+def volume_spec(image: bpy.types.Image | None = None) -> GridSpec | None:
+    """The GridSpec the file's volume was baked on (None: no volume)."""
+    d = _stored(image)
+    return None if d is None else GridSpec(tuple(d["lo"]), tuple(d["hi"]), tuple(d["shape"]))
 
 
 def volume_tiles(image: bpy.types.Image | None = None) -> int | None:
     """The maps in the file's atlases (the grid's probes and the bricks')."""
-    img = image if image is not None else volume_image()
-    raw = img.get(SPEC) if img is not None else None
-    return json.loads(raw).get("tiles") if raw else None
+    d = _stored(image)
+    return None if d is None else d.get("tiles")
 
 
 def volume_group(engine: str = "CYCLES") -> bpy.types.ShaderNodeTree | None:
