@@ -1,13 +1,14 @@
 """Speed against Blender's native splats at users' working points (issue 16 part 5, issue 22 goal 3): time against
 per-pixel error for a lit mesh in the sample room, Blender 5.3's Cycles path-tracing the native splats (denoiser off
-and on) against our bake (Lighting Auto, the panel's defaults) + Cycles and + EEVEE, for a 48x48, a 320x180 and a
-960x540 frame and a 24-frame camera move at 320x180 (baked once, rendered as one animation job with persistent
-data, native too). Same machine, same run, one Blender (bpy 5.3 in the trixie root, with the built zip installed by
-Blender's own installer, as tests/real_blender/ does). The GPU machine's bake of the same settings
-(benchmarks/auto_bake_core.py, core, clock held; docs/bench/auto_bake_core_nvidia-h200.csv) is drawn as its own
-series: that bake's time + our EEVEE render's time here.
+and on) against our bake (Lighting Auto, the panel's defaults; then Lighting Volume on the same probe, issue 37,
+unless --lighting auto) + Cycles and + EEVEE, for a 48x48, a 320x180 and a 960x540 frame and a 24-frame camera
+move at 320x180 (baked once, rendered as one animation job with persistent data, native too). Same machine, same
+run, one Blender (bpy 5.3 in the trixie root, with the built zip installed by Blender's own installer, as
+tests/real_blender/ does). The GPU machine's Auto bake of the same settings (benchmarks/auto_bake_core.py, core,
+clock held; docs/bench/auto_bake_core_nvidia-h200.csv) is drawn as its own series: that bake's time + our EEVEE
+render's time here.
 
-Run:  python benchmarks/native_bench.py [--frames 48x48,320x180,960x540] [--no-move] [--quick]
+Run:  python benchmarks/native_bench.py [--frames 48x48,320x180,960x540] [--no-move] [--quick] [--lighting auto]
       python benchmarks/native_bench.py --plot-only docs/bench/native_lavapipe.csv
 Needs the trixie root (scripts/blender_roots.sh ensure trixie). Writes docs/bench/native_<device>.csv (+ .json:
 references, bake report) and docs/native-vs-ours.png, and prints markdown tables: every point, then per frame our
@@ -44,6 +45,7 @@ import blender_scene as bs  # noqa: E402
 from blender_scene import MODULE, mesh_mask  # noqa: E402
 
 RESULT_TAG = "GSIBL-NATIVE-BENCH "
+VOLUME_LABEL = "our Volume bake"  # Lighting Volume's rows: "<label> + Cycles", "<label> + EEVEE"
 
 
 # ---------------------------------------------------------------------------------------------------- in Blender
@@ -238,21 +240,36 @@ def _in_blender(args: dict) -> dict:
     out["sphere_box"] = [list(at - Vector((radius,) * 3)), list(at + Vector((radius,) * 3))]
     place_camera(frames[0] if frames else MOVE["frame"])
     _, out["eevee_first_frame_s"] = render(eevee, 1)  # shader compilation: once per session, not per frame
-    for frame in frames:
-        place_camera(frame)
-        for n in args["our_cycles_samples"][frame]:
-            px, s = render("CYCLES", n)
-            row(frame, refs[frame], "our bake + Cycles", n, s, px, bake_s)
-        for n in args["eevee_samples"][frame]:
-            px, s = render(eevee, n)
-            row(frame, refs[frame], "our bake + EEVEE", n, s, px, bake_s)
-    if move_refs:
-        for n in args["move_our_cycles_samples"]:
-            px, s = render_move("CYCLES", n)
-            row("move", move_refs[0], "our bake + Cycles", n, s, px, bake_s, refs=move_refs)
-        for n in args["move_eevee_samples"]:
-            px, s = render_move(eevee, n)
-            row("move", move_refs[0], "our bake + EEVEE", n, s, px, bake_s, refs=move_refs)
+
+    def ours(label: str, bake_s: float) -> None:
+        """Our renders of every frame and the move with the bake in place, as ``label`` + engine."""
+        for frame in frames:
+            place_camera(frame)
+            for n in args["our_cycles_samples"][frame]:
+                px, s = render("CYCLES", n)
+                row(frame, refs[frame], f"{label} + Cycles", n, s, px, bake_s)
+            for n in args["eevee_samples"][frame]:
+                px, s = render(eevee, n)
+                row(frame, refs[frame], f"{label} + EEVEE", n, s, px, bake_s)
+        if move_refs:
+            for n in args["move_our_cycles_samples"]:
+                px, s = render_move("CYCLES", n)
+                row("move", move_refs[0], f"{label} + Cycles", n, s, px, bake_s, refs=move_refs)
+            for n in args["move_eevee_samples"]:
+                px, s = render_move(eevee, n)
+                row("move", move_refs[0], f"{label} + EEVEE", n, s, px, bake_s, refs=move_refs)
+
+    ours("our bake", bake_s)
+    if "volume" in args.get("lighting", ()):
+        # Lighting Volume on the same probe (issue 37): its first bake compiles what Auto's did not, the second is
+        # the warm re-bake timed, as Auto's is
+        probe.gs_ibl_probe.lighting = "VOLUME"
+        gb.bake_into_world(scene, probe)
+        t0 = time.perf_counter()
+        _, report, _ = gb.bake_into_world(scene, probe)
+        volume_s = out["volume_bake_s"] = time.perf_counter() - t0
+        out["volume_bake_report"] = report
+        ours(VOLUME_LABEL, volume_s)
     return out
 
 
@@ -267,7 +284,8 @@ def _device() -> str:
 
 STYLES = {"native Cycles": ("tab:red", "o-"), "native Cycles + denoiser": ("tab:orange", "s--"),
           "our bake + Cycles": ("tab:blue", "o-"), "our bake + EEVEE": ("tab:green", "^-"),
-          "our bake on the H200 (core, clock held) + EEVEE here": ("tab:purple", "v:")}
+          "our bake on the H200 (core, clock held) + EEVEE here": ("tab:purple", "v:"),
+          f"{VOLUME_LABEL} + Cycles": ("tab:cyan", "D-"), f"{VOLUME_LABEL} + EEVEE": ("tab:olive", "P-")}
 PANELS = ("48x48", "320x180", "960x540", "move")
 
 
@@ -301,7 +319,8 @@ def speedups(rows: list[dict]) -> list[dict]:
     same error."""
     out = []
     for frame in PANELS:
-        for method in ("our bake + EEVEE", "our bake + Cycles", "our bake on the H200 (core, clock held) + EEVEE here"):
+        for method in ("our bake + EEVEE", "our bake + Cycles", "our bake on the H200 (core, clock held) + EEVEE here",
+                       f"{VOLUME_LABEL} + EEVEE", f"{VOLUME_LABEL} + Cycles"):
             ours = [r for r in rows if r["frame"] == frame and r["method"] == method]
             if not ours:
                 continue
@@ -352,8 +371,8 @@ def _plot(rows: list[dict], out_png: str, title: str) -> None:
 
 def _title(blender, device, threads, date, gpu_note) -> str:
     return (f"White sphere (albedo 0.8, 33/70/210 px wide) in the sample room, Blender {blender}, {device} "
-            f"({threads} threads), {date}; ours: Lighting Auto, panel defaults; error against two independent "
-            f"native Cycles renders (denoiser off), their own noise removed; labels: samples{gpu_note}")
+            f"({threads} threads), {date}; ours: Lighting Auto and Volume, panel defaults; error against two "
+            f"independent native Cycles renders (denoiser off), their own noise removed; labels: samples{gpu_note}")
 
 
 def _read_gpu_bake(path: str) -> tuple[float | None, str]:
@@ -376,6 +395,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--frames", default="48x48,320x180,960x540", help="which of " + ", ".join(FRAMES))
     ap.add_argument("--no-move", action="store_true", help="leave the 24-frame move out")
+    ap.add_argument("--lighting", default="auto,volume", help="our series: auto (always), volume (Lighting Volume "
+                    "on the same probe, baked after Auto's renders)")
     ap.add_argument("--quick", action="store_true", help="a smoke run: few samples everywhere (a chart of noise)")
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--csv", default=None)
@@ -415,7 +436,7 @@ def main() -> None:
         shutil.copy(bs.__file__, runner.host / "blender_scene.py")
         # samples per frame: the larger frames stop where native's time runs to minutes on this CPU
         args = {"work": str(runner.inner), "room": str(runner.inner / "room.ply"), "threads": a.threads,
-                "frames": frames, "move": not a.no_move,
+                "frames": frames, "move": not a.no_move, "lighting": a.lighting.split(","),
                 "reference": {"48x48": 4096, "320x180": 1024, "960x540": 512},
                 "samples": {"48x48": [16, 64, 256, 1024], "320x180": [16, 64, 256], "960x540": [16, 64, 256]},
                 "our_cycles_samples": {"48x48": [16, 64, 256], "320x180": [16, 64, 256], "960x540": [16, 64]},
@@ -454,6 +475,8 @@ def main() -> None:
     print(f"references: {json.dumps(result['frames'])}\nour bake {result['bake_s']:.2f} s (first of the session "
           f"{result['bake_first_s']:.2f} s, Auto chose {result['auto_choice']}): {result['bake_report']}; "
           f"EEVEE's first frame (shaders) {result['eevee_first_frame_s']:.1f} s")
+    if "volume_bake_s" in result:
+        print(f"Lighting Volume's bake {result['volume_bake_s']:.2f} s: {result['volume_bake_report']}")
     print("| frame | method | samples | render s | bake s | total s | rel. RMS error | raw | mean / reference |")
     print("|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for row in result["rows"]:
