@@ -30,7 +30,8 @@ and bricks) over 3 meshes (centre, window, table) and 10 meshes (the five
 places and five more about the room); ratio = (World + volume) / World, issue 37's target <= 2x and <= 4x. Also
 Lighting Auto's measurement + grids for the same 3 meshes. All on one renderer built with a level of detail (the
 World probe renders every splat of it). The load average is on every row: timings on a shared CPU are noisy; the
-ratios are measured in the same run.
+ratios are measured in the same run. Every submission of the cost runs is timestamped (ctx.stamp_all): a volume
+row also has its GPU time, host = wall - GPU, and its submissions (issue 38's split).
 """
 from __future__ import annotations
 
@@ -210,18 +211,25 @@ def plot_budgets(rows: list[dict], path: str, device: str) -> None:
 
 
 def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
+    r.ctx.stamp_all = True  # every submission timestamped: the volume's GPU time beside its wall (issue 38's split)
     def world() -> float:
         t0 = time.perf_counter()
         bake_probe(None, np.asarray(PROBE, np.float64), ProbeSettings(), renderer=r, host_splats=scene)
         return time.perf_counter() - t0
 
+    split: dict = {}  # the last volume bake's GPU time (every submission stamped) and submissions
+
     def volume(names) -> tuple[float, int]:
         """Lighting Volume's bake as blender/lighting/volume.py runs it: the light's measurement and the grid's plan
         (its share of the budget), then grid, centres and bricks."""
-        t0 = time.perf_counter()
+        before, t0 = r.ctx.stats.snapshot(), time.perf_counter()
         plan, _ = choose_volume(r, boxes_of(names), share=GRID_SHARE)
         v = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes_of(names))
-        return time.perf_counter() - t0, v.timings["probes"]
+        wall = time.perf_counter() - t0
+        moved = r.ctx.stats.since(before)
+        split.update(gpu_ms=round(moved["gpu_ms"], 2), host_ms=round(max(wall * 1e3 - moved["gpu_ms"], 0.0), 2),
+                     submits=moved["submits"])
+        return wall, v.timings["probes"]
 
     def auto(names) -> float:
         t0 = time.perf_counter()
@@ -244,13 +252,14 @@ def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
         for label, names in COST_SETS.items():
             tv, probes = volume(names)
             rows.append({"meshes": label, "world_s": round(tw, 3), "volume_s": round(tv, 3), "probes": probes,
-                         "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2)})
+                         "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2), **split})
             print(rows[-1], flush=True)
         volume_bake.GPU_MAPS = False  # A/B: the maps from cubes read back (a GPU device's default makes them on it)
         tv, probes = volume(COST_SETS["3 meshes"])
         volume_bake.GPU_MAPS = None
         rows.append({"meshes": "3 meshes, host maps", "world_s": round(tw, 3), "volume_s": round(tv, 3),
-                     "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2)})
+                     "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2),
+                     **split})
         print(rows[-1], flush=True)
         ta = auto(COST_SETS["3 meshes"])
         rows.append({"meshes": "3 meshes, Auto today", "world_s": round(tw, 3), "volume_s": round(ta, 3),
@@ -318,7 +327,7 @@ def main() -> None:
     a = ap.parse_args()
     configs = [tuple(float(x) if i != 1 else int(x) for i, x in enumerate(c.split(":"))) for c in
                a.configs.split(",")]
-    volume_bake.GPU_MAPS = None  # the maps on a GPU device (off by default until checked there): its A/B row below
+    volume_bake.GPU_MAPS = None  # the default: the maps on a GPU device, numpy on a CPU one; its A/B row below
     scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
     t0 = time.perf_counter()
     r = SplatRenderer(scene, lod=True)
@@ -351,9 +360,12 @@ def main() -> None:
                   f"{row['cell_r']:.3f} / {row['cell_g']:.3f} / {row['cell_b']:.3f} | "
                   f"{'ok' if row['cell_ok'] else 'out'} |")
     write_csv(base.replace(".csv", "_cost.csv"), costs, extra)
-    print("\n| meshes | World s | volume (or Auto) s | probes | ratio | load |\n|---|---|---|---|---|---|")
+    print("\n| meshes | World s | volume (or Auto) s | volume GPU / host ms, submits | probes | ratio | load |\n"
+          "|---|---|---|---|---|---|---|")
     for c in costs:
-        print(f"| {c['meshes']} | {c['world_s']} | {c['volume_s']} | {c['probes']} | {c['ratio']}x | {c['load']} |")
+        split = f"{c['gpu_ms']} / {c['host_ms']}, {c['submits']}" if "gpu_ms" in c else "–"
+        print(f"| {c['meshes']} | {c['world_s']} | {c['volume_s']} | {split} | {c['probes']} | {c['ratio']}x | "
+              f"{c['load']} |")
     if acc:
         plot(acc, costs, a.png, dev)
         print(f"wrote {a.png}")
