@@ -89,6 +89,9 @@ def _in_blender(args: dict) -> dict:
     r.threads = args["threads"]
     r.use_persistent_data = True  # the move renders as one job: each engine keeps its scene between frames
     room.visible_camera = False  # the sphere alone in the picture: every error is its light
+    # Cycles' own path tracing of the native splats: Splats in Renders off (on, the Native Splats default, F12 draws
+    # them with our renderer and hides them from Cycles; tests/real_blender/cycles_reference.py does the same)
+    scene.gs_ibl_render.enabled = False
     scene.view_settings.view_transform = "Standard"
     c = scene.cycles
     c.device = "CPU"
