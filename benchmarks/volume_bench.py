@@ -165,22 +165,26 @@ def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
     return rows
 
 
-def budget_sweep(r: SplatRenderer, n_points: int, budgets) -> list[dict]:
-    """Accuracy against time per Volume Probes budget, the bake as Lighting Volume runs it over the five spheres
-    (the light's measurement, the grid at GRID_SHARE, centres and bricks): one row per budget and place."""
+def budget_sweep(r: SplatRenderer, n_points: int, budgets, faces=(volume_bake.DEFAULT_FACE,)) -> list[dict]:
+    """Accuracy against time per Volume Probes budget and probe face size, the bake as Lighting Volume runs it over
+    the five spheres (the light's measurement, the grid at GRID_SHARE, centres and bricks): one row per budget, face
+    and place."""
     data = {p: sphere_points(p, n_points) for p in PLACES}
     refs = {p: reference(r, *data[p][:2]) for p in PLACES}
     rows = []
-    for budget in budgets:
-        t0 = time.perf_counter()
-        plan, _ = choose_volume(r, boxes_of(PLACES), budget=budget, share=GRID_SHARE)
-        v = bake_refined(r, plan.spec, budget, boxes=boxes_of(PLACES))
-        secs = time.perf_counter() - t0
-        print(f"budget {budget}: {v.timings['probes']} probes, {secs:.2f} s; {v.report[:1]}", flush=True)
-        for p in PLACES:
-            pts, nrm, facing = data[p]
-            rows.append({"budget": budget, "place": p, "probes": v.timings["probes"], "bake_s": round(secs, 3),
-                         "load": round(os.getloadavg()[0], 2), **errors(vol.sample(v, pts, nrm), refs[p], facing)})
+    for face in faces:
+        for budget in budgets:
+            t0 = time.perf_counter()
+            plan, _ = choose_volume(r, boxes_of(PLACES), budget=budget, share=GRID_SHARE)
+            v = bake_refined(r, plan.spec, budget, boxes=boxes_of(PLACES), face_size=face)
+            secs = time.perf_counter() - t0
+            print(f"budget {budget}, {face}^2 faces: {v.timings['probes']} probes, {secs:.2f} s; {v.report[:1]}",
+                  flush=True)
+            for p in PLACES:
+                pts, nrm, facing = data[p]
+                rows.append({"budget": budget, "face": face, "place": p, "probes": v.timings["probes"],
+                             "bake_s": round(secs, 3), "load": round(os.getloadavg()[0], 2),
+                             **errors(vol.sample(v, pts, nrm), refs[p], facing)})
     return rows
 
 
@@ -189,21 +193,23 @@ def plot_budgets(rows: list[dict], path: str, device: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    budgets = list(dict.fromkeys(r["budget"] for r in rows))
-    t = [np.median([r["bake_s"] for r in rows if r["budget"] == b]) * 1e3 for b in budgets]
-    worst = [100 * max(max(abs(r[f"cell_{c}"] - 1) for c in "rgb") for r in rows if r["budget"] == b)
-             for b in budgets]
-    mean = [100 * np.mean([r["err_mean"] for r in rows if r["budget"] == b]) for b in budgets]
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    ax.plot(t, worst, "o-", label="worst camera-half mean, five places (target 3%)")
-    ax.plot(t, mean, "s--", label="per-point error, mean over the places")
-    for x, y, b in zip(t, worst, budgets):
-        ax.annotate(f"{b}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
+    for i, face in enumerate(dict.fromkeys(r.get("face", volume_bake.DEFAULT_FACE) for r in rows)):
+        rs = [r for r in rows if r.get("face", volume_bake.DEFAULT_FACE) == face]
+        budgets = list(dict.fromkeys(r["budget"] for r in rs))
+        t = [np.median([r["bake_s"] for r in rs if r["budget"] == b]) * 1e3 for b in budgets]
+        worst = [100 * max(max(abs(r[f"cell_{c}"] - 1) for c in "rgb") for r in rs if r["budget"] == b)
+                 for b in budgets]
+        mean = [100 * np.mean([r["err_mean"] for r in rs if r["budget"] == b]) for b in budgets]
+        ax.plot(t, worst, "o-", color=f"C{i}", label=f"{face}² faces: worst camera-half mean, five places")
+        ax.plot(t, mean, "s--", color=f"C{i}", label=f"{face}² faces: per-point error, mean over the places")
+        for x, y, b in zip(t, worst, budgets):
+            ax.annotate(f"{b}", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=8)
     ax.axhline(3, color="k", lw=0.7, ls=":")
     ax.set_xscale("log")
     ax.set_xlabel(f"Lighting Volume bake over the five spheres, ms ({device})")
     ax.set_ylabel("error, %")
-    ax.set_title("Volume Probes: accuracy against time (labels: the budget)", fontsize=9)
+    ax.set_title("Volume Probes: accuracy against time (labels: the budget; target 3%, dotted)", fontsize=9)
     ax.legend(fontsize=8)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
@@ -322,6 +328,8 @@ def main() -> None:
     ap.add_argument("--skip-accuracy", action="store_true")
     ap.add_argument("--budgets", default="256,512,1024,2048",
                     help="Volume Probes budgets for the accuracy-against-time sweep ('' skips it)")
+    ap.add_argument("--faces", default=str(volume_bake.DEFAULT_FACE),
+                    help="probe cube faces for the budget sweep, comma separated (e.g. 16,32)")
     ap.add_argument("--out-csv", default=None)
     ap.add_argument("--png", default=os.path.join(REPO, "docs", "img", "volume_bench.png"))
     a = ap.parse_args()
@@ -337,19 +345,20 @@ def main() -> None:
     extra = {"date": datetime.date.today().isoformat(), "device": r.ctx.device_name, "points": a.points}
     acc = [] if a.skip_accuracy else accuracy(r, a.points, configs)
     costs = cost(r, scene, a.repeats)
-    sweep = budget_sweep(r, a.points, [int(x) for x in a.budgets.split(",") if x]) if a.budgets else []
+    sweep = budget_sweep(r, a.points, [int(x) for x in a.budgets.split(",") if x],
+                         [int(x) for x in a.faces.split(",") if x]) if a.budgets else []
     r.close()
     base = a.out_csv or os.path.join(REPO, "docs", "bench", f"volume_{dev}.csv")
     if sweep:
         write_csv(base.replace(".csv", "_budgets.csv"), sweep, extra)
         plot_budgets(sweep, os.path.join(os.path.dirname(a.png), "volume_budgets.png"), dev)
-        print("\n| budget | probes | bake s | places within 3% | worst camera half | per-point mean |\n"
-              "|---|---|---|---|---|---|")
-        for b in dict.fromkeys(x["budget"] for x in sweep):
-            rs = [x for x in sweep if x["budget"] == b]
+        print("\n| face | budget | probes | bake s | places within 3% | worst camera half | per-point mean |\n"
+              "|---|---|---|---|---|---|---|")
+        for f, b in dict.fromkeys((x["face"], x["budget"]) for x in sweep):
+            rs = [x for x in sweep if x["budget"] == b and x["face"] == f]
             worst = max(max(abs(x[f"cell_{c}"] - 1) for c in "rgb") for x in rs)
-            print(f"| {b} | {rs[0]['probes']} | {rs[0]['bake_s']} | {sum(x['cell_ok'] for x in rs)} of {len(rs)} | "
-                  f"{100 * worst:.1f}% | {100 * np.mean([x['err_mean'] for x in rs]):.1f}% |")
+            print(f"| {f}² | {b} | {rs[0]['probes']} | {rs[0]['bake_s']} | {sum(x['cell_ok'] for x in rs)} of "
+                  f"{len(rs)} | {100 * worst:.1f}% | {100 * np.mean([x['err_mean'] for x in rs]):.1f}% |")
     if acc:
         write_csv(base.replace(".csv", "_accuracy.csv"), acc, extra)
         print(f"\n{a.points} points per sphere")

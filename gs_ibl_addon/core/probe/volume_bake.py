@@ -32,9 +32,13 @@ from .grid import GridSpec
 from .volume import (COVERED, FAR_FACTOR, IRR, VIS, VIS_SHARPNESS, LightVolume, bilinear_taps, grid_maps,
                      probe_positions, spec_spacing, texel_directions)
 
-# The cube face each probe renders. 32^2 changed no place's error over 16^2 by more than 0.4% (volume_bench.py,
-# 2026-12-05: the maps are made from 16^2 and 32^2 faces anyway) and costs ~2x on lavapipe.
-DEFAULT_FACE = 16
+# The cube face each probe renders. 16^2 faces alias small bright splats (a window, a lamp): each probe's light is off
+# by a few percent its own way, which reads per point, not in a camera half's mean, and its cells' centre errors
+# ask for bricks the light does not need. A sphere at the sample room's centre (256 points against per-point 32^2
+# probes, 2026-12-05, lavapipe): 16^2 faces rms 3.0% per point with 316 probes (20 bricks), 32^2 faces 0.98% with
+# 91 (no brick), 10.4 against 8.3 s. Over the five places (volume_bench.py --faces 16,32): 512 probes per-point
+# mean 2.5% / 2.6%, 1,024 probes 2.4% / 1.5%; the bake 1.2-1.3x as long at equal probes.
+DEFAULT_FACE = 32
 # Faces above these are box-averaged to them before the maps: irradiance needs no finer texels (analytic cubes' fitted
 # maps read 0.22% rms at 16^2 and at 32^2, tests/test_volume_bake.py), visibility's lobe of ~10 degrees a little finer.
 IRR_FACE, VIS_FACE = 16, 32
