@@ -422,10 +422,9 @@ def _search_and_filter(r: SplatRenderer, splat_count: int, pos: np.ndarray, s: P
                     s.tolerance)
             plan["irradiance_between_texels"] = {str(k): v for k, v in between.items()}
         if trials and result.sh_coefficients is not None:  # what 9 SH coefficients alone give (probe.json has them)
-            from .cubemap import face_directions
-            from .probe.sh_project import sh_irradiance
-            plan["sh_error"] = relative_rms(sh_irradiance(np.asarray(result.sh_coefficients, np.float64),
-                                                          face_directions(m)), result.irradiance)
+            from .probe.sh_project import sh_irradiance_faces
+            plan["sh_error"] = relative_rms(sh_irradiance_faces(np.asarray(result.sh_coefficients, np.float64), m),
+                                            result.irradiance)
         if s.glossy:
             say("prefiltering glossy maps", 0.85)
             with times.stage("glossy"):

@@ -23,8 +23,7 @@ from .ggx import DEFAULT_ROUGHNESS, ggx_prefilter
 from .reference import exact_irradiance_cube
 from .result import ProbeResult
 from .sampling import split_alpha
-from .sh_project import project_cube, sh_irradiance
-from .. import cubemap
+from .sh_project import project_cube, sh_irradiance_faces
 from ..settings import DEFAULT_DOWNSAMPLE_TO, FILTER_METHODS as METHODS
 
 
@@ -123,7 +122,7 @@ def filter_probe(radiance, irradiance_size: int = 16, method: str = "sh", sh_ord
 def _filter_cpu(rgb: np.ndarray, p: _Params, stages: _Stages) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     coeffs = stages.cpu("sh_project", project_cube, rgb, p.sh_order)
     if p.method == "sh":
-        irr = stages.cpu("irradiance", sh_irradiance, coeffs, cubemap.face_directions(p.size), p.sh_window)
+        irr = stages.cpu("irradiance", sh_irradiance_faces, coeffs, p.size, p.sh_window)
     elif p.method == "convolve":
         irr = stages.cpu("irradiance", cosine_convolve, rgb, p.size, p.phi_steps, p.theta_steps)
     elif p.method == "box":
@@ -144,7 +143,7 @@ def _filter_gpu(source, p: _Params, ctx, stages: _Stages
     if p.sh_order != 2:  # numpy SH of another order; the rest still on the GPU, from one upload
         with g.upload_cube(source, ctx) as cube:
             coeffs = stages.cpu("sh_project", project_cube, source, p.sh_order)
-            irr = stages.cpu("irradiance", sh_irradiance, coeffs, cubemap.face_directions(p.size), p.sh_window) \
+            irr = stages.cpu("irradiance", sh_irradiance_faces, coeffs, p.size, p.sh_window) \
                 if p.method == "sh" else _irradiance_gpu(g, cube, p, stages)
             pre = [] if p.roughness is None else stages.gpu("ggx", g.gpu_ggx_prefilter, cube, p.roughness, None,
                                                               p.ggx_samples)

@@ -544,7 +544,7 @@ def filter_probes(frame, irradiance_size: int = 16, method: str = "exact", downs
     or the order-2 SH evaluated per probe on the host (method "sh": 9 coefficients, nothing to batch). The
     render may still be in flight (render_probes(wait=False)): the filter is queued behind it and the host waits
     once for both. Each probe's result is what filter_probe gives for that probe's cube alone."""
-    from .sh_project import sh_irradiance
+    from .sh_project import sh_irradiance_faces
     if method not in BATCH_METHODS:
         raise ValueError(f"filter_probes takes method {' or '.join(BATCH_METHODS)}, not {method!r}")
     params = dict(phi_steps=64, theta_steps=16, box_level_size=1, downsample_to=downsample_to)
@@ -573,11 +573,11 @@ def filter_probes(frame, irradiance_size: int = 16, method: str = "exact", downs
             upload.close()
     if irr is None:
         t0 = time.perf_counter()
-        dirs = cubemap.face_directions(int(irradiance_size))
-        # every probe's coefficients as channels of one sh_irradiance call: the directions' SH basis made once, not
-        # once a probe (18 grid nodes: 2 ms of host time a filter on lavapipe's machine)
+        size = int(irradiance_size)
+        # every probe's coefficients as channels of one call on the faces' SH basis (made once a session), not once
+        # a probe (18 grid nodes: 2 ms of host time a filter on lavapipe's machine)
         p, k, c = coeffs.shape
-        irr = np.moveaxis(sh_irradiance(coeffs.transpose(1, 0, 2).reshape(k, p * c), dirs, sh_window)
-                          .reshape(dirs.shape[:-1] + (p, c)), -2, 0)
+        irr = np.moveaxis(sh_irradiance_faces(coeffs.transpose(1, 0, 2).reshape(k, p * c), size, sh_window)
+                          .reshape((6, size, size, p, c)), -2, 0)
         timings = {**timings, "sh_irradiance_host": (time.perf_counter() - t0) * 1e3}
     return ProbesFiltered(coeffs, irr, holes, timings)
