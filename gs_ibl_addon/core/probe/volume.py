@@ -186,20 +186,22 @@ def add_border(maps: np.ndarray) -> np.ndarray:
     return maps[..., r, c, :]
 
 
-def bilinear_map(maps: np.ndarray, d: np.ndarray) -> np.ndarray:
+def bilinear_map(maps: np.ndarray, d: np.ndarray, which: np.ndarray | None = None) -> np.ndarray:
     """Reference lookup of one map per point, without a border: maps (M, n, n, C), directions (M, 3) -> (M, C),
-    bilinear between texel centres with the neighbours across the fold (what the atlas's border gives)."""
-    maps = np.asarray(maps, np.float64)
+    bilinear between texel centres with the neighbours across the fold (what the atlas's border gives).
+    ``which``: (M,) each point's map among ``maps`` (K, n, n, C) instead (the four texels are gathered from there:
+    no (M, n, n, C) copy of whole maps, which cost most of a volume's host time on a GPU)."""
+    maps = np.asarray(maps)
     n = maps.shape[1]
     uv = oct_encode(d)
     x, y = (uv[:, 0] * 0.5 + 0.5) * n - 0.5, (uv[:, 1] * 0.5 + 0.5) * n - 0.5
     x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
     fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-    k = np.arange(len(maps))
+    k = np.arange(len(maps)) if which is None else np.asarray(which)
 
     def at(cc, rr):
         c, r = _wrap(cc, rr, n)
-        return maps[k, r, c]
+        return maps[k, r, c].astype(np.float64)
     return ((1 - fy) * ((1 - fx) * at(x0, y0) + fx * at(x0 + 1, y0))
             + fy * ((1 - fx) * at(x0, y0 + 1) + fx * at(x0 + 1, y0 + 1)))
 
@@ -439,9 +441,9 @@ def sample(volume: LightVolume, positions: np.ndarray, normals: np.ndarray, visi
     irr, mom = volume.all_maps()
     num, den = 0.0, 0.0
     for i, tri, q, p, n in _corners(volume.spec, positions, normals, _cells_of(volume)):
-        vis = bilinear_map(mom[i], _away(p, q)) if visibility else None
+        vis = bilinear_map(mom, _away(p, q), i) if visibility else None
         w = _weight(q, p, vis, tri)
-        num = num + w[:, None] * bilinear_map(irr[i], n)
+        num = num + w[:, None] * bilinear_map(irr, n, i)
         den = den + w
     return num / den[:, None]
 

@@ -84,8 +84,8 @@ def centre_errors(volume: LightVolume, centre_irradiance: np.ndarray, cells: np.
         pts = (c[:, None, :] - back[None]).reshape(-1, 3)
         got = sample(volume, pts, np.broadcast_to(normals, (len(c), *normals.shape)).reshape(-1, 3))
         got = (got @ LUMINANCE).reshape(len(c), -1)
-        want = bilinear_map(np.repeat(centre_irradiance[s:s + CENTRE_CHUNK], len(normals), 0),
-                            np.tile(normals, (len(c), 1))).reshape(len(c), -1, 3) @ LUMINANCE
+        want = bilinear_map(centre_irradiance[s:s + CENTRE_CHUNK], np.tile(normals, (len(c), 1)),
+                            np.repeat(np.arange(len(c)), len(normals))).reshape(len(c), -1, 3) @ LUMINANCE
         out[s:s + len(c)] = np.abs(got - want).mean(1) / np.maximum(np.abs(want).mean(1), 1e-12)
     return out
 
