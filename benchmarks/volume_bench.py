@@ -62,6 +62,7 @@ from gs_ibl_addon.core.probe.volume_bake import bake_volume, point_irradiance  #
 from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
 from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume, plan_volume  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
+from gs_ibl_addon.core.stage_times import StageTimes, stages  # noqa: E402
 from gs_ibl_addon.core.synthetic import fibonacci_sphere  # noqa: E402
 
 RADIUS = 0.25
@@ -194,8 +195,8 @@ def plot_budgets(rows: list[dict], path: str, device: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 4.2))
-    for i, face in enumerate(dict.fromkeys(r.get("face", volume_bake.DEFAULT_FACE) for r in rows)):
-        rs = [r for r in rows if r.get("face", volume_bake.DEFAULT_FACE) == face]
+    for i, face in enumerate(dict.fromkeys(r["face"] for r in rows)):
+        rs = [r for r in rows if r["face"] == face]
         budgets = list(dict.fromkeys(r["budget"] for r in rs))
         t = [np.median([r["bake_s"] for r in rs if r["budget"] == b]) * 1e3 for b in budgets]
         worst = [100 * max(max(abs(r[f"cell_{c}"] - 1) for c in "rgb") for r in rs if r["budget"] == b)
@@ -218,24 +219,29 @@ def plot_budgets(rows: list[dict], path: str, device: str) -> None:
 
 def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
     r.ctx.stamp_all = True  # every submission timestamped: the volume's GPU time beside its wall (issue 38's split)
+    try:
+        return _cost(r, scene, repeats)
+    finally:
+        r.ctx.stamp_all = False  # the budget sweep after it times its bakes as a user's run them
+
+
+def _cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
     def world() -> float:
         t0 = time.perf_counter()
         bake_probe(None, np.asarray(PROBE, np.float64), ProbeSettings(), renderer=r, host_splats=scene)
         return time.perf_counter() - t0
 
-    split: dict = {}  # the last volume bake's GPU time (every submission stamped) and submissions
-
-    def volume(names) -> tuple[float, int]:
+    def volume(names) -> tuple[float, int, dict]:
         """Lighting Volume's bake as blender/lighting/volume.py runs it: the light's measurement and the grid's plan
-        (its share of the budget), then grid, centres and bricks."""
-        before, t0 = r.ctx.stats.snapshot(), time.perf_counter()
-        plan, _ = choose_volume(r, boxes_of(names), share=GRID_SHARE)
-        v = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes_of(names))
-        wall = time.perf_counter() - t0
-        moved = r.ctx.stats.since(before)
-        split.update(gpu_ms=round(moved["gpu_ms"], 2), host_ms=round(max(wall * 1e3 - moved["gpu_ms"], 0.0), 2),
-                     submits=moved["submits"])
-        return wall, v.timings["probes"]
+        (its share of the budget), then grid, centres and bricks. (wall s, probes, its GPU / host ms and
+        submissions)."""
+        timings: dict = {}
+        with StageTimes(r.ctx, timings).stage("volume"):
+            plan, _ = choose_volume(r, boxes_of(names), share=GRID_SHARE)
+            v = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes_of(names))
+        t = stages(timings)["volume"]
+        split = {"gpu_ms": round(t["gpu"], 2), "host_ms": round(t["host"], 2), "submits": int(t["submits"])}
+        return t["wall"] / 1e3, v.timings["probes"], split
 
     def auto(names) -> float:
         t0 = time.perf_counter()
@@ -256,12 +262,12 @@ def cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
     for _ in range(repeats):
         tw = world()
         for label, names in COST_SETS.items():
-            tv, probes = volume(names)
+            tv, probes, split = volume(names)
             rows.append({"meshes": label, "world_s": round(tw, 3), "volume_s": round(tv, 3), "probes": probes,
                          "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2), **split})
             print(rows[-1], flush=True)
         volume_bake.GPU_MAPS = False  # A/B: the maps from cubes read back (a GPU device's default makes them on it)
-        tv, probes = volume(COST_SETS["3 meshes"])
+        tv, probes, split = volume(COST_SETS["3 meshes"])
         volume_bake.GPU_MAPS = None
         rows.append({"meshes": "3 meshes, host maps", "world_s": round(tw, 3), "volume_s": round(tv, 3),
                      "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2),
