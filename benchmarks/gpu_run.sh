@@ -46,6 +46,10 @@
 #                                        timestamped; and a new process's context, upload and first bakes, the
 #                                        second process finding the first's pipeline cache on disk). Into $OUT:
 #                                        bake_stages.csv, stages.log. Carry .gl and .whl
+#   bash benchmarks/gpu_run.sh profile   there, about a minute (issues 37 and 38: where host time goes):
+#                                        host_profile.py, cProfile of the default bake, Lighting Auto's bake, a
+#                                        1080p camera frame and Lighting Volume's bake of three meshes. Into $OUT:
+#                                        profile.log and one .pstats per work. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
 #                                        volume's accuracy against per-point probes at the five places, its bake's
 #                                        cost against a World-only bake, and with host-made maps: GPU_MAPS A/B),
@@ -74,7 +78,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full|final|refs|stages|volume)
+trials|grid|full|final|refs|stages|volume|profile)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -160,6 +164,14 @@ trials|grid|full|final|refs|stages|volume)
         --out-csv "$out/volume.csv" --png "$out/volume_bench.png" || echo "[gpu_run] volume_bench: exit $?"
       echo "[gpu_run] volume: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = profile ]; then
+    log="$out/profile.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 240 python3 benchmarks/host_profile.py --repeats 5 --top 30 --out "$out" \
+        || echo "[gpu_run] host_profile: exit $?"
+      echo "[gpu_run] profile: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = refs ]; then
     # Deadline: gsplat's ~55 s compile, then ~2 s a view; stopped at 300 s
     log="$out/refs.log"
@@ -188,7 +200,7 @@ trials|grid|full|final|refs|stages|volume)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume|profile" >&2
   exit 2
   ;;
 esac

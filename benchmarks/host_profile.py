@@ -1,0 +1,107 @@
+"""Where a bake's host time goes (issues 37 and 38): cProfile of the warm bakes on one uploaded renderer.
+
+Run: python benchmarks/host_profile.py [--works default,auto,camera,volume] [--repeats 5] [--top 25] [--out DIR]
+
+The pieces of work are auto_bake_core.py --stages' (the sample's default bake, Lighting Auto's bake of the sphere,
+a 1920x1080 camera frame) and volume_bench.py's cost run (Lighting Volume's bake for three meshes). Each is run
+once to warm up, then --repeats times under the profiler with no submission timestamped (as a user's bake runs).
+Prints, per work, the wall time per run and the functions with the most time of their own and the most time under
+them; with --out, one .pstats file per work (``python -m pstats``). On a GPU the functions are the host time; on
+lavapipe the rendering is host time too, so read the GPU machine's table.
+"""
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import os
+import pstats
+import sys
+import time
+
+import numpy as np
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from auto_bake_core import PROBE, RADIUS, REPO, TOLERANCE  # noqa: E402
+from volume_bench import COST_SETS, boxes_of  # noqa: E402
+
+from gs_ibl_addon.core.bake import ProbeSettings, bake_probe, default_probe_position  # noqa: E402
+from gs_ibl_addon.core.formats import read_scene  # noqa: E402
+from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
+                                                measured_nodes, mesh_grid)
+from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
+from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
+from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume  # noqa: E402
+from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
+from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
+
+
+def works(r: SplatRenderer, scene) -> dict:
+    """{name: the work, a function of no arguments}."""
+    def default() -> None:
+        bake_probe(None, default_probe_position(scene), ProbeSettings(), renderer=r, host_splats=scene)
+
+    def auto() -> None:
+        bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
+        pts = measure_points(PROBE - RADIUS, PROBE + RADIUS)
+        d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
+        choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
+        if choice.kind == "grid":
+            spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
+            bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+
+    cam = np.eye(4)
+    cam[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
+    cam[:3, 3] = PROBE
+    view = ViewBatch.camera(cam, np.tan(np.radians(30)), np.tan(np.radians(30)) * 1080 / 1920, 1920, 1080)
+
+    def camera() -> None:
+        r.render_camera(view)
+
+    def volume() -> None:
+        boxes = boxes_of(COST_SETS["3 meshes"])
+        plan, _ = choose_volume(r, boxes, share=GRID_SHARE)
+        bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes)
+
+    return {"default": default, "auto": auto, "camera": camera, "volume": volume}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--works", default="default,auto,camera,volume")
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--out", default=None, help="a folder for one .pstats file per work")
+    a = ap.parse_args()
+    scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
+    r = SplatRenderer(scene)
+    r.ctx.stamp_all = False
+    print(f"device: {r.ctx.device_name}")
+    table = works(r, scene)
+    for name in a.works.split(","):
+        fn = table[name]
+        fn()  # warm-up: pipelines, allocations, cached plans
+        prof = cProfile.Profile()
+        walls = []
+        for _ in range(a.repeats):
+            t0 = time.perf_counter()
+            prof.enable()
+            fn()
+            prof.disable()
+            walls.append((time.perf_counter() - t0) * 1e3)
+        print(f"\n=== {name}: wall ms per run (profiled) {' '.join(f'{w:.1f}' for w in walls)}")
+        for key in ("tottime", "cumulative"):
+            s = io.StringIO()
+            pstats.Stats(prof, stream=s).strip_dirs().sort_stats(key).print_stats(a.top)
+            text = s.getvalue()
+            print(f"--- {name}, by {key} (seconds over {a.repeats} runs)")
+            print(text[text.find("   ncalls"):].rstrip())
+        if a.out:
+            os.makedirs(a.out, exist_ok=True)
+            prof.dump_stats(os.path.join(a.out, f"{name}.pstats"))
+    r.close()
+
+
+if __name__ == "__main__":
+    main()
