@@ -1,7 +1,7 @@
 """The bake of benchmarks/native_bench.py's scene without Blender: what the GPU machine's series on that chart
 costs (issue 22, goal 3).
 
-Run: python benchmarks/auto_bake_core.py [--repeats 3] [--out CSV]
+Run: python benchmarks/auto_bake_core.py [--repeats 3] [--lighting auto,volume] [--out CSV] [--volume-out CSV]
      python benchmarks/auto_bake_core.py --stages [--ab] [--gpu-paths] [--repeats 5] [--out CSV]
 
 The sample room, the probe at the white sphere ((0, 0.45, 1.0), radius 0.3: blender_scene.ROOM_SPHERE), the panel's
@@ -10,7 +10,10 @@ it, on one uploaded renderer (Blender's splat cache keeps it between bakes): the
 (core CLI: write_probe), the 9-point measurement in one batch with the World probe's place, and the nodes of the
 sphere's grid the measurement did not place (18 of 3 x 3 x 3, 116 of 5 x 5 x 5), when it asks for a grid. Wall
 time: median of --repeats after one warm-up; the device, driver, date and SM clock (held by a CUDA context:
-bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv).
+bench_common) on the row. Appends to --out (default docs/bench/auto_bake_core_<device>.csv). Lighting Volume's
+bake of the same sphere (volume_bake: the World probe, its files and the volume over the sphere's box, as
+blender/lighting/volume.py) goes to --volume-out (default docs/bench/volume_bake_core_<device>.csv): native_bench.py
+draws both as the GPU machine's series.
 
 ``--stages [--ab]`` (issue 38: a bake whose wall time is its GPU time): per stage, wall time beside the GPU time of the
 submissions it waited for (every recording timestamped: the context's stamp_all) and the submissions it made, host
@@ -48,7 +51,10 @@ from gs_ibl_addon.core.bake import ProbeSettings, bake_probe, default_probe_posi
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
                                                 measured_nodes, mesh_grid)
+from gs_ibl_addon.core.probe import volume as pv  # noqa: E402
 from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
+from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
+from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume  # noqa: E402
 from gs_ibl_addon.core.probe.result import write_probe  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
@@ -80,6 +86,26 @@ def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     stages = {b: t[b] - t[a] for a, b in zip(names, names[1:])}
     return {"wall_s": t["grid"] - t["start"], **stages, "choice": choice.kind,
             "faces": "/".join(str(x) for x in result.settings.get("face_sizes", []))}
+
+
+def volume_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
+    """One Lighting Volume bake as the panel's Bake does it (blender/lighting/volume.py _bake): the World probe and
+    its files, the region's plan over the sphere's box, the volume with its bricks (the default budget and face),
+    the World probe's SH at its place, the images packed. Wall seconds per stage, and the probes."""
+    t = {"start": time.perf_counter()}
+    result = bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
+    t["world probe"] = time.perf_counter()
+    write_probe(result, out_dir)
+    t["writing"] = time.perf_counter()
+    boxes = [(PROBE - RADIUS, PROBE + RADIUS)]
+    plan, _ = choose_volume(r, boxes, budget=DEFAULT_BUDGET, share=GRID_SHARE)
+    vol = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes)
+    monomial_coefficients(bake_sh_points(r, PROBE[None], MEASURE_FACE))  # the EEVEE output's World light
+    pv.pack_atlas(vol), pv.pack_cells(vol)
+    t["volume"] = time.perf_counter()
+    names = list(t)
+    return {"wall_s": t["volume"] - t["start"], **{b: t[b] - t[a] for a, b in zip(names, names[1:])},
+            "probes": int(vol.timings.get("probes", vol.spec.count))}
 
 
 def stage_runs(r: SplatRenderer, scene) -> dict[str, dict[str, dict[str, float]]]:
@@ -198,6 +224,10 @@ def main() -> None:
     ap.add_argument("--gpu-paths", action="store_true", help="with --stages on a CPU device: the code paths a GPU "
                                                              "takes where a bake picks by device")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--lighting", default="auto,volume", help="without --stages: which bakes (Lighting Auto's, "
+                    "Lighting Volume's), each into its own CSV")
+    ap.add_argument("--volume-out", default=None, help="the Volume rows' CSV (default "
+                    "docs/bench/volume_bake_core_<device>.csv)")
     a = ap.parse_args()
     keep = hold_gpu_clock()  # noqa: F841 (the context holds the clock while it lives)
     info = {"device": "", "driver": ""}
@@ -213,18 +243,24 @@ def main() -> None:
     scene = read_scene(os.path.join(REPO, "samples", "room.ply"))
     r = SplatRenderer(scene)
     info["device"] = r.ctx.device_name
-    with tempfile.TemporaryDirectory() as tmp:
-        auto_bake(r, scene, tmp)  # warm-up: pipelines, first allocations
-        runs = [auto_bake(r, scene, tmp) for _ in range(a.repeats)]
+    label = device_label(info["device"])
+    for name, bake in (("auto", auto_bake), ("volume", volume_bake)):
+        if name not in a.lighting.split(","):
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            bake(r, scene, tmp)  # warm-up: pipelines, first allocations
+            runs = [bake(r, scene, tmp) for _ in range(a.repeats)]
+        med = {k: statistics.median(x[k] for x in runs) for k in runs[0] if isinstance(runs[0][k], float)}
+        row = {"date": datetime.date.today().isoformat(), "device": info["device"], "driver": info["driver"],
+               "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2), "repeats": a.repeats,
+               **({"choice": runs[0]["choice"], "faces": runs[0]["faces"]} if name == "auto" else
+                  {"probes": runs[0]["probes"]}),
+               **{k: round(v, 4) for k, v in med.items()}}
+        print(name, " ".join(f"{k}={v}" for k, v in row.items()))
+        default = f"{'auto' if name == 'auto' else 'volume'}_bake_core_{label}.csv"
+        out = (a.out if name == "auto" else a.volume_out) or os.path.join(REPO, "docs", "bench", default)
+        append_csv(out, [row])
     r.close()
-    med = {k: statistics.median(x[k] for x in runs) for k in runs[0] if isinstance(runs[0][k], float)}
-    row = {"date": datetime.date.today().isoformat(), "device": info["device"], "driver": info["driver"],
-           "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2), "repeats": a.repeats,
-           "choice": runs[0]["choice"], "faces": runs[0]["faces"],
-           **{k: round(v, 4) for k, v in med.items()}}
-    print(" ".join(f"{k}={v}" for k, v in row.items()))
-    append_csv(a.out or os.path.join(REPO, "docs", "bench", f"auto_bake_core_{device_label(info['device'])}.csv"),
-               [row])
 
 
 if __name__ == "__main__":

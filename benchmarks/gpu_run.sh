@@ -44,8 +44,10 @@
 #                                        host = wall - GPU and submissions of the sample's default bake, Lighting
 #                                        Auto's bake of the sphere and a 1920x1080 camera frame, every recording
 #                                        timestamped; and a new process's context, upload and first bakes, the
-#                                        second process finding the first's pipeline cache on disk). Into $OUT:
-#                                        bake_stages.csv, stages.log. Carry .gl and .whl
+#                                        second process finding the first's pipeline cache on disk); then the
+#                                        Auto and Volume bakes of native_bench's sphere (its GPU series). Into $OUT:
+#                                        bake_stages.csv, auto_bake_core.csv, volume_bake_core.csv, stages.log.
+#                                        Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh profile   there, about a minute (issues 37 and 38: where host time goes):
 #                                        host_profile.py, cProfile of the default bake, Lighting Auto's bake, a
 #                                        1080p camera frame and Lighting Volume's bake of three meshes. Into $OUT:
@@ -149,6 +151,10 @@ trials|grid|full|final|refs|stages|volume|profile)
         --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages: exit $?"
       timeout --signal=INT --kill-after=10 90 python3 benchmarks/auto_bake_core.py --stages --repeats 3 \
         --out "$out/bake_stages.csv" || echo "[gpu_run] auto_bake_core --stages (cache on disk): exit $?"
+      # native_bench's GPU series: Lighting Auto's and Lighting Volume's bakes of its sphere (core, clock held)
+      timeout --signal=INT --kill-after=10 120 python3 benchmarks/auto_bake_core.py --repeats 5 \
+        --out "$out/auto_bake_core.csv" --volume-out "$out/volume_bake_core.csv" \
+        || echo "[gpu_run] auto_bake_core: exit $?"
       echo "[gpu_run] stages: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
   elif [ "$1" = volume ]; then

@@ -4,9 +4,9 @@ and on) against our bake (Lighting Auto, the panel's defaults; then Lighting Vol
 unless --lighting auto) + Cycles and + EEVEE, for a 48x48, a 320x180 and a 960x540 frame and a 24-frame camera
 move at 320x180 (baked once, rendered as one animation job with persistent data, native too). Same machine, same
 run, one Blender (bpy 5.3 in the trixie root, with the built zip installed by Blender's own installer, as
-tests/real_blender/ does). The GPU machine's Auto bake of the same settings (benchmarks/auto_bake_core.py, core,
-clock held; docs/bench/auto_bake_core_nvidia-h200.csv) is drawn as its own series: that bake's time + our EEVEE
-render's time here.
+tests/real_blender/ does). The GPU machine's Auto and Volume bakes of the same settings (benchmarks/auto_bake_core.py,
+core, clock held; the newest rows of docs/bench/{auto,volume}_bake_core_nvidia-*.csv) are drawn as their own
+series: that bake's time + our EEVEE render's time here.
 
 Run:  python benchmarks/native_bench.py [--frames 48x48,320x180,960x540] [--no-move] [--quick] [--lighting auto]
       python benchmarks/native_bench.py --plot-only docs/bench/native_lavapipe.csv
@@ -285,19 +285,21 @@ def _device() -> str:
     return "lavapipe" if "llvmpipe" in name else name.replace(" ", "-")
 
 
+GPU_SUFFIX = " on the GPU machine (core, clock held) + EEVEE here"  # a GPU series: "<our label><GPU_SUFFIX>"
 STYLES = {"native Cycles": ("tab:red", "o-"), "native Cycles + denoiser": ("tab:orange", "s--"),
           "our bake + Cycles": ("tab:blue", "o-"), "our bake + EEVEE": ("tab:green", "^-"),
-          "our bake on the H200 (core, clock held) + EEVEE here": ("tab:purple", "v:"),
-          f"{VOLUME_LABEL} + Cycles": ("tab:cyan", "D-"), f"{VOLUME_LABEL} + EEVEE": ("tab:olive", "P-")}
+          f"our bake{GPU_SUFFIX}": ("tab:purple", "v:"),
+          f"{VOLUME_LABEL} + Cycles": ("tab:cyan", "D-"), f"{VOLUME_LABEL} + EEVEE": ("tab:olive", "P-"),
+          f"{VOLUME_LABEL}{GPU_SUFFIX}": ("tab:brown", "X:")}
+GPU_BAKES = {"our bake": "auto_bake_core_nvidia-*.csv", VOLUME_LABEL: "volume_bake_core_nvidia-*.csv"}
 PANELS = ("48x48", "320x180", "960x540", "move")
 
 
-def gpu_series(rows: list[dict], gpu_bake_s: float | None) -> list[dict]:
-    """Our EEVEE rows again with the bake's time taken from the GPU machine (core, same settings)."""
-    if gpu_bake_s is None:
-        return []
-    return [{**r, "method": "our bake on the H200 (core, clock held) + EEVEE here", "bake_s": gpu_bake_s,
-             "total_s": float(r["render_s"]) + gpu_bake_s} for r in rows if r["method"] == "our bake + EEVEE"]
+def gpu_series(rows: list[dict], gpu_bakes: dict[str, float]) -> list[dict]:
+    """Our EEVEE rows again, each of Auto and Volume with its bake's time taken from the GPU machine (core, same
+    settings; ``gpu_bakes``: {our label: seconds})."""
+    return [{**r, "method": f"{label}{GPU_SUFFIX}", "bake_s": s, "total_s": float(r["render_s"]) + s}
+            for label, s in gpu_bakes.items() for r in rows if r["method"] == f"{label} + EEVEE"]
 
 
 def native_time_at(rows: list[dict], frame: str, error: float, method: str) -> tuple[float, str] | None:
@@ -322,8 +324,7 @@ def speedups(rows: list[dict]) -> list[dict]:
     same error."""
     out = []
     for frame in PANELS:
-        for method in ("our bake + EEVEE", "our bake + Cycles", "our bake on the H200 (core, clock held) + EEVEE here",
-                       f"{VOLUME_LABEL} + EEVEE", f"{VOLUME_LABEL} + Cycles"):
+        for method in (m for m in STYLES if not m.startswith("native")):
             ours = [r for r in rows if r["frame"] == frame and r["method"] == method]
             if not ours:
                 continue
@@ -378,13 +379,21 @@ def _title(blender, device, threads, date, gpu_note) -> str:
             f"independent native Cycles renders (denoiser off), their own noise removed; labels: samples{gpu_note}")
 
 
-def _read_gpu_bake(path: str) -> tuple[float | None, str]:
-    if not os.path.exists(path):
-        return None, ""
+def _read_gpu_bakes(folder: str) -> tuple[dict[str, float], str]:
+    """({our label: the GPU machine's bake, seconds}, the title's note): per bake the newest row of its CSVs in
+    ``folder`` (auto_bake_core.py writes them, one per device)."""
     import csv
-    row = list(csv.DictReader(open(path)))[-1]
-    return float(row["wall_s"]), (f"\nH200 bake: {row['device']}, driver {row['driver']}, SM {row['sm_mhz']} MHz, "
-                                  f"{row['date']} ({row['wall_s']} s wall, core Auto bake)")
+    import glob
+    out, notes = {}, []
+    for label, pattern in GPU_BAKES.items():
+        rows = [r for path in glob.glob(os.path.join(folder, pattern)) for r in csv.DictReader(open(path))]
+        if not rows:
+            continue
+        row = max(rows, key=lambda r: r["date"])
+        out[label] = float(row["wall_s"])
+        notes.append(f"{label}: {row['device']}, driver {row['driver']}, SM {row['sm_mhz']} MHz, {row['date']}, "
+                     f"{float(row['wall_s']):.3f} s wall")
+    return out, ("\nGPU bakes (core): " + "; ".join(notes)) if notes else ""
 
 
 def _ints(text: str) -> list[int]:
@@ -404,15 +413,15 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--csv", default=None)
     ap.add_argument("--png", default=os.path.join(REPO, "docs", "native-vs-ours.png"))
-    ap.add_argument("--gpu-bake", default=os.path.join(REPO, "docs", "bench", "auto_bake_core_nvidia-h200.csv"),
-                    help="the GPU machine's bake time (benchmarks/auto_bake_core.py)")
+    ap.add_argument("--gpu-bakes", default=os.path.join(REPO, "docs", "bench"),
+                    help="the folder of the GPU machine's bake times (benchmarks/auto_bake_core.py's CSVs)")
     ap.add_argument("--plot-only", metavar="CSV", help="redraw the chart of an earlier run's CSV and stop")
     a = ap.parse_args()
-    gpu_bake_s, gpu_note = _read_gpu_bake(a.gpu_bake)
+    gpu_bakes, gpu_note = _read_gpu_bakes(a.gpu_bakes)
     if a.plot_only:
         import csv
-        rows = [r for r in csv.DictReader(open(a.plot_only)) if not r["method"].startswith("our bake on the H200")]
-        rows += gpu_series(rows, gpu_bake_s)
+        rows = [r for r in csv.DictReader(open(a.plot_only)) if "(core, clock held)" not in r["method"]]
+        rows += gpu_series(rows, gpu_bakes)
         r0 = rows[0]
         _plot(rows, a.png, _title(r0["blender"], r0["device"], a.threads, r0["date"], gpu_note))
         _print_speedups(rows)
@@ -473,7 +482,7 @@ def main() -> None:
     json_path = os.path.splitext(csv_path)[0] + ".json"
     with open(json_path, "w") as f:
         json.dump({k: v for k, v in result.items() if k != "rows"}, f, indent=1)
-    rows += gpu_series(rows, gpu_bake_s)
+    rows += gpu_series(rows, gpu_bakes)
     _plot(rows, a.png, _title(result["blender"], device, a.threads, stamp, gpu_note))
     print(f"references: {json.dumps(result['frames'])}\nour bake {result['bake_s']:.2f} s (first of the session "
           f"{result['bake_first_s']:.2f} s, Auto chose {result['auto_choice']}): {result['bake_report']}; "
