@@ -77,6 +77,9 @@ prepare)
   python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
     --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 -d .whl \
     cffi==2.0.0 pycparser vulkan==1.3.275.1 plyfile gsplat==1.5.3 rich markdown-it-py mdurl pygments
+  # the probe's files (core/image_io.py: auto_bake_core.py's bakes write them, as a user's bake does)
+  python3 -m pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+    --platform manylinux_2_28_x86_64 -d .whl "$(grep -i '^openimageio==' requirements.txt)"
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;

@@ -25,6 +25,7 @@ FACE_BASES = np.array([
     [[0, 0, 1], [1, 0, 0], [0, -1, 0]],
     [[0, 0, -1], [-1, 0, 0], [0, -1, 0]],
 ], dtype=np.float64)
+FACE_BASES.flags.writeable = False  # its rows are the cube views' own arrays (render/views.py _cube_views)
 
 
 def face_st(size: int) -> tuple[np.ndarray, np.ndarray]:

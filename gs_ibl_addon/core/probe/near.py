@@ -88,10 +88,17 @@ def _scene_terms(scene) -> tuple[float, np.ndarray, np.ndarray]:
 
 def _distances(scene, position) -> np.ndarray:
     """Each splat centre's distance from the probe (float32 metres): the one pass over all splats that both
-    checks read. einsum's row sums, not norm's reduce along the short axis: the same float32 values (three terms
-    added in order), 0.2 ms against 0.5 ms on the sample room's 21,939 splats."""
-    d = scene.positions - np.asarray(position, np.float64).astype(np.float32)
-    return np.sqrt(np.einsum("ij,ij->i", d, d))
+    checks read. Per axis, squared and summed in place: the same float32 values as einsum's row sums (three terms
+    added in order), 0.05 ms against 0.2 ms on the sample room's 21,939 splats (norm's reduce: 0.5 ms)."""
+    q = np.asarray(position, np.float64).astype(np.float32)
+    p = scene.positions
+    x, y, z = p[:, 0] - q[0], p[:, 1] - q[1], p[:, 2] - q[2]
+    x *= x
+    y *= y
+    z *= z
+    x += y
+    x += z
+    return np.sqrt(x, out=x)
 
 
 def _candidates(scene, position, keep: int = 256, dist: np.ndarray | None = None) -> np.ndarray:
@@ -114,12 +121,16 @@ def capture_size(scene) -> float:
     return float(np.linalg.norm(hi.astype(np.float64) - lo))
 
 
+@lru_cache(maxsize=2)
 def _footprint_offsets(k: int = _FOOTPRINT_SAMPLES) -> np.ndarray:
-    """(k, 2) points of a unit 2D Gaussian, spread evenly (a sunflower with Rayleigh-distributed radii)."""
+    """(k, 2) points of a unit 2D Gaussian, spread evenly (a sunflower with Rayleigh-distributed radii); cached,
+    read-only."""
     i = np.arange(k) + 0.5
     r = np.sqrt(-2.0 * np.log(1.0 - i / k))
     a = i * np.pi * (3.0 - np.sqrt(5.0))
-    return np.stack([r * np.cos(a), r * np.sin(a)], 1)
+    out = np.stack([r * np.cos(a), r * np.sin(a)], 1)
+    out.flags.writeable = False
+    return out
 
 
 @lru_cache(maxsize=4)

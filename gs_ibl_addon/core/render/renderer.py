@@ -220,7 +220,8 @@ def budget_fit(count: int, cap: int) -> int:
     return budget_for(count) if budget_for(count) <= cap // 2 else cap
 
 
-PROGRAMS_KEPT = 8  # recorded batch shapes per renderer (a face-size search uses about four)
+PROGRAMS_KEPT = 16  # recorded batch shapes per renderer (a face-size search uses three, Auto's batches two, a
+# light volume's about five)
 
 # GPU bytes per (probe, splat) pair: prepared (PREP vec4), tile rectangles (MAX_VIEWS uvec2), tile count, depth
 # key and value, the counts' prefix sum, the depth sort's scratch key and value; with a level of detail also the
@@ -496,31 +497,62 @@ def view_values(v, tile_base: int = 0, pixel_base: int = 0) -> dict:
             "cx": v.cx, "cy": v.cy, "frame_width": fw, "frame_height": fh}
 
 
+def _view_plan() -> tuple[tuple[tuple[str, np.ndarray], ...], np.ndarray]:
+    """Where each View component goes among VIEW_ROWS' words (a name repeated over components: a vector's), and
+    which words are uint32 (uvec4 rows): made once, so packing a view is a few assignments."""
+    where: dict[str, list[int]] = {}
+    uint = np.zeros(VIEW_BYTES // 4, bool)
+    for i, (_, kind, parts) in enumerate(VIEW_ROWS):
+        for j, name in enumerate(parts.split()):
+            if name != "-":
+                where.setdefault(name, []).append(4 * i + j)
+        uint[4 * i:4 * i + 4] = kind.startswith("u")
+    return tuple((n, np.array(w)) for n, w in where.items()), uint
+
+
+_VIEW_PLAN, _VIEW_UINT = _view_plan()
+
+
 def pack_view(values: dict) -> np.ndarray:
     """One View struct's bytes (VIEW_BYTES) as 4-byte words: each VIEW_ROWS row's components from ``values``
     (a name repeated over components takes a vector), float rows as float32, uvec4 rows as uint32."""
-    out = np.zeros(VIEW_BYTES // 4, np.uint32)
-    for i, (_, kind, parts) in enumerate(VIEW_ROWS):
-        names = parts.split()
-        row = np.zeros(4)
-        for name in dict.fromkeys(names):
-            if name != "-":
-                row[[j for j, x in enumerate(names) if x == name]] = np.asarray(values[name], np.float64)
-        out[4 * i:4 * i + 4] = row.astype(np.uint32) if kind.startswith("u") else row.astype(np.float32).view(np.uint32)
+    row = np.zeros(VIEW_BYTES // 4)
+    for name, words in _VIEW_PLAN:
+        row[words] = values[name]
+    out = row.astype(np.float32).view(np.uint32)
+    out[_VIEW_UINT] = row[_VIEW_UINT].astype(np.uint32)
     return out
 
 
 def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
-    if len(batch.views) > MAX_VIEWS:
-        raise ValueError(f"a batch holds at most {MAX_VIEWS} views, got {len(batch.views)}")
+    """(the views' packed words, total tiles, total pixels). A batch's views are often the very tuple an earlier
+    batch had (ViewBatch.cubemap keeps one per face size): its packing is kept with it (_PACKED), since packing
+    six views was about 1 ms of a GPU bake's host time."""
+    views = batch.views
+    kept = _PACKED.get(id(views))
+    if kept is not None and kept[0] is views:
+        return kept[1]
+    if len(views) > MAX_VIEWS:
+        raise ValueError(f"a batch holds at most {MAX_VIEWS} views, got {len(views)}")
     rows = []
     tile_base = pixel_base = 0
-    for v in batch.views:
+    for v in views:
         rows.append(pack_view(view_values(v, tile_base, pixel_base)))
         tx, ty = v.tiles
         tile_base += tx * ty
         pixel_base += v.width * v.height
-    return np.concatenate(rows), tile_base, pixel_base
+    out = np.concatenate(rows), tile_base, pixel_base
+    out[0].flags.writeable = False
+    while len(_PACKED) >= 32:  # cameras make new views each frame: the oldest go
+        try:
+            _PACKED.pop(next(iter(_PACKED)), None)
+        except (StopIteration, RuntimeError):  # emptied or changed by another thread meanwhile
+            break
+    _PACKED[id(views)] = (views, out)  # the tuple is held with it, so its id is not reused meanwhile
+    return out
+
+
+_PACKED: dict[int, tuple] = {}
 
 
 def _refs(held: dict, name: str) -> int:
@@ -788,7 +820,8 @@ class SplatRenderer:
         """A camera frame for a final render, arrays in and arrays out (as gsplat's ``rasterization``): ``batch`` one
         view (ViewBatch.camera: lens shift, render border), ``cut`` None or the (H, W) float32 distance along the
         view axis of the mesh surface each pixel sees (+inf where none; the window's pixels for a border), and a
-        CameraFrame of FRONT, BEHIND (render(cut=...)), the depth and the GPU timings back. A frame whose images
+        CameraFrame of FRONT, BEHIND (render(cut=...); without a cut read-only zeros), the depth and the GPU timings
+        back. A frame whose images
         this device cannot hold is refused first, naming the size that fits (check_camera_fits). The arrays are the
         caller's while it holds them (or a view of them); ones it let go are read into by a later frame (_host_array),
         so hold the array, not a raw pointer into it."""
@@ -802,13 +835,22 @@ class SplatRenderer:
         frame, px, hw = res.frame, v.width * v.height, (v.height, v.width)
         frame.wait()
         front = frame.image.read(np.float32, px * 4, out=self._host_array("front", hw + (4,)))
-        # Without a cut BEHIND is zero: np.zeros's fresh pages need no writing (zeros_like wrote 33 MB a 1080p frame)
+        # Without a cut BEHIND is zero: one read-only zero array per size, shared by such frames (np.zeros cost
+        # 3.4 ms a 1080p frame on an H100's host: freed pages coming back are cleared again)
         behind = (frame.behind.read(np.float32, px * 4, out=self._host_array("behind", hw + (4,))) if cut is not None
-                  else np.zeros(front.shape, front.dtype))
+                  else self._zeros(front.shape))
         d = frame.depth.read(np.float32, px, out=self._host_array("depth", hw)) if depth else None
         timings = dict(res.timings_ms)
         timings["wall"] = (time.perf_counter() - t0) * 1e3
         return CameraFrame(front, behind, d, timings, dict(self.kernels))
+
+    def _zeros(self, shape: tuple[int, ...]) -> np.ndarray:
+        """A read-only float32 zero array of ``shape``, kept for the next frame of that size."""
+        z = self._host.get("zeros")
+        if z is None or z.shape != shape:
+            z = self._host["zeros"] = np.zeros(shape, np.float32)
+            z.flags.writeable = False
+        return z
 
     def _host_array(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
         """A float32 array for render_camera to read ``name`` into: the one it gave back last time once nothing
@@ -919,6 +961,11 @@ class SplatRenderer:
             prog.close()
             prog = None
         if prog is None:
+            # a recording of this shape for other capacities is never asked for again (budgets only follow what
+            # frames drew): it goes now, not after newer shapes pushed the search's out (Auto's bake re-recorded
+            # four programs a bake on an H100, 3.5 ms each)
+            for old in [k for k in self._programs if k[0] == shape]:
+                self._programs.pop(old).close()
             # (a kernel's descriptor pool that fills meanwhile is retired, not reset: the recording stays valid)
             prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, kernels,
                                 min_chunks, layers)

@@ -14,6 +14,7 @@ are the full frame's pixels bit for bit (ViewBatch.camera).
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -63,6 +64,14 @@ class View:
                 + tt[..., None] * self.down[None, None])
 
 
+@lru_cache(maxsize=16)
+def _cube_views(face_size: int) -> tuple[View, ...]:
+    """The six faces' views at one size: one tuple per size, so a renderer packs it once (renderer.py
+    _views_buffer_data); its arrays are FACE_BASES' rows, read-only."""
+    return tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
+                 for f in range(6))
+
+
 @dataclass(frozen=True)
 class ViewBatch:
     origin: np.ndarray
@@ -110,8 +119,7 @@ class ViewBatch:
         by this face's pixel."""
         if int(face_size) < 1:
             raise ValueError(f"cube face size {face_size} must be 1 or more")
-        views = tuple(View(FACE_BASES[f, 0], FACE_BASES[f, 1], FACE_BASES[f, 2], 1.0, 1.0, face_size, face_size)
-                      for f in range(6))
+        views = _cube_views(int(face_size))
         return ViewBatch(np.asarray(origin, np.float64).reshape(3), views, 2.0 / face_size, energy_preserving,
                          dilation_angle=PROBE_DILATION_ANGLE if energy_preserving else None, sort=SORT_RADIAL)
 
