@@ -367,9 +367,10 @@ def _plot(rows: list[dict], out_png: str, title: str) -> None:
             if lab not in labels:
                 handles.append(h)
                 labels.append(lab)
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
+    rows_of_legend = -(-len(labels) // 5)  # five a row: nine series did not fit one row of the figure's width
+    fig.legend(handles, labels, loc="lower center", ncol=min(len(labels), 5), fontsize=8, frameon=False)
     fig.suptitle(title, fontsize=8)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
+    fig.tight_layout(rect=(0, 0.05 + 0.04 * rows_of_legend, 1, 1))
     fig.savefig(out_png, dpi=120)
 
 
