@@ -15,7 +15,8 @@ Needs the trixie root (scripts/blender_roots.sh ensure trixie). The Blender side
 run in bpy 5.3 with the built zip installed by Blender's own installer through tests/real_blender/test_matrix.py's
 machinery (built_zip, Runner, run_script), with the scene and set-up of tests/real_blender/blender_scene.py.
 Writes docs/auto_light.csv, docs/img/auto_light.png (the chart) and docs/img/auto_light_renders.png (every render),
-keeps the renders (.npy) and the result in build/auto-light/run, and prints a markdown table. A full run took 36 min
+keeps the renders (.npy) and the result in build/auto-light/run (a --no-write trial in build/auto-light/run-trial,
+its references taken from run), and prints a markdown table. A full run took 36 min
 on a loaded 2-core machine (the ten 8,192-spp references 15).
 
 The room (samples/room.ply, its colours re-encoded for Blender's sRGB rule) is imported by Blender's PLY importer
@@ -351,7 +352,9 @@ def main() -> None:
     places = {p: PLACES[p] for p in a.places.split(",")}
     t_start = time.perf_counter()
     runner = matrix.Runner(entry, None)
-    run = WORK / ("animation" if anim else "run")
+    # a trial (--no-write) keeps its renders apart: the kept run's references stay whole for the next full run
+    kept_run = WORK / ("animation" if anim else "run")
+    run = kept_run.with_name(kept_run.name + "-trial") if a.no_write else kept_run
     result: dict = {}
     kept: dict = {}
     try:
@@ -364,7 +367,7 @@ def main() -> None:
                 "keys": [f"f{f:02d}" for f in anim["at"]] if anim else list(places),
                 "eevee_settings": _options(a.eevee_set), "cycles_settings": _options(a.cycles_set),
                 "volume_budget": a.volume_budget, "volume_face": a.volume_face}
-        kept = _kept_natives(run, args) if "native" not in args["steps"] else {}
+        kept = _kept_natives(kept_run, args) if "native" not in args["steps"] else {}
         result = matrix.run_script(runner, HERE / "auto_light_scene.py", args, RESULT_TAG, "auto")
         result["wall_s"] = time.perf_counter() - t_start
         head = np.asarray(result.get("positions_head", []))
