@@ -821,10 +821,9 @@ class SplatRenderer:
         view (ViewBatch.camera: lens shift, render border), ``cut`` None or the (H, W) float32 distance along the
         view axis of the mesh surface each pixel sees (+inf where none; the window's pixels for a border), and a
         CameraFrame of FRONT, BEHIND (render(cut=...); without a cut read-only zeros), the depth and the GPU timings
-        back. A frame whose images
-        this device cannot hold is refused first, naming the size that fits (check_camera_fits). The arrays are the
-        caller's while it holds them (or a view of them); ones it let go are read into by a later frame (_host_array),
-        so hold the array, not a raw pointer into it."""
+        back. A frame whose images this device cannot hold is refused first, naming the size that fits
+        (check_camera_fits). The arrays are the caller's while it holds them (or a view of them); ones it let go are
+        read into by a later frame (_host_array), so hold the array, not a raw pointer into it."""
         t0 = time.perf_counter()
         if batch.n_probes != 1 or len(batch.views) != 1:
             raise ValueError(f"render_camera draws one camera view; this batch has {batch.n_probes} origin(s) and "
@@ -953,18 +952,18 @@ class SplatRenderer:
         shape = self._shape(batch, lod_k, group)
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
         kernels = batch_kernels(self.ctx, batch, total_tiles, layers)
-        key = (shape, bool(batch.energy_preserving), batch.sort, bool(timestamps), bool(depth), self.capacity,
-               self.cut_capacity, caps, check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"],
-               kernels["emit"], min_chunks)
+        what = (shape, bool(batch.energy_preserving), batch.sort, bool(timestamps), bool(depth),
+                check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"], kernels["emit"])
+        key = what + (self.capacity, self.cut_capacity, caps, min_chunks)  # and the sizes it was recorded for
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
             prog.close()
             prog = None
         if prog is None:
-            # a recording of this shape for other capacities is never asked for again (budgets only follow what
-            # frames drew): it goes now, not after newer shapes pushed the search's out (Auto's bake re-recorded
-            # four programs a bake on an H100, 3.5 ms each)
-            for old in [k for k in self._programs if k[0] == shape]:
+            # the same work recorded for other sizes is never asked for again (budgets and capacities only follow
+            # what frames drew): it goes now, not after newer shapes pushed the search's out (Auto's bake
+            # re-recorded four programs a bake on an H100, 3.5 ms each)
+            for old in [k for k in self._programs if k[:len(what)] == what]:
                 self._programs.pop(old).close()
             # (a kernel's descriptor pool that fills meanwhile is retired, not reset: the recording stays valid)
             prog = self._record(batch, total_tiles, total_pixels, timestamps, depth, lod_k, group, caps, kernels,
