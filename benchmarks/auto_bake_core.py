@@ -253,11 +253,10 @@ def main() -> None:
         med = {k: statistics.median(x[k] for x in runs) for k in runs[0] if isinstance(runs[0][k], float)}
         row = {"date": datetime.date.today().isoformat(), "device": info["device"], "driver": info["driver"],
                "sm_mhz": gpu_clock(), "load": round(os.getloadavg()[0], 2), "repeats": a.repeats,
-               **({"choice": runs[0]["choice"], "faces": runs[0]["faces"]} if name == "auto" else
-                  {"probes": runs[0]["probes"]}),
+               **{k: v for k, v in runs[0].items() if not isinstance(v, float)},  # Auto's choice, Volume's probes
                **{k: round(v, 4) for k, v in med.items()}}
         print(name, " ".join(f"{k}={v}" for k, v in row.items()))
-        default = f"{'auto' if name == 'auto' else 'volume'}_bake_core_{label}.csv"
+        default = f"{name}_bake_core_{label}.csv"
         out = (a.out if name == "auto" else a.volume_out) or os.path.join(REPO, "docs", "bench", default)
         append_csv(out, [row])
     r.close()

@@ -543,11 +543,8 @@ def _views_buffer_data(batch: ViewBatch) -> tuple[np.ndarray, int, int]:
         pixel_base += v.width * v.height
     out = np.concatenate(rows), tile_base, pixel_base
     out[0].flags.writeable = False
-    while len(_PACKED) >= 32:  # cameras make new views each frame: the oldest go
-        try:
-            _PACKED.pop(next(iter(_PACKED)), None)
-        except (StopIteration, RuntimeError):  # emptied or changed by another thread meanwhile
-            break
+    if len(_PACKED) >= 32:  # cameras make new views each frame: start again (a cube's six repack in microseconds)
+        _PACKED.clear()
     _PACKED[id(views)] = (views, out)  # the tuple is held with it, so its id is not reused meanwhile
     return out
 
