@@ -49,12 +49,10 @@ from bench_common import append_csv, gpu_clock, hold_gpu_clock  # noqa: E402
 from blender_scene import ROOM_SPHERE  # noqa: E402 (native_bench.py's sphere)
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe, default_probe_position  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
-from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
-                                                measured_nodes, mesh_grid)
+from gs_ibl_addon.core.probe.auto_light import (AutoLight, auto_light_batches, measure_bake,  # noqa: E402
+                                                run_batches)
 from gs_ibl_addon.core.probe import volume as pv  # noqa: E402
-from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
-from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
-from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume  # noqa: E402
+from gs_ibl_addon.core.probe.volume_refine import bake_light_volume  # noqa: E402
 from gs_ibl_addon.core.probe.result import write_probe  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
@@ -67,6 +65,22 @@ RADIUS = ROOM_SPHERE["radius"]
 TOLERANCE = 0.05  # the panel's Variation Tolerance
 
 
+def sphere_auto(r: SplatRenderer, stage=None) -> AutoLight:
+    """Lighting Auto for the sphere (core/probe/auto_light.py, as blender/lighting/auto_light.py bakes it), each
+    batch inside ``stage(name)`` when given: "measurement", then "grid" when the sphere gets one."""
+    names, bake = iter(("measurement", "grid")), measure_bake(r)
+
+    def staged(points):
+        with stage(next(names)) if stage else contextlib.nullcontext():
+            return bake(points)
+    return run_batches(auto_light_batches(PROBE, [(PROBE - RADIUS, PROBE + RADIUS)], ["sphere"], TOLERANCE), staged)
+
+
+def sphere_volume(r: SplatRenderer):
+    """Lighting Volume's volume over the sphere's box (core bake_light_volume, the default budget and face)."""
+    return bake_light_volume(r, [(PROBE - RADIUS, PROBE + RADIUS)])[1]
+
+
 def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     """One bake as the panel's Bake does it: (wall seconds per stage, the light the sphere got)."""
     t = {"start": time.perf_counter()}
@@ -74,33 +88,31 @@ def auto_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     t["world probe"] = time.perf_counter()
     write_probe(result, out_dir)
     t["writing"] = time.perf_counter()
-    pts = measure_points(PROBE - RADIUS, PROBE + RADIUS)
-    d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
-    choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
-    t["measurement"] = time.perf_counter()
-    if choice.kind == "grid":  # the nodes the measurement did not place, as blender/lighting/auto_light.py
-        spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
-        bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+
+    @contextlib.contextmanager
+    def mark(name):
+        yield
+        t[name] = time.perf_counter()
+    light = sphere_auto(r, mark)
+    t["measurement"] = t.get("measurement", t["writing"])  # the choice's host work goes with the grid's batch
     t["grid"] = time.perf_counter()
     names = list(t)
     stages = {b: t[b] - t[a] for a, b in zip(names, names[1:])}
-    return {"wall_s": t["grid"] - t["start"], **stages, "choice": choice.kind,
+    return {"wall_s": t["grid"] - t["start"], **stages, "choice": light.choices[0].kind,
             "faces": "/".join(str(x) for x in result.settings.get("face_sizes", []))}
 
 
 def volume_bake(r: SplatRenderer, scene, out_dir: str) -> dict:
     """One Lighting Volume bake as the panel's Bake does it (blender/lighting/volume.py _bake): the World probe and
-    its files, the region's plan over the sphere's box, the volume with its bricks (the default budget and face),
-    the World probe's SH at its place, the images packed. Wall seconds per stage, and the probes."""
+    its files, the volume over the sphere's box, the World probe's SH at its place, the images packed. Wall
+    seconds per stage, and the probes."""
     t = {"start": time.perf_counter()}
     result = bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
     t["world probe"] = time.perf_counter()
     write_probe(result, out_dir)
     t["writing"] = time.perf_counter()
-    boxes = [(PROBE - RADIUS, PROBE + RADIUS)]
-    plan, _ = choose_volume(r, boxes, budget=DEFAULT_BUDGET, share=GRID_SHARE)
-    vol = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes)
-    monomial_coefficients(bake_sh_points(r, PROBE[None], MEASURE_FACE))  # the EEVEE output's World light
+    vol = sphere_volume(r)
+    measure_bake(r)(PROBE[None])  # the EEVEE output's World light
     pv.pack_atlas(vol), pv.pack_cells(vol)
     t["volume"] = time.perf_counter()
     names = list(t)
@@ -122,16 +134,9 @@ def stage_runs(r: SplatRenderer, scene) -> dict[str, dict[str, dict[str, float]]
     with times.stage("all"):
         with times.stage("world probe"):
             bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
-        with times.stage("measurement"):
-            pts = measure_points(PROBE - RADIUS, PROBE + RADIUS)
-            d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
-            choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
-        with times.stage("grid"):
-            if choice.kind == "grid":
-                spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
-                bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+        sphere_auto(r, times.stage)
     rows = stages(timings)
-    out["auto bake"] = {k: rows[k] for k in ("world probe", "measurement", "grid", "all")}
+    out["auto bake"] = {k: rows[k] for k in ("world probe", "measurement", "grid", "all") if k in rows}
     cam = np.eye(4)
     cam[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]  # looking along +Y, Z up (Blender's front view turned round)
     cam[:3, 3] = PROBE

@@ -23,16 +23,12 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from auto_bake_core import PROBE, RADIUS, REPO, TOLERANCE  # noqa: E402
+from auto_bake_core import PROBE, REPO, sphere_auto  # noqa: E402
 from volume_bench import COST_SETS, boxes_of  # noqa: E402
 
 from gs_ibl_addon.core.bake import ProbeSettings, bake_probe, default_probe_position  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
-from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
-                                                measured_nodes, mesh_grid)
-from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients  # noqa: E402
-from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
-from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume  # noqa: E402
+from gs_ibl_addon.core.probe.volume_refine import bake_light_volume  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.render.views import ViewBatch  # noqa: E402
 
@@ -44,12 +40,7 @@ def works(r: SplatRenderer, scene) -> dict:
 
     def auto() -> None:
         bake_probe(None, PROBE, ProbeSettings(), renderer=r, host_splats=scene)
-        pts = measure_points(PROBE - RADIUS, PROBE + RADIUS)
-        d = monomial_coefficients(bake_sh_points(r, np.vstack([PROBE[None], pts]), MEASURE_FACE))
-        choice = choose_light("sphere", d[0], d[1:], TOLERANCE)
-        if choice.kind == "grid":
-            spec = mesh_grid(PROBE - RADIUS, PROBE + RADIUS, choice.variation)
-            bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+        sphere_auto(r)
 
     cam = np.eye(4)
     cam[:3, :3] = [[1, 0, 0], [0, 0, 1], [0, -1, 0]]
@@ -60,9 +51,7 @@ def works(r: SplatRenderer, scene) -> dict:
         r.render_camera(view)
 
     def volume() -> None:
-        boxes = boxes_of(COST_SETS["3 meshes"])
-        plan, _ = choose_volume(r, boxes, share=GRID_SHARE)
-        bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes)
+        bake_light_volume(r, boxes_of(COST_SETS["3 meshes"]))
 
     return {"default": default, "auto": auto, "camera": camera, "volume": volume}
 

@@ -53,14 +53,12 @@ from gs_ibl_addon.core.bake import ProbeSettings, bake_probe  # noqa: E402
 from gs_ibl_addon.core.formats import read_scene  # noqa: E402
 from gs_ibl_addon.core.probe import volume as vol  # noqa: E402
 from gs_ibl_addon.core.probe import volume_bake  # noqa: E402
-from gs_ibl_addon.core.probe.auto_light import (MEASURE_FACE, choose_light, measure_points,  # noqa: E402
-                                                measured_nodes, mesh_grid)
-from gs_ibl_addon.core.probe.grid import (bake_sh_points, eval_irradiance, interpolate,  # noqa: E402
-                                          monomial_coefficients)
+from gs_ibl_addon.core.probe.auto_light import auto_light, measure_bake, mesh_grid  # noqa: E402
+from gs_ibl_addon.core.probe.grid import eval_irradiance  # noqa: E402
 from gs_ibl_addon.core.probe.variation import LUMINANCE  # noqa: E402
 from gs_ibl_addon.core.probe.volume_bake import bake_volume, point_irradiance  # noqa: E402
-from gs_ibl_addon.core.probe.volume_refine import GRID_SHARE, bake_refined  # noqa: E402
-from gs_ibl_addon.core.probe.volume_region import DEFAULT_BUDGET, choose_volume, plan_volume  # noqa: E402
+from gs_ibl_addon.core.probe.volume_refine import bake_light_volume, bake_refined  # noqa: E402
+from gs_ibl_addon.core.probe.volume_region import plan_volume  # noqa: E402
 from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.stage_times import StageTimes, stages  # noqa: E402
 from gs_ibl_addon.core.synthetic import fibonacci_sphere  # noqa: E402
@@ -93,24 +91,14 @@ def reference(r: SplatRenderer, pts: np.ndarray, nrm: np.ndarray) -> np.ndarray:
     return point_irradiance(r, pts, nrm, REF_FACE)
 
 
-def auto_today(r: SplatRenderer, place: str, pts: np.ndarray, nrm: np.ndarray, d_world: np.ndarray):
+def auto_today(r: SplatRenderer, place: str, pts: np.ndarray, nrm: np.ndarray):
     """(E/pi at the points from Lighting Auto's choice, the choice)."""
     c = centre(place)
-    lo, hi = c - RADIUS, c + RADIUS
-    mp = measure_points(lo, hi)
-    d = monomial_coefficients(bake_sh_points(r, mp, MEASURE_FACE))
-    choice = choose_light(place, d_world, d, TOLERANCE)
-    if choice.kind == "world":
-        return eval_irradiance(d_world, nrm), choice.kind
-    if choice.kind == "probe":
-        return eval_irradiance(d[0], nrm), choice.kind
-    spec = mesh_grid(lo, hi, choice.variation)
-    nodes = spec.points().reshape(-1, 3)
-    have = measured_nodes(spec, mp)
-    dn = np.empty((len(nodes), 9, 3))
-    dn[have >= 0] = d[have[have >= 0]]
-    dn[have < 0] = monomial_coefficients(bake_sh_points(r, nodes[have < 0], MEASURE_FACE))
-    return eval_irradiance(interpolate(dn.reshape(*spec.shape, 9, 3), spec, pts), nrm), f"grid {spec.shape[0]}^3"
+    light = auto_light(r, PROBE, [(c - RADIUS, c + RADIUS)], [place], TOLERANCE)
+    kind = light.choices[0].kind
+    if kind == "grid":
+        kind = f"grid {light.grids[0][0].shape[0]}^3"
+    return eval_irradiance(light.coefficients_at(0, pts), nrm), kind
 
 
 def errors(got: np.ndarray, want: np.ndarray, facing: np.ndarray) -> dict:
@@ -129,7 +117,7 @@ def boxes_of(names) -> list:
 
 def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
     rows = []
-    d_world = monomial_coefficients(bake_sh_points(r, np.asarray(PROBE, np.float64)[None], MEASURE_FACE))[0]
+    d_world = measure_bake(r)(np.asarray(PROBE, np.float64)[None])[0]
     data = {p: sphere_points(p, n_points) for p in PLACES}
     t0 = time.perf_counter()
     refs = {p: reference(r, *data[p][:2]) for p in PLACES}
@@ -148,7 +136,7 @@ def accuracy(r: SplatRenderer, n_points: int, configs) -> list[dict]:
         pts, nrm, facing = data[p]
         want = refs[p]
         rows.append({"place": p, "method": "world", **errors(eval_irradiance(d_world, nrm), want, facing)})
-        got, kind = auto_today(r, p, pts, nrm, d_world)
+        got, kind = auto_today(r, p, pts, nrm)
         rows.append({"place": p, "method": f"auto ({kind})", **errors(got, want, facing)})
         # the same nodes as Auto's grid for this mesh (3^3 or 5^3 over its shrunk box), as a volume: octahedral maps and
         # visibility against order-2 SH at equal density
@@ -176,8 +164,7 @@ def budget_sweep(r: SplatRenderer, n_points: int, budgets, faces=(volume_bake.DE
     for face in faces:
         for budget in budgets:
             t0 = time.perf_counter()
-            plan, _ = choose_volume(r, boxes_of(PLACES), budget=budget, share=GRID_SHARE)
-            v = bake_refined(r, plan.spec, budget, boxes=boxes_of(PLACES), face_size=face)
+            v = bake_light_volume(r, boxes_of(PLACES), budget, face_size=face)[1]
             secs = time.perf_counter() - t0
             print(f"budget {budget}, {face}^2 faces: {v.timings['probes']} probes, {secs:.2f} s; {v.report[:1]}",
                   flush=True)
@@ -237,23 +224,14 @@ def _cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
         submissions)."""
         timings: dict = {}
         with StageTimes(r.ctx, timings).stage("volume"):
-            plan, _ = choose_volume(r, boxes_of(names), share=GRID_SHARE)
-            v = bake_refined(r, plan.spec, DEFAULT_BUDGET, boxes=boxes_of(names))
+            v = bake_light_volume(r, boxes_of(names))[1]
         t = stages(timings)["volume"]
         split = {"gpu_ms": round(t["gpu"], 2), "host_ms": round(t["host"], 2), "submits": int(t["submits"])}
         return t["wall"] / 1e3, v.timings["probes"], split
 
     def auto(names) -> float:
         t0 = time.perf_counter()
-        d_world = monomial_coefficients(bake_sh_points(r, np.asarray(PROBE, np.float64)[None], MEASURE_FACE))[0]
-        for name in names:
-            c = centre(name)
-            pts = measure_points(c - RADIUS, c + RADIUS)
-            d = monomial_coefficients(bake_sh_points(r, pts, MEASURE_FACE))
-            choice = choose_light(name, d_world, d, TOLERANCE)
-            if choice.kind == "grid":
-                spec = mesh_grid(c - RADIUS, c + RADIUS, choice.variation)
-                bake_sh_points(r, spec.points().reshape(-1, 3)[measured_nodes(spec, pts) < 0], MEASURE_FACE)
+        auto_light(r, PROBE, boxes_of(names), names, TOLERANCE)
         return time.perf_counter() - t0
 
     world()  # warm-up: pipelines, allocations

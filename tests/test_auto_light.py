@@ -49,3 +49,35 @@ def test_a_grid_reuses_the_measured_nodes():
     flat = mesh_grid(lo, np.array([0.8, 0.3, 1.0]))  # no height: one node along z
     mf = measured_nodes(flat, measure_points(lo, np.array([0.8, 0.3, 1.0])))
     assert flat.count == 9 and (mf >= 0).sum() == 5  # the centre and four corners; the edge middles are new
+
+
+def test_the_batches_a_light_field_asks_for():
+    """auto_light_batches on a known light (irradiance level 1 + x, uniform in direction; a bake is this function
+    of the points): the first batch is the World probe's place and each mesh's measure points; a mesh across the
+    light's change gets a grid whose second batch is only the nodes not measured, and every node holds the field;
+    a mesh where x = 0 gets the World's light (level 1 at the World probe's place, x = 0)."""
+    from gs_ibl_addon.core.probe.auto_light import auto_light_batches, run_batches
+
+    def field(points):
+        return np.stack([_uniform(1.0 + p[0]) for p in np.asarray(points)])
+
+    asked = []
+
+    def bake(points):
+        asked.append(np.asarray(points))
+        return field(points)
+    boxes = [(np.array([-0.05, 0.0, 0.0]), np.array([0.05, 0.1, 0.1])),  # 8.5 cm across: 8.5% change
+             (np.array([0.4, 0.0, 0.0]), np.array([1.4, 1.0, 1.0]))]  # x from 0.475 to 1.325
+    light = run_batches(auto_light_batches((0.0, 0.0, 0.0), boxes, ["small", "wide"], 0.1), bake)
+    assert [c.kind for c in light.choices] == ["world", "grid"]
+    assert len(asked) == 2 and len(asked[0]) == 1 + 2 * 9 and np.allclose(asked[0][0], 0)
+    spec, nodes = light.grids[1]
+    assert spec.shape == (3, 3, 3) and len(asked[1]) == 27 - 9
+    np.testing.assert_allclose(nodes.reshape(-1, 9, 3), field(spec.points().reshape(-1, 3)), atol=1e-12)
+    inside = np.array([[0.9, 0.5, 0.5], [0.6, 0.2, 0.8]])
+    np.testing.assert_allclose(light.coefficients_at(1, inside), field(inside), atol=1e-12)  # linear: exact
+    np.testing.assert_allclose(light.coefficients_at(0, inside), field(np.zeros((2, 3))), atol=1e-12)
+    # no mesh needs a grid: one batch
+    asked.clear()
+    light = run_batches(auto_light_batches((0.0, 0.0, 0.0), boxes[:1], ["small"], 0.1), bake)
+    assert len(asked) == 1 and light.grids == {}

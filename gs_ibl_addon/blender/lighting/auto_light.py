@@ -11,8 +11,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 
-from ...core.probe.auto_light import (MEASURE_FACE, LightChoice, choose_light, measure_points, measured_nodes,
-                                     mesh_grid)
+from ...core.probe.auto_light import MEASURE_FACE, AutoLight, LightChoice, auto_light_batches
 from . import local_light as ll
 from ..common.jobs import Job, Progress, Work, run_now
 from .object_probes import lit_meshes, point_coefficients, probe_renderer_steps, world_box
@@ -58,34 +57,26 @@ def auto_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object,
     scene_name, probe_name, names = scene.name, probe.name, [o.name for o in meshes]
     tol = float(probe.gs_ibl_probe.variation_tolerance)
     boxes = [world_box(o) for o in meshes]
-    points = np.concatenate([measure_points(*box) for box in boxes])
     at = np.array(probe.matrix_world.translation, np.float64)
-    # the measurement, one batch with the World probe's place (their difference carries no difference of method)
-    both = yield Work(_probes, r, np.vstack([at[None], points]), span=(0.0, 0.4))
-    d_world, d = both[0], both[1:]
-    choices = [choose_light(n, d_world, d[9 * i:9 * i + 9], tol) for i, n in enumerate(names)]
-    # light of their own, at the operators' size, for the meshes that need it: one more batch
-    keys, tiles, grids = {}, {}, {}  # grids: {mesh index: its grid}
-    for i, (name, box, c) in enumerate(zip(names, boxes, choices)):
+    # the measurement, one batch with the World probe's place (their difference carries no difference of method);
+    # then, for the meshes that need a grid, one more batch of its nodes
+    batches, spans = auto_light_batches(at, boxes, names, tol), iter([(0.0, 0.4), (0.4, 0.95)])
+    try:
+        points = next(batches)
+        while True:
+            points = batches.send((yield Work(_probes, r, points, span=next(spans))))
+    except StopIteration as done:
+        light: AutoLight = done.value
+    choices = light.choices
+    keys, tiles = {}, {}
+    for i, (name, c) in enumerate(zip(names, choices)):
         if c.kind == "probe":  # its centre's measurement is its probe
             keys[name] = f"probe:{name}"
-            tiles[keys[name]] = ll.probe_tile(points[9 * i], d[9 * i] - d_world)
+            tiles[keys[name]] = ll.probe_tile(light.points[i, 0], light.measured[i, 0] - light.d_world)
         elif c.kind == "grid":
             keys[name] = f"object:{name}"
-            grids[i] = mesh_grid(*box, c.variation)
-    if grids:  # the grids' nodes the measurement did not place: one more batch
-        reuse = {i: measured_nodes(spec, points[9 * i:9 * i + 9]) for i, spec in grids.items()}
-        fresh = {i: spec.points().reshape(-1, 3)[reuse[i] < 0] for i, spec in grids.items()}
-        todo = np.concatenate(list(fresh.values()))
-        dg = (yield Work(_probes, r, todo, span=(0.4, 0.95))) if len(todo) else np.empty((0, *d.shape[1:]))
-        start = 0
-        for i, spec in grids.items():
-            m = reuse[i]
-            nodes = np.empty((spec.count, *d.shape[1:]))
-            nodes[m >= 0] = d[9 * i + m[m >= 0]]
-            nodes[m < 0] = dg[start:start + len(fresh[i])]
-            start += len(fresh[i])
-            tiles[keys[names[i]]] = (spec, nodes.reshape(*spec.shape, *d.shape[1:]) - d_world)
+            spec, nodes = light.grids[i]
+            tiles[keys[name]] = (spec, nodes - light.d_world)
     scene = bpy.data.scenes.get(scene_name)  # after the workers: by name (see blender/bake.py _named)
     probe = scene.objects.get(probe_name) if scene is not None else None
     if probe is None:
@@ -103,7 +94,7 @@ def auto_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object,
         ll.light_object(obj, float(probe.gs_ibl_probe.strength))
         obj[AUTO_KEY] = probe.name
     if tiles:
-        ll.store_grids(tiles, d_world, probe.gs_ibl_probe.irradiance_image)
+        ll.store_grids(tiles, light.d_world, probe.gs_ibl_probe.irradiance_image)
     if objects is None:  # a whole bake: the More Than One Probe panel lists why each mesh got what it got
         probe.gs_ibl_probe.local_report = "\n".join(c.message() for c in choices)
     counts = {k: sum(c.kind == k for c in choices) for k in ("world", "probe", "grid")}

@@ -116,14 +116,11 @@ def _bake(renderer, boxes, within, where, budget, face_size, progress):
     """The worker's part: the World probe's SH at its place (the EEVEE output's World light), the region's plan and
     the volume with its bricks, packed. Returns (plan, volume, (irradiance, visibility, cells) images, World
     coefficients)."""
-    from ...core.probe.volume_refine import GRID_SHARE, bake_refined
-    from ...core.probe.volume_region import choose_volume
+    from ...core.probe.volume_refine import bake_light_volume
     try:
         progress("measuring how fast the light changes", 0.0)
-        plan, _coarse = choose_volume(renderer, boxes, budget=budget, within=within, share=GRID_SHARE)
-        vol = bake_refined(renderer, plan.spec, budget, boxes=boxes, face_size=face_size,
-                           progress=lambda done, total: progress(f"baking {done} of about {total} light volume "
-                                                                 "probes", 0.1 + 0.85 * min(done / max(total, 1), 1)))
+        plan, vol = bake_light_volume(renderer, boxes, budget, within, face_size, lambda done, total: progress(
+            f"baking {done} of about {total} light volume probes", 0.1 + 0.85 * min(done / max(total, 1), 1)))
         world = point_coefficients(renderer, np.asarray(where, np.float64)[None])[0]
         return plan, vol, (*pv.pack_atlas(vol), pv.pack_cells(vol)), world
     finally:

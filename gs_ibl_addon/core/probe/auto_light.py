@@ -17,10 +17,11 @@ varies across them get a grid baked (a second batch, of the 18 or 116 nodes the 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable, Generator
 
 import numpy as np
 
-from .grid import POINT_FACE_SIZE, GridSpec, eval_irradiance
+from .grid import POINT_FACE_SIZE, GridSpec, bake_sh_points, eval_irradiance, interpolate, monomial_coefficients
 from .variation import LUMINANCE, NORMALS
 
 GRID_SHAPE = (3, 3, 3)
@@ -102,3 +103,74 @@ def choose_light(name: str, d_world: np.ndarray, d_points: np.ndarray, tolerance
     variation = float(np.max(np.abs(e_nodes - e_centre[None])) / scale)
     kind = "grid" if variation > tolerance else "probe" if offset > tolerance else "world"
     return LightChoice(name, kind, offset, variation)
+
+
+@dataclass(frozen=True)
+class AutoLight:
+    """Lighting Auto's light for a set of meshes: the World probe's monomial coefficients ``d_world`` (9, 3), each
+    mesh's choice, its measure points (meshes, 9, 3) and their coefficients ``measured`` (meshes, 9, 9, 3), and for
+    each mesh that got a grid {mesh index: (its grid, node coefficients (*grid shape, 9, 3))}."""
+    d_world: np.ndarray
+    choices: tuple[LightChoice, ...]
+    points: np.ndarray
+    measured: np.ndarray
+    grids: dict[int, tuple[GridSpec, np.ndarray]]
+
+    def coefficients_at(self, i: int, positions: np.ndarray) -> np.ndarray:
+        """(M, 9, 3): the light mesh ``i`` is given at world ``positions`` (M, 3), as the local-light group reads it
+        (the World's, its centre's, or its grid's interpolated)."""
+        n, kind = len(positions), self.choices[i].kind
+        if kind == "grid":
+            spec, nodes = self.grids[i]
+            return interpolate(nodes, spec, np.asarray(positions, np.float64))
+        d = self.d_world if kind == "world" else self.measured[i, 0]
+        return np.broadcast_to(d, (n, *d.shape))
+
+
+def auto_light_batches(at, boxes, names, tolerance: float) -> Generator[np.ndarray, np.ndarray, AutoLight]:
+    """Lighting Auto for meshes ``names`` with world boxes ``boxes`` (lo, hi) and the World probe at ``at``, as a
+    generator that yields each batch's probe points (P, 3) and is sent their monomial coefficients (P, 9, 3), baked
+    at MEASURE_FACE: the measurement (the World probe's place first, then each mesh's measure_points), then, when a
+    mesh needs a grid, the grids' nodes the measurement did not place. A caller chooses where the batches run (the
+    add-on's job runs them on a worker); auto_light runs them here."""
+    points = np.asarray([measure_points(*box) for box in boxes], np.float64).reshape(len(boxes), 9, 3)
+    both = yield np.vstack([np.asarray(at, np.float64)[None], points.reshape(-1, 3)])
+    d_world = np.asarray(both[0])
+    measured = np.asarray(both[1:]).reshape(len(boxes), 9, *d_world.shape)
+    choices = tuple(choose_light(n, d_world, measured[i], tolerance) for i, n in enumerate(names))
+    specs = {i: mesh_grid(*boxes[i], c.variation) for i, c in enumerate(choices) if c.kind == "grid"}
+    reuse = {i: measured_nodes(spec, points[i]) for i, spec in specs.items()}
+    fresh = {i: spec.points().reshape(-1, 3)[reuse[i] < 0] for i, spec in specs.items()}
+    todo = np.concatenate([np.empty((0, 3)), *fresh.values()])
+    dg = (yield todo) if len(todo) else np.empty((0, *d_world.shape))
+    grids, start = {}, 0
+    for i, spec in specs.items():
+        m = reuse[i]
+        nodes = np.empty((spec.count, *d_world.shape))
+        nodes[m >= 0] = measured[i, m[m >= 0]]
+        nodes[m < 0] = dg[start:start + len(fresh[i])]
+        start += len(fresh[i])
+        grids[i] = (spec, nodes.reshape(*spec.shape, *d_world.shape))
+    return AutoLight(d_world, choices, points, measured, grids)
+
+
+def run_batches(batches: Generator[np.ndarray, np.ndarray, AutoLight],
+                bake: Callable[[np.ndarray], np.ndarray]) -> AutoLight:
+    """Drive auto_light_batches with ``bake`` (points -> monomial coefficients) in this thread."""
+    try:
+        points = next(batches)
+        while True:
+            points = batches.send(bake(points))
+    except StopIteration as done:
+        return done.value
+
+
+def measure_bake(renderer) -> Callable[[np.ndarray], np.ndarray]:
+    """Points (P, 3) -> monomial coefficients (P, 9, 3) of probes there at MEASURE_FACE, in one batch on
+    ``renderer``: how the add-on's Lighting Auto bakes auto_light_batches' batches."""
+    return lambda points: monomial_coefficients(bake_sh_points(renderer, points, MEASURE_FACE))
+
+
+def auto_light(renderer, at, boxes, names, tolerance: float) -> AutoLight:
+    """auto_light_batches baked on ``renderer`` here."""
+    return run_batches(auto_light_batches(at, boxes, names, tolerance), measure_bake(renderer))

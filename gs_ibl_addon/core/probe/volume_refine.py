@@ -36,6 +36,7 @@ from .volume import (BRICK_LEVELS, KEY_UNITS, NORMAL_BIAS, LightVolume, bilinear
                      cell_shape, flat_cells, grid_maps, index_grid, key_positions, node_keys, probe_positions, sample,
                      spec_spacing)
 from .volume_bake import DEFAULT_FACE, bake_probes, far_distance, probe_report
+from .volume_region import DEFAULT_BUDGET, VolumePlan, choose_volume
 
 # The grid's share of the probe budget; the cells' centres and the bricks take the rest. Over the sample room's five
 # places (volume_bench.py, 2026-12-05, 64 points a sphere): the grid at 0.6 m (300 probes) and bricks to 512 put
@@ -180,3 +181,12 @@ def bake_refined(renderer, spec: GridSpec, budget: int, tolerance: float = REFIN
                    "face": int(face_size), "per_submission": first["per_submission"], "lod_k": float(lod_k),
                    "cell_error_max": worst}
     return vol
+
+
+def bake_light_volume(renderer, boxes, budget: int = DEFAULT_BUDGET, within=None, face_size: int = DEFAULT_FACE,
+                      progress: Callable[[int, int], None] | None = None) -> tuple[VolumePlan, LightVolume]:
+    """Lighting Volume's bake for the lit meshes' ``boxes`` (over an animation): the region planned from the light
+    it measures (volume_region.choose_volume, the grid within GRID_SHARE of ``budget``), then the volume with its
+    bricks (bake_refined). ``within``: a box the region stays inside (the splats' bounds)."""
+    plan, _coarse = choose_volume(renderer, boxes, budget=budget, within=within, share=GRID_SHARE)
+    return plan, bake_refined(renderer, plan.spec, budget, boxes=boxes, face_size=face_size, progress=progress)
