@@ -137,6 +137,24 @@ def test_device_local_buffers_go_through_the_kept_staging_buffers(ctx, monkeypat
     assert ctx._staging["up"].nbytes >= 4096 and ctx._staging["down"].nbytes >= 4096
 
 
+@pytest.mark.parametrize("mapped", [True, False])
+def test_large_transfers_split_over_threads_arrive_whole(ctx, monkeypatch, mapped):
+    # A GPU machine's host copies a large readback or upload over COPY_THREADS threads (buffers.copy_bytes); this
+    # 2-core machine does not, so the split is forced: pieces of whole pages, the last short, every byte in place.
+    from gs_ibl_addon.core.vk import Buffer, buffers
+    monkeypatch.setattr(buffers, "PARALLEL_COPY", 4096)
+    monkeypatch.setattr(buffers, "COPY_THREADS", 3)
+    data = np.random.default_rng(2).random(50_001).astype(np.float32)  # 200,004 bytes: 3 pieces, not of a page
+    with Buffer(ctx, data.nbytes + 64, "copies") as b:
+        if not mapped:
+            ctx.vk.vkUnmapMemory(ctx.device, b.memory)
+            b._map = None
+        b.write(data, 64)
+        out = np.full(len(data), -1.0, np.float32)
+        assert b.read(np.float32, len(data), 64, out=out) is out
+        np.testing.assert_array_equal(out, data)
+
+
 def test_filter_plans_of_a_closed_renderer_give_their_buffers_back(ctx):
     scene = random_scene(500, seed=6, sh_degree=0, extent=3.0)
     with SplatRenderer(scene, ctx) as r:
