@@ -242,7 +242,7 @@ FRAME_BYTES_PER_PIXEL = 16 + 12
 
 
 def _binding_limit(ctx) -> int:
-    return int(ctx.vk.vkGetPhysicalDeviceProperties(ctx.physical_device).limits.maxStorageBufferRange)
+    return ctx.max_storage_range
 
 
 def largest_probe_face(ctx, n_probes: int) -> int:

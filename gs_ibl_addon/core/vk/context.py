@@ -70,6 +70,7 @@ class VulkanContext:
         self.is_cpu = props.deviceType == vk.VK_PHYSICAL_DEVICE_TYPE_CPU
         self.timestamp_period_ns: float = props.limits.timestampPeriod
         self.max_workgroups = tuple(props.limits.maxComputeWorkGroupCount)
+        self.max_storage_range: int = int(props.limits.maxStorageBufferRange)  # one binding's bytes
         self.memory_properties = vk.vkGetPhysicalDeviceMemoryProperties(self.physical_device)
         self.subgroup_size, self.subgroup_ballot = self._subgroup_info()
 
