@@ -51,7 +51,8 @@
 #   bash benchmarks/gpu_run.sh profile   there, about a minute (issues 37 and 38: where host time goes):
 #                                        host_profile.py, cProfile of the default bake, Lighting Auto's bake, a
 #                                        1080p camera frame and Lighting Volume's bake of three meshes. Into $OUT:
-#                                        profile.log and one .pstats per work. Carry .gl and .whl
+#                                        profile.log and one .pstats per work; then the camera frame's wall
+#                                        by host copy threads (--copy-ab) into the log. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
 #                                        volume's accuracy against per-point probes at the five places, its bake's
 #                                        cost against a World-only bake, and with host-made maps: GPU_MAPS A/B),
@@ -179,6 +180,8 @@ trials|grid|full|final|refs|stages|volume|profile)
       set +e
       timeout --signal=INT --kill-after=10 240 python3 benchmarks/host_profile.py --repeats 5 --top 30 --out "$out" \
         || echo "[gpu_run] host_profile: exit $?"
+      timeout --signal=INT --kill-after=10 60 python3 benchmarks/host_profile.py --copy-ab --repeats 30 \
+        || echo "[gpu_run] host_profile --copy-ab: exit $?"
       echo "[gpu_run] profile: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
   elif [ "$1" = refs ]; then
