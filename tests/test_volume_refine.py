@@ -68,3 +68,18 @@ def test_budget_and_flat_volumes():
     assert (vr.choose_bricks(flat, np.full(4, 0.5), 0.02, 1000) == 1).all()
     assert vr.cells_touching(spec, [((0.6, 0.6, 0.6), (0.7, 0.7, 0.7))]).sum() == 1
     assert vr.cells_touching(spec, [((0.4, 0.4, 0.4), (0.6, 0.6, 0.6))]).sum() == 8
+
+
+def test_bricks_go_where_a_probe_removes_the_most_error():
+    """A cell at 28% and one at 5%, a budget for the first's 2x and 4x bricks (18 + 98 new probes): worst first
+    would spend it all on the first; per probe its 4x brick (7% left x 3/4 over 98) is worth less than the second
+    cell's 2x (5% x 3/4 over 18), which goes first, and the 4x no longer fits."""
+    spec = GridSpec((0, 0, 0), (3, 3, 3), (4, 4, 4))
+    cells = vol.index_grid(vol.cell_shape(spec))
+    a = int(np.flatnonzero((cells == (0, 0, 0)).all(1))[0])
+    b = int(np.flatnonzero((cells == (2, 2, 2)).all(1))[0])
+    errors = np.zeros(len(cells))
+    errors[a], errors[b] = 0.28, 0.05
+    refine = vr.choose_bricks(spec, errors, 0.02, 18 + 98)
+    assert refine[0, 0, 0] == 2 and refine[2, 2, 2] == 2 and (refine > 1).sum() == 2
+    assert vr.choose_bricks(spec, errors, 0.02, 18 + 18 + 98)[0, 0, 0] == 4  # room for both: the 4x follows

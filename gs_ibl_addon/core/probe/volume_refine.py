@@ -10,11 +10,14 @@ costs the whole room for a few cells. Here each cell is asked instead:
   trilinear interpolation errs most for a smooth field, and it sees what the corners miss: a lamp or a wall inside
   the cell.
 - Choose: linear interpolation errs as the square of the spacing, so a brick of r (volume.BRICK_LEVELS: 2 or 4;
-  its nodes r + 1 a side, the centre one of them) cuts the error about r^2 times. The cell worst now (error / r^2)
-  gets the next level while it is over the tolerance and the budget holds the probes it adds (bricks share their
-  faces and corners with the grid and each other: a probe is rendered once). Straight to the finest level spent the
-  sample room's budget on a few cells while the window's kept none (auto_light_bench, 2026-12-05: the window's
-  sphere +5%); level by level for every cell first left the lamp's at 2 (its sphere +3%, Suzanne +6%).
+  its nodes r + 1 a side, the centre one of them) cuts the error about r^2 times. The next level goes to the cell
+  whose brick removes the most error per probe it adds (bricks share their faces and corners with the grid and each
+  other: a probe is rendered once), while the cell is over the tolerance and the budget holds its probes. A 4x brick
+  adds 98 probes to a 2x's 18, so it waits until the 2x bricks of other cells are worth less. Worst cell first gave
+  the sample room's lamp cell a 4x brick while 13 cells kept none, and the window's sphere read +3.8%
+  (auto_light_bench, 2026-12-06: 6 bricks, Cycles 7 / 10 within 3%, EEVEE 6 / 10); per probe: 14 bricks at 2x, 5
+  cells left, every sphere within 3% in both engines, Cycles 8 / 10, EEVEE 7 / 10. Straight to the finest level
+  had spent the budget on a few cells (2026-12-05: the window's sphere +5%).
 - Bake: the new probes, in batched submissions; the bricks' maps are gathered from grid nodes, centres and new
   probes by place (volume.brick_keys).
 
@@ -93,32 +96,48 @@ def centre_errors(volume: LightVolume, centre_irradiance: np.ndarray, cells: np.
 
 def choose_bricks(spec: GridSpec, errors: np.ndarray, tolerance: float, budget: int) -> np.ndarray:
     """(cx, cy, cz) r per cell from (C,) ``errors`` in cell order (0: a cell not measured), within ``budget`` new
-    probes (not grid nodes, centres or another brick's). The cell whose light is worst now (its error / r^2) gets the
-    next level, while it is over ``tolerance`` and its new probes fit; a cell whose next level does not fit keeps
-    its own (the worst error left is as small as the budget allows)."""
+    probes (not grid nodes, centres or another brick's). The next level goes to the cell whose brick removes the most
+    error per new probe (its error x (1 - (r / next)^2) over the probes it adds), while the cell is over ``tolerance``
+    and its probes fit; a brick that does not fit is passed over for smaller ones."""
     shape = cell_shape(spec)
     refine = np.ones(shape, int)
     if min(spec.shape) < 2 or budget <= 0:
         return refine
     taken = {tuple(k) for k in np.vstack([node_keys(spec), cell_keys(spec)])}
     cells = index_grid(shape)
-    queue = [(-float(e), int(i), 1) for i, e in enumerate(errors) if e > tolerance]
+
+    def worth(i: int, r: int, e: float) -> tuple[float, int, set] | None:
+        """(error removed per new probe, next level, its new probes) of cell i's next brick, or None."""
+        nxt = next((x for x in BRICK_LEVELS if x > r), None)
+        if nxt is None:
+            return None
+        new = {tuple(k) for k in brick_keys_of(cells[i], nxt)} - taken
+        return e * (1 - (r / nxt) ** 2) / max(len(new), 1), nxt, new
+    queue = []
+    for i, e in enumerate(errors):
+        w = worth(i, 1, float(e)) if e > tolerance else None
+        if w is not None:
+            queue.append((-w[0], i, 1, float(e)))
     heapq.heapify(queue)
     added = 0
     while queue:
-        neg, i, r = heapq.heappop(queue)
-        nxt = next((x for x in BRICK_LEVELS if x > r), None)
-        if nxt is None:
+        neg, i, r, e = heapq.heappop(queue)
+        w = worth(i, r, e)
+        if w is None:
             continue
-        new = {tuple(k) for k in brick_keys_of(cells[i], nxt)} - taken
+        if queue and w[0] < -queue[0][0] - 1e-15:  # its new probes shrank or grew since: queued again as it is now
+            heapq.heappush(queue, (-w[0], i, r, e))
+            continue
+        _, nxt, new = w
         if added + len(new) > budget:
             continue
         refine[tuple(cells[i])] = nxt
         taken |= new
         added += len(new)
-        left = -neg * (r / nxt) ** 2
-        if left > tolerance:
-            heapq.heappush(queue, (-left, i, nxt))
+        left = e * (r / nxt) ** 2
+        w = worth(i, nxt, left) if left > tolerance else None
+        if w is not None:
+            heapq.heappush(queue, (-w[0], i, nxt, left))
     return refine
 
 
