@@ -273,6 +273,7 @@ def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import matplotlib.ticker  # noqa: F401 (matplotlib.ticker below)
     methods = list(dict.fromkeys(r["method"].split(" (")[0] for r in acc))
     places = list(PLACES)
     fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.8), gridspec_kw={"width_ratios": [2.2, 1]})
@@ -284,6 +285,8 @@ def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
     a.set_xticks(np.arange(len(places)) + 0.4 - width / 2, places)
     a.set_ylabel("per-point irradiance error, mean (%)")
     a.set_yscale("log")
+    a.set_yticks([1, 2, 3, 5, 10, 20, 50], ["1", "2", "3", "5", "10", "20", "50"])
+    a.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     a.axhline(3, color="k", lw=0.8, ls="--")
     a.set_title("White spheres in the sample room vs dense per-point probes")
     a.legend(fontsize=7, ncol=2)
@@ -296,7 +299,7 @@ def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
     b.set_ylabel("whole bake / World-probe-only bake")
     b.axhline(2, color="k", lw=0.8, ls="--")
     b.axhline(4, color="k", lw=0.8, ls=":")
-    b.set_title(f"Cost ({device}; targets 2x and 4x)")
+    b.set_title(f"Cost, {device}\n(targets 2x and 4x, lines)", fontsize=10)
     fig.tight_layout()
     os.makedirs(os.path.dirname(path), exist_ok=True)
     fig.savefig(path, dpi=110)
