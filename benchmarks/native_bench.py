@@ -83,7 +83,6 @@ def _in_blender(args: dict) -> dict:
     scene.camera = cam
     r = scene.render
     r.resolution_percentage = 100
-    r.film_transparent = True
     r.image_settings.file_format = "OPEN_EXR"
     r.threads_mode = "FIXED"
     r.threads = args["threads"]
@@ -92,6 +91,7 @@ def _in_blender(args: dict) -> dict:
     # Cycles' own path tracing of the native splats: Splats in Renders off (on, the Native Splats default, F12 draws
     # them with our renderer and hides them from Cycles; tests/real_blender/cycles_reference.py does the same)
     scene.gs_ibl_render.enabled = False
+    r.film_transparent = True  # after: turning Splats in Renders off put back the Film Transparent import found (off)
     scene.view_settings.view_transform = "Standard"
     c = scene.cycles
     c.device = "CPU"
