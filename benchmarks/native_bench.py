@@ -165,6 +165,10 @@ def _in_blender(args: dict) -> dict:
             (a, sa), (b, sb) = (render("CYCLES", samples, seed=s, border=border) for s in (101, 102))
             # one pixel in from the outline: edges are each engine's own filter
             self.mask = m = mesh_mask(a, b)
+            region = (border[1] - border[0]) * r.resolution_x * (border[3] - border[2]) * r.resolution_y
+            if m.sum() > 0.9 * region:  # a sphere fills pi/4 of its box: an opaque background (2026-12-05's runs)
+                raise RuntimeError(f"{label}: the sphere's mask covers {int(m.sum())} of its region's {region:.0f} "
+                                   "pixels: the references are opaque (Film Transparent off?)")
             self.a, self.b = a[m][:, :3].astype(np.float64), b[m][:, :3].astype(np.float64)
             self.mean = 0.5 * (self.a + self.b)
             self.noise_var = float(np.mean((self.a - self.b) ** 2)) / 4.0  # of the mean's pixels
@@ -305,7 +309,9 @@ def gpu_series(rows: list[dict], gpu_bakes: dict[str, float]) -> list[dict]:
 def native_time_at(rows: list[dict], frame: str, error: float, method: str) -> tuple[float, str] | None:
     """The time native ``method`` (with or without the denoiser) takes to reach ``error`` in ``frame``: log-log
     interpolation between measured samples; past the last one without the denoiser, Monte Carlo's error ~
-    1/sqrt(time) ("extrapolated"); None when it does not reach it."""
+    1/sqrt(time) ("extrapolated"); None when it does not reach it (or ``error`` is 0: below the references' noise)."""
+    if error <= 0:
+        return None
     pts = sorted((float(r["total_s"]), float(r["rel_rms_error"])) for r in rows
                  if r["frame"] == frame and r["method"] == method)
     for (t0, e0), (t1, e1) in zip(pts, pts[1:]):
