@@ -396,7 +396,7 @@ def _read_gpu_bakes(folder: str) -> tuple[dict[str, float], str]:
         rows = [r for path in glob.glob(os.path.join(folder, pattern)) for r in csv.DictReader(open(path))]
         if not rows:
             continue
-        row = max(rows, key=lambda r: r["date"])
+        row = rows[max(range(len(rows)), key=lambda i: (rows[i]["date"], i))]  # a day's last row is its newest
         out[label] = float(row["wall_s"])
         notes.append(f"{label}: {row['device']}, driver {row['driver']}, SM {row['sm_mhz']} MHz, {row['date']}, "
                      f"{float(row['wall_s']):.3f} s wall")
