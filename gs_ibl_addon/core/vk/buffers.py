@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -25,6 +26,7 @@ STAGING_MAX = 64 << 20  # the kept staging buffers grow to this at most; larger 
 PARALLEL_COPY = 8 << 20
 COPY_THREADS = min(8, (os.cpu_count() or 1) // 2)
 _copy_pool: ThreadPoolExecutor | None = None
+_copy_pool_lock = threading.Lock()  # reads come from the overlay, bakes' workers and F12 at once
 
 
 def copy_bytes(dst: np.ndarray, src: np.ndarray) -> None:
@@ -34,8 +36,9 @@ def copy_bytes(dst: np.ndarray, src: np.ndarray) -> None:
     if n < PARALLEL_COPY or COPY_THREADS < 2:
         dst[:] = src
         return
-    if _copy_pool is None:
-        _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="gs-ibl-copy")
+    with _copy_pool_lock:
+        if _copy_pool is None:
+            _copy_pool = ThreadPoolExecutor(COPY_THREADS, thread_name_prefix="gs-ibl-copy")
     step = -(-n // (COPY_THREADS * 4096)) * 4096  # whole pages
     for f in [_copy_pool.submit(np.copyto, dst[i:i + step], src[i:i + step]) for i in range(0, n, step)]:
         f.result()
@@ -118,14 +121,12 @@ class Buffer:
         stats.readbacks += 1
         stats.readback_bytes += nbytes
         # Small reads of mapped memory are direct even when uncached (a few words cost less than a copy).
-        if self._map is not None and (self.host_cached or nbytes <= 4096):
-            if out is None:
-                return np.frombuffer(self._map, dtype=dt, count=n, offset=offset).copy()
-            copy_bytes(out.reshape(-1).view(np.uint8), np.frombuffer(self._map, np.uint8, nbytes, offset))
-            return out
         if out is None:
             out = np.empty(n, dt)
         dst = out.reshape(-1).view(np.uint8)
+        if self._map is not None and (self.host_cached or nbytes <= 4096):
+            copy_bytes(dst, np.frombuffer(self._map, np.uint8, nbytes, offset))
+            return out
         with self.ctx.lock:
             stage = staging(self.ctx, min(nbytes, STAGING_MAX), "down")
             for start in range(0, nbytes, STAGING_MAX):
