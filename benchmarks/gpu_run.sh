@@ -53,6 +53,12 @@
 #                                        1080p camera frame and Lighting Volume's bake of three meshes. Into $OUT:
 #                                        profile.log and one .pstats per work; then the camera frame's wall
 #                                        by host copy threads (--copy-ab) into the log. Carry .gl and .whl
+#   AB=v1,v2 bash benchmarks/gpu_run.sh ab
+#                                        there, ~3 minutes (issue 38): peer_bench's A/B rows of those VARIANTS
+#                                        (e.g. sh-splat: the SH uploaded splat-major) beside ours and gsplat, 1M and
+#                                        6M, faces 64² and 1024², camera frames 1920x1080 and 3840x2160, gsplat's
+#                                        kernels by stage at the camera sizes. Into $OUT: peer.csv, camera.csv,
+#                                        ab.log. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
 #                                        volume's accuracy against per-point probes at the five places, its bake's
 #                                        cost against a World-only bake, and with host-made maps: GPU_MAPS A/B),
@@ -84,7 +90,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full|final|refs|stages|volume|profile)
+trials|grid|full|final|refs|stages|volume|profile|ab)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -193,6 +199,18 @@ trials|grid|full|final|refs|stages|volume|profile)
         --peer gsplat --size 480x270 --out "$out" || echo "[gpu_run] native_frame_bench refs: exit $?"
       echo "[gpu_run] refs: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = ab ]; then
+    # AB=variant[,variant] (peer_bench VARIANTS): those rows beside ours and gsplat at 1M and 6M, cube faces 64² and
+    # 1024², camera frames 1920x1080 and 3840x2160, gsplat's kernels by stage at the camera sizes; ~3 minutes
+    log="$out/ab.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 420 python3 benchmarks/peer_bench.py bench --scenes shell,random \
+        --counts 6000000,1000000 --faces 64,1024 --cameras 1920x1080,3840x2160 --ab "${AB:?AB=variants}" \
+        --gsplat-stages cameras --warmup 0.3 --rounds 3 --block 5 --deadline 360 --csv "$out/peer.csv" \
+        --camera-csv "$out/camera.csv" || echo "[gpu_run] peer_bench: exit $?"
+      echo "[gpu_run] ab: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = trials ]; then
     python3 benchmarks/shader_stats.py --kernels gs_raster,gs_raster_conic,gs_raster_strips,gs_raster_conic_strips \
       --trials out/trials --csv "$out/trial_stats.csv" | grep -E "Register|Shared Memory|Spill" || true
@@ -212,7 +230,7 @@ trials|grid|full|final|refs|stages|volume|profile)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume|profile" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume|profile|ab" >&2
   exit 2
   ;;
 esac

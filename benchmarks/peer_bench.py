@@ -109,7 +109,11 @@ VARIANTS = {
     "strips-noconic": ("gs-ibl strips, no conic", dict(RASTER_STRIPS=True, CONIC_MAX_FACE=0)),
     "emit-slot": ("gs-ibl emit per slot", dict(EMIT_PER_SPLAT=False)),
     "emit-splat": ("gs-ibl emit per splat", dict(EMIT_PER_SPLAT=True)),
+    "sh-splat": ("gs-ibl SH splat-major", dict(SH_SPLAT_MAJOR=True)),
+    "sh-coef": ("gs-ibl SH coefficient-major", dict(SH_SPLAT_MAJOR=False)),
 }
+# Switches read when a renderer uploads its scene, not when it records: a row that sets one has a renderer of its own.
+UPLOAD_SWITCHES = {"SH_SPLAT_MAJOR"}
 # The variants that time one choice of the kernel table against the other (kernel_table.CHOICES): variant ->
 # (stage, kernel). raster_ab_bench.py table makes the table from rows of these.
 TABLE_VARIANTS = {"plain": ("raster", "plain"), "strips": ("raster", "strips"),
@@ -160,14 +164,21 @@ class Ours:
         from gs_ibl_addon.core.vk.context import VulkanContext
         self.trial, self.variant = trial, variant or ""
         self.own_ctx = VulkanContext() if trial else None
-        self.owner = share is None or trial is not None
+        self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
+        self.owner = share is None or trial is not None or bool(UPLOAD_SWITCHES & set(off))
         if self.owner:
-            with kernels_from(trial):
-                self.r = renderer.SplatRenderer(scene, self.own_ctx or ctx)
+            before = {k: getattr(renderer, k) for k in UPLOAD_SWITCHES}
+            try:
+                for k in UPLOAD_SWITCHES & set(off):
+                    setattr(renderer, k, off[k])
+                with kernels_from(trial):
+                    self.r = renderer.SplatRenderer(scene, self.own_ctx or ctx)
+            finally:
+                for k, v in before.items():
+                    setattr(renderer, k, v)
         else:
             self.r = share.r
         self.sh_k = scene.sh.shape[1]
-        self.name, off = VARIANTS[variant] if variant else ("gs-ibl", {})
         if trial:
             self.name = f"gs-ibl [{os.path.basename(os.path.normpath(trial))}]"
         if not DEFAULTS:  # the first row is made before any row has set a switch

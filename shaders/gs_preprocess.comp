@@ -33,6 +33,7 @@ layout(push_constant) uniform P {
     float lod_tau; float lod_cell; float lod_ox; float lod_oy; float lod_oz;  // threshold, level-1 cell, grid corner
     uint srgb;  // the scene's colour space (core/colour.py): 1 "srgb" (trained on photos), 0 "linear"
     uint sort_order;  // SORT_RADIAL or SORT_VIEW_DEPTH (constants.py): the batch's ViewBatch.sort
+    uint sh_splat_major;  // the SH buffer's layout (render/upload.py): 1 splat-major (N, K, 3), 0 (K, 3, N)
 } p;
 
 const uint LOD_NO_PARENT = 255u;  // render/lod.py NO_PARENT: no stored ancestor, its error is infinite
@@ -59,8 +60,14 @@ bool in_cut(uvec2 w) {
 
 const float C0 = 0.28209479177387814, C1 = 0.4886025119029199;
 
-// SH is stored coefficient-major (sh[(k * 3 + channel) * n + splat]) so that a warp's loads are contiguous.
+// Coefficient-major SH (sh[(k * 3 + channel) * n + splat]) gives a warp contiguous loads when all its lanes draw; a
+// splat-major one (sh[(splat * K + k) * 3 + channel]) reads one splat's 48 words from one or two cache lines, which
+// is what a camera view's preprocess wants, where about one lane in eight is in view (renderer.SH_SPLAT_MAJOR).
 vec3 sh_coeff(uint i, uint k) {
+    if (p.sh_splat_major != 0u) {
+        uint b = (i * p.sh_k + k) * 3u;
+        return vec3(sh[b], sh[b + 1u], sh[b + 2u]);
+    }
     uint b = 3u * k * p.n + i;
     return vec3(sh[b], sh[b + p.n], sh[b + 2u * p.n]);
 }

@@ -6,6 +6,7 @@ import pytest
 
 from gs_ibl_addon.core.cubemap import face_directions, seam_ratio
 from gs_ibl_addon.core.render.reference import render_reference
+from gs_ibl_addon.core.render import renderer as R
 from gs_ibl_addon.core.render.renderer import SplatRenderer, render_cubemap
 from gs_ibl_addon.core.render.views import ViewBatch
 from gs_ibl_addon.core.scene import SplatScene, rgb_to_sh_dc
@@ -208,3 +209,23 @@ def test_depth_matches_reference_and_known_distances(monkeypatch, max_chunks):
                      np.array([0.99, 0.99], np.float32), rgb_to_sh_dc(np.full((2, 1, 3), 0.5, np.float32)))
     img = SplatRenderer(two).render(ViewBatch.pinhole([0, 0, 0], [0, 1, 0], 40, 32, 32), depth=True).depths[0]
     assert abs(img[16, 16] - 4.0495) < 0.01
+
+
+@pytest.mark.parametrize("sh_degree", [1, 3])
+def test_sh_layouts_render_the_same(monkeypatch, sh_degree):
+    """The splat-major SH upload (renderer.SH_SPLAT_MAJOR) is a layout, not a rule: a cubemap and a camera view
+    come out bit for bit as with the coefficient-major one."""
+    scene = random_scene(700, seed=11, sh_degree=sh_degree, extent=2.0)
+    cam = np.eye(4)
+    cam[:3, 3] = (0.2, -0.1, 0.3)
+    batches = (ViewBatch.cubemap([0.1, -0.2, 0.05], 24), ViewBatch.camera(cam, 0.6, 0.4, 70, 45))
+    images = {}
+    for layout in (False, True):
+        monkeypatch.setattr(R, "SH_SPLAT_MAJOR", layout)
+        with SplatRenderer(scene) as r:
+            assert r.sh_splat_major is layout
+            images[layout] = [r.render(b).images for b in batches]
+    for b, (a, s) in enumerate(zip(images[False], images[True])):
+        for v, (x, y) in enumerate(zip(a, s)):
+            assert np.array_equal(x, y), f"batch {b} view {v}: the layouts differ by {np.abs(x - y).max():.2e}"
+        assert max(float(x[..., 3].mean()) for x in a) > 0.05  # something was drawn

@@ -208,6 +208,10 @@ def batch_kernels(ctx, batch: ViewBatch, tiles_per_probe: int, cut: bool = False
 # the image plane (gs_raster.glsl plane_form, splat_math.plane_form): the ray test's m with less arithmetic per pixel
 # and no cancellation for small far splats. False: the ray test for every pair (tests, benchmarks' A/B).
 PLANE_FORMS = True
+# The SH buffer's layout, chosen when a renderer uploads its scene (render/upload.py): False coefficient-major, the
+# layout whose loads a warp shares when every lane draws (probes: every splat is in some face); True splat-major,
+# one splat's coefficients together, for views that see a fraction of the splats (a camera's ~1/8).
+SH_SPLAT_MAJOR = False
 
 # A batch shape's recordings sort and emit for twice what it drew (two frames apart, a moving view rarely draws
 # twice as much; a frame that does is drawn again), within the renderer's buffers; from its first frame, once that
@@ -626,7 +630,8 @@ class SplatRenderer:
             self.pos_op, self.scale, self.rot = buf(n * 16, "pos_op"), buf(n * 16, "scale"), buf(n * 16, "rot")
             self.sh = buf(n * self.sh_k * 12, "sh")
             # in tie order (render/upload.py): the GPU's splat i is the scene's (or the tree's node) order[i]
-            up = gpu_splats(scene)
+            self.sh_splat_major = bool(SH_SPLAT_MAJOR)
+            up = gpu_splats(scene, self.sh_splat_major)
             self.upload_order = up.order.astype(np.uint32)  # kept for the renderer's life: 4 bytes a splat
             if scene.count:
                 self.pos_op.write(up.pos_op)
@@ -1075,7 +1080,7 @@ class SplatRenderer:
                      (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
                      n=n, dilation_angle=batch.dilation, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
-                     sort_order=int(batch.sort),
+                     sort_order=int(batch.sort), sh_splat_major=int(self.sh_splat_major),
                      **grid)
         stamp("preprocess")
         pairs = n * probes
