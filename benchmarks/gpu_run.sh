@@ -57,8 +57,8 @@
 #                                        there, ~3 minutes (issue 38): peer_bench's A/B rows of those VARIANTS
 #                                        (e.g. sh-splat: the SH uploaded splat-major) beside ours and gsplat, 1M and
 #                                        6M, faces 64² and 1024², camera frames 1920x1080 and 3840x2160, gsplat's
-#                                        kernels by stage at the camera sizes. Into $OUT: peer.csv, camera.csv,
-#                                        ab.log. Carry .gl and .whl
+#                                        kernels by stage at the camera sizes; the LOD probe (lod_bench, 1M at 32²).
+#                                        Into $OUT: peer.csv, camera.csv, lod.csv, ab.log. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
 #                                        volume's accuracy against per-point probes at the five places, its bake's
 #                                        cost against a World-only bake, and with host-made maps: GPU_MAPS A/B),
@@ -209,6 +209,8 @@ trials|grid|full|final|refs|stages|volume|profile|ab)
         --counts 6000000,1000000 --faces 64,1024 --cameras 1920x1080,3840x2160 --ab "${AB:?AB=variants}" \
         --gsplat-stages cameras --warmup 0.3 --rounds 3 --block 5 --deadline 360 --csv "$out/peer.csv" \
         --camera-csv "$out/camera.csv" || echo "[gpu_run] peer_bench: exit $?"
+      timeout --signal=INT --kill-after=10 90 python3 benchmarks/lod_bench.py --counts 1000000 --faces 32 --ks 4 \
+        --hold-clock --skip-accuracy --csv "$out/lod.csv" || echo "[gpu_run] lod_bench: exit $?"
       echo "[gpu_run] ab: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
   elif [ "$1" = trials ]; then

@@ -111,6 +111,7 @@ VARIANTS = {
     "emit-splat": ("gs-ibl emit per splat", dict(EMIT_PER_SPLAT=True)),
     "sh-splat": ("gs-ibl SH splat-major", dict(SH_SPLAT_MAJOR=True)),
     "sh-coef": ("gs-ibl SH coefficient-major", dict(SH_SPLAT_MAJOR=False)),
+    "no-compact": ("gs-ibl every splat depth-sorted", dict(COMPACT_VIEWS=False)),
 }
 # Switches read when a renderer uploads its scene, not when it records: a row that sets one has a renderer of its own.
 UPLOAD_SWITCHES = {"SH_SPLAT_MAJOR"}

@@ -2,7 +2,8 @@
 // Per splat, once for all views of the batch: cull, whitening transform for the per-ray evaluation, SH colour
 // toward the origin, the number of tiles it touches over all views, and its depth key (distance from the origin).
 // With a level of detail (p.lod = 1; render/lod.py) the splats are the nodes of its tree and each first decides
-// whether it is in the probe's cut; the drawn ones are flagged in `live` for gs_lod_compact.
+// whether it is in the probe's cut. With p.compact = 1 (a level of detail, or a single view, which sees a fraction
+// of the splats) the drawn ones are flagged in `live` for gs_lod_compact, and only they are depth-sorted.
 // Several probes in one batch (SplatRenderer.render_probes): workgroup x is the probe and (y, z) the block of 256
 // splats, and every output is per (probe, splat) pair at index probe * n + splat, so the later stages, which only
 // ever see pair indices, need no change; a pair's first tile in the batch travels in prepared[.. + 4].y for
@@ -34,6 +35,7 @@ layout(push_constant) uniform P {
     uint srgb;  // the scene's colour space (core/colour.py): 1 "srgb" (trained on photos), 0 "linear"
     uint sort_order;  // SORT_RADIAL or SORT_VIEW_DEPTH (constants.py): the batch's ViewBatch.sort
     uint sh_splat_major;  // the SH buffer's layout (render/upload.py): 1 splat-major (N, K, 3), 0 (K, 3, N)
+    uint compact;  // 1: flag drawn pairs in `live` (packed by gs_lod_compact), leave depth_val and tile_count
 } p;
 
 const uint LOD_NO_PARENT = 255u;  // render/lod.py NO_PARENT: no stored ancestor, its error is infinite
@@ -130,14 +132,14 @@ void main() {
     uint q = probe * p.n + i;  // the (probe, splat) pair: index of every per-pair output
     origin = origins[probe].xyz;
     depth_key[q] = 0xFFFFFFFFu;
-    if (p.lod != 0u) {
-        // nodes out of the cut read nothing more: most of a big scene's nodes end here
-        live[q] = 0u;
-        if (!in_cut(lod[i])) return;
+    if (p.compact != 0u) {
+        live[q] = 0u;  // the compaction reads depth_val (its pair) and tile_count of drawn pairs only
     } else {
         depth_val[q] = q;
         tile_count[q] = 0u;
     }
+    // nodes out of the cut read nothing more: most of a big scene's nodes end here
+    if (p.lod != 0u && !in_cut(lod[i])) return;
     vec4 po = pos_op[i];
     vec3 mu = po.xyz - origin;
     float dist = length(mu);
@@ -169,7 +171,7 @@ void main() {
         rects[q * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
     }
     if (count == 0u) return;
-    if (p.lod != 0u) live[q] = 1u;
+    if (p.compact != 0u) live[q] = 1u;
     vec3 inv = inversesqrt(s2);
     vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
     vec3 ol = -vec3(dot(w0, mu), dot(w1, mu), dot(w2, mu));

@@ -229,3 +229,26 @@ def test_sh_layouts_render_the_same(monkeypatch, sh_degree):
         for v, (x, y) in enumerate(zip(a, s)):
             assert np.array_equal(x, y), f"batch {b} view {v}: the layouts differ by {np.abs(x - y).max():.2e}"
         assert max(float(x[..., 3].mean()) for x in a) > 0.05  # something was drawn
+
+
+def test_single_view_sorts_only_its_drawn_splats(monkeypatch):
+    """A camera view packs its drawn pairs before the depth sort (renderer.COMPACT_VIEWS): the same image bit for
+    bit, and the same depth order of the drawn splats, as sorting every splat with the culled ones keyed last."""
+    scene = random_scene(3000, seed=5, sh_degree=3, extent=2.0)
+    cam = np.eye(4)
+    batch = ViewBatch.camera(cam, 0.5, 0.3, 64, 40)
+    out = {}
+    for compact in (True, False):
+        monkeypatch.setattr(R, "COMPACT_VIEWS", compact)
+        with SplatRenderer(scene) as r:
+            r.render(batch)
+            res = r.render(batch)  # the second frame: recorded again for the budget the first one learnt
+            drawn = r.drawn
+            keys, order = r.read_depth_order(scene.count)
+            out[compact] = (res.images[0], drawn, keys, order)
+    image, drawn, keys, order = out[True]
+    assert np.array_equal(image, out[False][0])
+    assert 0 < drawn < scene.count // 2  # most of the box is outside a 60-degree view
+    full_keys, full_order = out[False][2], out[False][3]
+    assert np.all(full_keys[drawn:] == 0xFFFFFFFF) and np.all(full_keys[:drawn] != 0xFFFFFFFF)
+    assert np.array_equal(keys[:drawn], full_keys[:drawn]) and np.array_equal(order[:drawn], full_order[:drawn])

@@ -211,7 +211,11 @@ PLANE_FORMS = True
 # The SH buffer's layout, chosen when a renderer uploads its scene (render/upload.py): False coefficient-major, the
 # layout whose loads a warp shares when every lane draws (probes: every splat is in some face); True splat-major,
 # one splat's coefficients together, for views that see a fraction of the splats (a camera's ~1/8).
-SH_SPLAT_MAJOR = False
+SH_SPLAT_MAJOR: bool | None = None  # None: the device's (splat-major on a GPU, coefficient-major on a CPU device)
+# A single view (a camera frame, one face alone) sees a fraction of the splats: its drawn pairs are packed before
+# the depth sort (gs_preprocess's flags, a prefix sum, gs_lod_compact: the level of detail's way), so the sort and
+# the stages after it run over those alone. False: every pair is sorted, the culled ones keyed last (A/B rows).
+COMPACT_VIEWS = True
 
 # A batch shape's recordings sort and emit for twice what it drew (two frames apart, a moving view rarely draws
 # twice as much; a frame that does is drawn again), within the renderer's buffers; from its first frame, once that
@@ -630,7 +634,7 @@ class SplatRenderer:
             self.pos_op, self.scale, self.rot = buf(n * 16, "pos_op"), buf(n * 16, "scale"), buf(n * 16, "rot")
             self.sh = buf(n * self.sh_k * 12, "sh")
             # in tie order (render/upload.py): the GPU's splat i is the scene's (or the tree's node) order[i]
-            self.sh_splat_major = bool(SH_SPLAT_MAJOR)
+            self.sh_splat_major = (not self.ctx.is_cpu) if SH_SPLAT_MAJOR is None else bool(SH_SPLAT_MAJOR)
             up = gpu_splats(scene, self.sh_splat_major)
             self.upload_order = up.order.astype(np.uint32)  # kept for the renderer's life: 4 bytes a splat
             if scene.count:
@@ -700,6 +704,8 @@ class SplatRenderer:
         self.scanner = self._own(Scanner(self.ctx, m))
         if self.lod is None:
             self.depth_sorter = self._own(RadixSorter(self.ctx, m))
+            self._drop(getattr(self, "cut_sorter", None))  # a single view's compaction, made again when asked for
+            self.cut_sorter, self.cut_capacity = None, 0
         else:
             self.sort_key, self.sort_val = buf(m * 4, "lod-sort-key"), buf(m * 4, "lod-sort-val")
             self.lod_scanner = self._own(Scanner(self.ctx, m))
@@ -736,6 +742,25 @@ class SplatRenderer:
         self.inst_val = self._buffer(self.capacity * 4, "inst_val")
         self.owners = self._buffer((self.capacity // 256 + 2) * 4, "emit-owners")  # a splat per 256 slots
         self.tile_sorter = self._own(RadixSorter(self.ctx, self.capacity))
+
+    def _compacts(self, batch: ViewBatch) -> bool:
+        """Whether ``batch``'s drawn pairs are packed before the depth sort: a level of detail's cut, or a single
+        view (COMPACT_VIEWS)."""
+        return self.lod is not None or (COMPACT_VIEWS and len(batch.views) == 1 and batch.n_probes == 1)
+
+    def _ensure_compact(self) -> None:
+        """A single view's compaction without a level of detail: sorted for every pair it could draw (the pair
+        buffers' length), so a frame never outgrows it; each shape's budget (_caps) trims what its recordings sort."""
+        m = self.nodes * self.slots
+        if self.lod is not None or (self.cut_sorter is not None and self.cut_capacity == m):
+            return
+        buf = self._buffer
+        if self.sort_key is None:
+            self.sort_key, self.sort_val = buf(m * 4, "compact-sort-key"), buf(m * 4, "compact-sort-val")
+            self.lod_scanner = self._own(Scanner(self.ctx, m))
+        self._drop(self.cut_sorter)
+        self.cut_capacity = m
+        self.cut_sorter = self._own(RadixSorter(self.ctx, m))
 
     def _grow_cut(self, need: int) -> None:
         self._drop(self.cut_sorter)
@@ -796,6 +821,8 @@ class SplatRenderer:
             raise ValueError(f"depth of {probes} probes does not fit one group of this device ({group}): "
                              "render them without depth, or fewer at a time")
         self._ensure_slots(group)
+        if self._compacts(batch):
+            self._ensure_compact()
         last = probes - (-(-probes // group) - 1) * group
         self.views.write(view_data)
         if self._n_count != (group, last):  # a single probe's render uploads nothing more than it did
@@ -882,10 +909,11 @@ class SplatRenderer:
             counts = self._frame["group_counts"].read(np.uint32, 4 * n_groups).reshape(n_groups, 4)
             needed, total = int(counts[:, 1].max()), int(counts[:, 1].sum())
             pairs_cap, cut_cap = self._caps(shape)
-            if self.lod is not None:
+            compacts = self._compacts(batch)
+            if compacts:
                 self.drawn = int(counts[:, 2].max())
-            if self.lod is not None and self.drawn > cut_cap:  # the cut outgrew its sort: nothing after it counts
-                if self.drawn > self.cut_capacity:
+            if compacts and self.drawn > cut_cap:  # the cut outgrew its sort: nothing after it counts
+                if self.drawn > self.cut_capacity:  # (a level of detail's: a single view's holds every pair)
                     self._grow_cut(int(self.drawn * 1.25) + 1024)
                 self._budgets[shape] = (pairs_cap, budget_for(self.drawn))
             elif needed > pairs_cap:
@@ -895,7 +923,7 @@ class SplatRenderer:
             else:
                 if shape not in self._budgets:  # its first frame: later ones are sized for what it drew
                     self._budgets[shape] = (budget_fit(needed, pairs_cap),
-                                            budget_fit(self.drawn, cut_cap) if self.lod is not None else cut_cap)
+                                            budget_fit(self.drawn, cut_cap) if compacts else cut_cap)
                 chunks = self._loop_chunks(prog, int(counts[:, 3].max()))
                 if chunks is None:
                     break
@@ -955,7 +983,8 @@ class SplatRenderer:
         caps, min_chunks = self._caps(shape), self._min_chunks.get(shape, 1)
         kernels = batch_kernels(self.ctx, batch, total_tiles, layers)
         what = (shape, bool(batch.energy_preserving), batch.sort, bool(timestamps), bool(depth),
-                check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"], kernels["emit"])
+                check_colour_space(self.colour_space), PLANE_FORMS, kernels["raster"], kernels["emit"],
+                self._compacts(batch))
         key = what + (self.capacity, self.cut_capacity, caps, min_chunks)  # and the sizes it was recorded for
         prog = self._programs.pop(key, None)
         if prog is not None and not prog.valid:
@@ -1069,6 +1098,7 @@ class SplatRenderer:
         are in (the sorts leave their results where their last pass wrote them)."""
         c, tree, nv = self.ctx, self.lod, len(batch.views)
         capacity, cut_capacity = caps
+        compact = self._compacts(batch)
         grid = (dict(lod=1, lod_tau=lod_k * batch.pixel_angle, lod_cell=tree.cell1, lod_ox=tree.origin[0],
                      lod_oy=tree.origin[1], lod_oz=tree.origin[2]) if tree is not None else
                 dict(lod=0, lod_tau=0.0, lod_cell=0.0, lod_ox=0.0, lod_oy=0.0, lod_oz=0.0))
@@ -1076,21 +1106,23 @@ class SplatRenderer:
                      [self.pos_op, self.scale, self.rot, self.sh, self.views, self.prepared, self.tile_count,
                       self.depth_key, self.depth_val, self.rects, origins,
                       self.lod_words if tree is not None else self.no_depth,
-                      self.offsets],  # Live: written only with a level of detail (offsets are free until emit)
+                      self.offsets],  # Live: written only when compacting (offsets are free until emit)
                      (probes,) + groups(n, 256, c),  # x: the probe, (y, z): the block of splats
                      n=n, dilation_angle=batch.dilation, near=self.near, sh_k=self.sh_k, n_views=nv,
                      energy_preserving=int(batch.energy_preserving), srgb=int(self.colour_space == "srgb"),
-                     sort_order=int(batch.sort), sh_splat_major=int(self.sh_splat_major),
+                     sort_order=int(batch.sort), sh_splat_major=int(self.sh_splat_major), compact=int(compact),
                      **grid)
         stamp("preprocess")
         pairs = n * probes
-        if tree is not None:
-            # the cut, packed in storage order (the upload's tie order): its count stays on the GPU (live_total[0])
+        if compact:
+            # the cut (or the view's drawn pairs), packed in storage order (the upload's tie order): its count stays
+            # on the GPU (live_total[0]); a single view's packing is timed with its depth sort
             live_total = self.lod_scanner.record(rec, self.offsets, pairs)
             rec.dispatch(KERNELS["gs_lod_compact"], [self.depth_key, self.offsets, self.sort_key, self.sort_val],
                          groups(pairs, 256, c), n=pairs)
             rec.copy(live_total, self.count, 4, dst_offset=8)  # read back with the pair counts
-            stamp("lod_compact")
+            if tree is not None:
+                stamp("lod_compact")
             keys, vals, sort_count, sorter, count_index = (self.sort_key, self.sort_val, live_total, self.cut_sorter,
                                                            0)
             pairs = cut_capacity  # from here on only the cut's entries

@@ -54,7 +54,7 @@ KERNELS: dict[str, Kernel] = {k.name: k for k in (
     # renderer (render/renderer.py)
     _k("gs_preprocess", "PosOp Scale Rot SH Views Prepared TileCount DepthKey DepthVal Rects Origin Lod Live",
        "n dilation_angle:float near:float sh_k n_views energy_preserving lod lod_tau:float lod_cell:float "
-       "lod_ox:float lod_oy:float lod_oz:float srgb sort_order sh_splat_major"),
+       "lod_ox:float lod_oy:float lod_oz:float srgb sort_order sh_splat_major compact"),
     _k("gs_lod_compact", "DepthKey Live SortKey SortVal", "n"),
     _k("gs_gather_counts", "DepthKey DepthVal TileCount Offsets Count", "n count_index"),
     _k("gs_emit_owners", "Offsets Total Owners", "n capacity"),
