@@ -53,7 +53,7 @@
 #                                        1080p camera frame and Lighting Volume's bake of three meshes. Into $OUT:
 #                                        profile.log and one .pstats per work; then the camera frame's wall
 #                                        by host copy threads (--copy-ab) into the log. Carry .gl and .whl
-#   AB=v1,v2 bash benchmarks/gpu_run.sh ab
+#   AB=v1,v2 [TRIALS=out/trials] bash benchmarks/gpu_run.sh ab
 #                                        there, ~3 minutes (issue 38): peer_bench's A/B rows of those VARIANTS
 #                                        (e.g. sh-splat: the SH uploaded splat-major) beside ours and gsplat, 1M and
 #                                        6M, faces 64² and 1024², camera frames 1920x1080 and 3840x2160, gsplat's
@@ -206,7 +206,7 @@ trials|grid|full|final|refs|stages|volume|profile|ab)
     (
       set +e
       timeout --signal=INT --kill-after=10 420 python3 benchmarks/peer_bench.py bench --scenes shell,random \
-        --counts 6000000,1000000 --faces 64,1024 --cameras 1920x1080,3840x2160 --ab "${AB:?AB=variants}" \
+        --counts 6000000,1000000 --faces 64,1024 --cameras 1920x1080,3840x2160 --ab "${AB:?AB=variants}" ${TRIALS:+--trials "$TRIALS"} \
         --gsplat-stages cameras --warmup 0.3 --rounds 3 --block 5 --deadline 360 --csv "$out/peer.csv" \
         --camera-csv "$out/camera.csv" || echo "[gpu_run] peer_bench: exit $?"
       timeout --signal=INT --kill-after=10 90 python3 benchmarks/lod_bench.py --counts 1000000 --faces 32 --ks 4 \

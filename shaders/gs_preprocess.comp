@@ -163,14 +163,21 @@ void main() {
     float cutoff = 2.0 * log(255.0 * po.w);
     if (!(dist > p.near) || !(cutoff > 0.0)) return;
     mat3 cov = cut_covariance(R, s2, cutoff);
-    uint count = 0u;
+    // gs_emit reads every view's rectangle of a drawn pair and none of a culled one: a culled pair writes none (a
+    // camera view culls ~7 of 8 splats, and each write would take a sector of its own), a drawn one zeros its misses
+    uint count = 0u, missed = 0u;
     for (uint v = 0u; v < p.n_views; ++v) {
         uvec4 rc;
-        bool hit = view_rect(views[v], mu, cov, rc);
-        if (hit) count += (rc.z - rc.x) * (rc.w - rc.y);
-        rects[q * MAX_VIEWS + v] = hit ? uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16)) : uvec2(0u);
+        if (view_rect(views[v], mu, cov, rc)) {
+            count += (rc.z - rc.x) * (rc.w - rc.y);
+            rects[q * MAX_VIEWS + v] = uvec2(rc.x | (rc.y << 16), rc.z | (rc.w << 16));
+        } else {
+            missed |= 1u << v;
+        }
     }
     if (count == 0u) return;
+    for (uint v = 0u; missed != 0u && v < p.n_views; ++v)
+        if ((missed & (1u << v)) != 0u) rects[q * MAX_VIEWS + v] = uvec2(0u);
     if (p.compact != 0u) live[q] = 1u;
     vec3 inv = inversesqrt(s2);
     vec3 w0 = R[0] * inv.x, w1 = R[1] * inv.y, w2 = R[2] * inv.z;  // rows of W = diag(1/s') R^T
