@@ -351,3 +351,69 @@ def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch
     probe.gs_ibl_probe.mute_native_splats = False
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
     assert native.visible_diffuse
+
+
+def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path, write_3dgs_ply):
+    """Issue 37: a grey shell (the probe's own splats) and a red ball beside the probe (another capture): the
+    World probe is baked from both, merged and sorted together (the report says "lit by 2 splat objects"), and its
+    irradiance is redder than with the ball hidden from renders. Moving the ball, hiding it, or giving it another
+    colour space marks the bake out of date or leaves it out, and says which."""
+    from gs_ibl_addon.blender.lighting.stale import stale_reasons
+    from gs_ibl_addon.blender.splats import cache as splat_cache
+    from gs_ibl_addon.core import synthetic
+    shell = synthetic.shell_scene(lambda d: np.full(d.shape, 0.3), 1500, radius=3.0)
+    ball = synthetic.sphere_object((0.6, 0.0, 0.0), 0.2, (0.9, 0.05, 0.05), 0.05)
+    for name, sc in (("shell", shell), ("ball", ball)):
+        write_3dgs_ply(tmp_path / f"{name}.ply", sc)
+        assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(tmp_path / f"{name}.ply"),
+                                            show_proxy=False) == {"FINISHED"}
+    shell_obj, ball_obj = bpy.data.objects["shell"], bpy.data.objects["ball"]
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    probe.gs_ibl_probe.splats = shell_obj
+    probe.gs_ibl_probe.face_size, probe.gs_ibl_probe.irradiance_size = 32, 8
+    probe.gs_ibl_probe.lighting = "WORLD"
+    scene = bpy.context.scene
+
+    def bake():
+        bpy.context.view_layer.objects.active = probe
+        assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+        _rad, irr = _world_images()
+        return probe.gs_ibl_probe.last_report, irr[..., :3].reshape(-1, 3).mean(0)
+
+    uploads = splat_cache.uploads
+    both_report, both = bake()
+    assert splat_cache.uploads == uploads + 1  # one merged copy of both (each object's own is not needed)
+    bake()
+    assert splat_cache.uploads == uploads + 1  # kept for the next bake
+    assert "lit by 2 splat objects: shell, ball" in both_report
+    assert stale_reasons(scene, probe) == []
+    ball_obj.location.x += 0.1
+    bpy.context.view_layer.update()
+    assert "'ball' moved" in stale_reasons(scene, probe)
+    ball_obj.location.x -= 0.1
+    ball_obj.hide_render = True
+    bpy.context.view_layer.update()
+    assert "'ball' no longer lights it" in stale_reasons(scene, probe)
+    one_report, one = bake()
+    print(f"\nmean irradiance: both {np.round(both, 4)}, the shell alone {np.round(one, 4)}")
+    assert "lit by" not in one_report
+    assert both[0] / both[2] > 1.05 * one[0] / one[2]  # redder with the ball
+    ball_obj.hide_render = False
+    ball_obj.gs_ibl_splats.colour_space = "LINEAR" if shell_obj.gs_ibl_splats.colour_space == "SRGB" else "SRGB"
+    bpy.context.view_layer.update()
+    assert "'ball' now lights it" not in stale_reasons(scene, probe)  # another colour space: left out
+    left_report, left = bake()
+    assert "left out of the light: ball" in left_report and np.allclose(left, one, rtol=1e-4)
+    # Update When Moved follows every object that lights the probe
+    from gs_ibl_addon.blender.lighting import auto_update as au
+    ball_obj.gs_ibl_splats.colour_space = shell_obj.gs_ibl_splats.colour_space
+    bake()
+    probe.gs_ibl_probe.auto_update = True
+    ball_obj.location.x += 0.2
+    bpy.context.view_layer.update()
+    assert au._pending == {(scene.name, probe.name)} and bpy.app.timers.is_registered(au.run_pending)
+    bpy.app.timers.unregister(au.run_pending)
+    before = au.auto_bakes
+    assert au.run_pending() is None and au.auto_bakes == before + 1 and au.last_auto_error is None
+    assert stale_reasons(scene, probe) == []

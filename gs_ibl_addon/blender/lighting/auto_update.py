@@ -56,7 +56,7 @@ def _rebaseline() -> None:
         for obj in scene.objects:
             if is_probe(obj) and obj.gs_ibl_probe.auto_update:
                 baked_states[(scene.name, obj.name)] = seen_states[(scene.name, obj.name)] = \
-                    bake_state(obj, auto_splats(scene, obj))
+                    bake_state(obj, auto_splats(scene, obj), scene)
                 places = lit_places.get((scene.name, obj.name), {})
                 for name in places:
                     mesh = scene.objects.get(name)
@@ -75,7 +75,7 @@ def _look(scene: bpy.types.Scene) -> None:
         if is_probe(obj):
             splats = auto_splats(scene, obj)
             if splats is not None:
-                seen_states[(scene.name, obj.name)] = bake_state(obj, splats)
+                seen_states[(scene.name, obj.name)] = bake_state(obj, splats, scene)
 
 
 @persistent
@@ -103,7 +103,7 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         if splats is None:
             continue
         key = (scene.name, obj.name)
-        state = bake_state(obj, splats)
+        state = bake_state(obj, splats, scene)
         before = seen_states.get(key, baked_states.get(key, state))  # never looked at: nothing to compare with
         seen_states[key] = state
         if not moved or not obj.gs_ibl_probe.auto_update:
@@ -112,7 +112,8 @@ def on_depsgraph_update(scene, depsgraph) -> None:
         if meshes:
             _pending_meshes.setdefault(key, set()).update(meshes)
         # a probe parented to a mesh ("follows" it) is reported moved with it
-        really = (obj.name in moved or splats.name in moved) and state != before
+        lighting = {splats.name} | {name for name, _key in state[2]}  # every splat object that lights it
+        really = (obj.name in moved or bool(lighting & moved)) and state != before
         if not really or state == baked_states.get(key):
             if not meshes:
                 continue
@@ -162,7 +163,7 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
         splats = auto_splats(scene, probe)
         if splats is None:
             continue
-        if bake_state(probe, splats) == baked_states.get((scene_name, probe_name)):
+        if bake_state(probe, splats, scene) == baked_states.get((scene_name, probe_name)):
             meshes = [scene.objects[n] for n in sorted(relight.get((scene_name, probe_name), ()))
                       if n in scene.objects and probe.gs_ibl_probe.world is not None]
             if meshes:  # only lit meshes moved: their light is chosen again, the World stays

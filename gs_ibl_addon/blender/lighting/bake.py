@@ -26,7 +26,7 @@ from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from .volume import volume_light_steps
 from .object_probes import lit_meshes
 from . import local_light as ll
-from .sources import in_scene, require_splats
+from .sources import in_scene, lighting_set, require_splats, set_text
 from . import world as gw
 from .lights_from_probe import set_lights_strength, sync_lights
 from ..common.datablocks import is_ours, is_probe
@@ -213,11 +213,11 @@ def _named(scene_name: str, probe_name: str, splats_name: str):
 
 def _bake_and_resample(where: np.ndarray, settings: ProbeSettings, cached, local=None,
                        progress: Callable[[str, float], None] | None = None):
-    """The worker's part of a bake: the core bake and its lat-long images. ``local``: (splats as read, matrix,
-    object name) for a bake that uploads its own copy."""
+    """The worker's part of a bake: the core bake and its lat-long images. ``local``: per splat object that lights
+    the probe (splats as read, matrix, object name), for a bake that uploads its own copy."""
     if local is not None:  # the gain goes on the splats (exact), so this bake uploads its own copy
-        from ..splats.object import to_world
-        result = bake_probe(to_world(*local), where, settings, progress=progress)
+        from ..splats.object import merged_world
+        result = bake_probe(merged_world(local), where, settings, progress=progress)
     else:
         result = bake_probe(None, where, settings, renderer=cached.renderer, progress=progress,
                             host_splats=cached.host)
@@ -245,10 +245,12 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     scene, probe, splats = _named(scene_name, probe_name, splats_name)
     meshes = probe.gs_ibl_probe.lighting in ("AUTO", "VOLUME") and bool(lit_meshes(scene, probe))
     baked, written = ((0.05, 0.35), 0.4) if meshes else ((0.05, 0.95), 0.97)
-    yield Step(f"reading {splat_count(splats):,} splats", 0.0)
+    lighting, left_out = lighting_set(scene, splats)  # the probe's own splats and every other one in renders
+    lighting_names = [o.name for o in lighting]  # (the objects may be deleted while a worker bakes)
+    yield Step(f"reading {sum(splat_count(o) for o in lighting):,} splats", 0.0)
     uploads = splat_cache.uploads
-    # read and uploaded once, shared with the overlay and re-bakes
-    cached = yield from within(splat_cache.get_steps(splats), 0.0, baked[0])
+    # read and uploaded once, shared with the overlay and re-bakes (a set of objects: one merged copy)
+    cached = yield from within(splat_cache.set_steps(lighting), 0.0, baked[0])
     if splat_cache.uploads != uploads:  # this bake read them: reading, turning SH, upload (a wait is "other")
         stages.update(cached.timings)
     t = time.perf_counter()
@@ -258,7 +260,9 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     local = None
     if settings.highlight_gain != 1:
         from ..splats.object import read_steps
-        local = (*(yield from read_steps(splats)), splats_name)
+        local = []
+        for o in lighting_set(scene, splats)[0]:
+            local.append((*(yield from read_steps(o)), o.name))
     result, radiance, irradiance = yield Work(_bake_and_resample, where, settings, cached, local, span=baked)
     t = lap("bake", t)  # renders, filters and the host work between them
     scene, probe, splats = _named(scene_name, probe_name, splats_name)
@@ -268,8 +272,8 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     t = lap("writing", t)
     if probe.gs_ibl_probe.splats is None:
         probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
-    baked_states[(scene.name, probe.name)] = seen_states[(scene.name, probe.name)] = bake_state(probe, splats)
-    record_bake(probe, splats)
+    baked_states[(scene.name, probe.name)] = seen_states[(scene.name, probe.name)] = bake_state(probe, splats, scene)
+    record_bake(probe, splats, [o for o in lighting_set(scene, splats)[0][1:]])
     auto, choices = None, None
     if probe.gs_ibl_probe.lighting == "AUTO":
         yield Step("choosing each mesh's light", written)
@@ -287,6 +291,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
         remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
     seconds = time.perf_counter() - t0
     lines, warning = summary(result, seconds, stages, splats_name)
+    lines[1:1] = set_text(lighting_names, left_out)
     if auto:
         lines.append(auto)
     if animated_text(probe) is not None:  # the light is where the probe stands now, not along its path
@@ -334,14 +339,19 @@ lit_places: dict[tuple[str, str], dict[str, bytes]] = {}  # (scene, probe) -> {m
 # was chosen}
 
 
-def bake_state(probe: bpy.types.Object, splats: bpy.types.Object | None) -> tuple:
-    """What a bake's light depends on that a move changes: the probe's position and the splats' placement and data.
+def bake_state(probe: bpy.types.Object, splats: bpy.types.Object | None,
+               scene: bpy.types.Scene | None = None) -> tuple:
+    """What a bake's light depends on that a move changes: the probe's position and the placement and data of the
+    splats that light it (its own ``splats`` and, given the ``scene``, the others shown in renders: which they are
+    and each one's data key).
 
     A re-bake is due only when this differs from the last bake's: depsgraph updates also report objects whose
     transform did not change (a bake writing the probe's own properties is one), which once made every bake
     schedule the next."""
+    others = () if splats is None or scene is None else tuple(
+        (o.name, splat_cache.data_key(o)) for o in lighting_set(scene, splats)[0][1:])
     return (tuple(round(float(c), 9) for c in probe.matrix_world.translation),
-            splat_cache.data_key(splats) if splats is not None else None)
+            splat_cache.data_key(splats) if splats is not None else None, others)
 
 
 def place_key(obj: bpy.types.Object) -> bytes:

@@ -17,7 +17,7 @@ from ...core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coeffic
 from ...core.probe.variation import Variation, box_points, variation_from_sh
 from . import local_light as ll
 from ..splats import cache as splat_cache
-from .sources import find_splats, require_splats
+from .sources import find_splats, lighting_set, require_splats
 from ..common.jobs import Job, gpu, run_now
 from ..common.datablocks import is_probe
 from ..splats.object import is_splat_object
@@ -58,14 +58,15 @@ def lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, selected=()) -> 
 
 
 def probe_renderer_steps(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False) -> Job:
-    """A job giving the GPU renderer holding the probe's splats (splat_cache), after checking the probe, its splats
-    and, with ``need_world``, that it has been baked (local light corrects the light of its World)."""
+    """A job giving the GPU renderer holding the splats that light the probe (its own and the others shown in
+    renders: sources.lighting_set; splat_cache), after checking the probe, its splats and, with ``need_world``, that
+    it has been baked (local light corrects the light of its World)."""
     if not is_probe(probe):
         raise ValueError(f"{getattr(probe, 'name', None)!r} is not a GS-IBL probe (add one with Add > GS-IBL Probe)")
     splats = require_splats(scene, probe)
     if need_world and probe.gs_ibl_probe.world is None:
         raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
-    return (yield from splat_cache.get_steps(splats)).renderer
+    return (yield from splat_cache.set_steps(lighting_set(scene, splats)[0])).renderer
 
 
 def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False):

@@ -1,4 +1,6 @@
-"""Which splat object lights a probe: the probe's Splats field, else the active or the scene's only one."""
+"""Which splat objects light a probe: its own (the probe's Splats field, else the active or the scene's only one),
+and with it every other splat object of the scene shown in renders (a room and a capture standing in it light the
+meshes together, sorted as one scene)."""
 from __future__ import annotations
 
 import bpy
@@ -6,7 +8,7 @@ import numpy as np
 from mathutils import Vector
 
 from ..common.datablocks import is_probe
-from ..splats.object import is_splat_object
+from ..splats.object import colour_space_of, is_splat_object
 
 
 def scene_splats(scene: bpy.types.Scene) -> list[bpy.types.Object]:
@@ -38,6 +40,31 @@ def require_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None
         raise ValueError("No splat object in the scene: import a splat file (File > Import > Gaussian Splatting)")
     names = ", ".join(repr(o.name) for o in found[:4]) + (", ..." if len(found) > 4 else "")
     raise ValueError(f"{len(found)} splat objects in the scene ({names}): pick one in the probe's Splats field")
+
+
+def lighting_set(scene: bpy.types.Scene, own: bpy.types.Object) -> tuple[list[bpy.types.Object], list[str]]:
+    """(the splat objects that light a probe whose own is ``own``: it first, then every other one of the scene not
+    hidden from renders, in the scene's order; the names of those left out because their colour space is not
+    ``own``'s: one colour rule draws a merged scene, so the panel's Colour Space of each must agree)."""
+    space = colour_space_of(own)
+    kept, left = [own], []
+    for o in scene_splats(scene):
+        if o != own and not o.hide_render:
+            (kept if colour_space_of(o) == space else left).append(o)
+    return kept, [o.name for o in left]
+
+
+def set_text(names: list[str], left_out: list[str], lit_line: bool = True) -> list[str]:
+    """What a bake's report says of the splat objects ``names`` it was lit by (the probe's own first; nothing
+    when it alone lit it) and of those ``left_out``; ``lit_line`` False: only the latter."""
+    lines = []
+    if lit_line and len(names) > 1:
+        lines.append(f"lit by {len(names)} splat objects: " + ", ".join(names[:6]) + (", ..." if len(names) > 6
+                                                                                      else ""))
+    if left_out:
+        lines.append(f"left out of the light: {', '.join(left_out[:6])}{', ...' if len(left_out) > 6 else ''} "
+                     f"(a Colour Space other than {names[0]}'s: set them alike in the GS-IBL panel)")
+    return lines
 
 
 def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,

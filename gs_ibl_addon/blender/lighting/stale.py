@@ -14,6 +14,7 @@ import numpy as np
 
 from ..common.jobs import set_notice
 from ..splats.object import splat_count
+from .sources import lighting_set
 
 BAKED_KEY = "gs_ibl_baked"  # on a probe: {"probe": xyz, "splats": name, "splats_matrix": 16 floats,
 # "splats_count": n, "meshes": {name: 16 floats}, "lighting": "AUTO" | "VOLUME" | "WORLD", "volume_probes": n} of its
@@ -43,10 +44,12 @@ def _differs(a, b) -> bool:
     return a.shape != b.shape or not np.allclose(a, b, rtol=0.0, atol=_TOLERANCE)
 
 
-def record_bake(probe: bpy.types.Object, splats: bpy.types.Object) -> None:
-    """What the bake just written was made from (Lighting Auto's meshes are added by record_meshes)."""
+def record_bake(probe: bpy.types.Object, splats: bpy.types.Object, others=()) -> None:
+    """What the bake just written was made from: the probe's place, its ``splats`` and the ``others`` that lit it
+    with them (sources.lighting_set) (Lighting Auto's meshes are added by record_meshes)."""
     probe[BAKED_KEY] = {"probe": [float(v) for v in probe.matrix_world.translation], "splats": splats.name,
                         "splats_matrix": _matrix(splats), "splats_count": splat_count(splats), "meshes": {},
+                        "others": {o.name: {"matrix": _matrix(o), "count": splat_count(o)} for o in others},
                         "lighting": probe.gs_ibl_probe.lighting, "volume_probes": probe.gs_ibl_probe.volume_probes}
 
 
@@ -112,6 +115,8 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
         out.append(f"{name!r} moved")
     elif splat_count(splats) != rec.get("splats_count"):
         out.append(f"{name!r} was edited")
+    if splats is not None and "others" in rec:  # (a record from before several objects lit a probe: no mark)
+        out += _others_reasons(scene, splats, rec["others"])
     lighting = probe.gs_ibl_probe.lighting
     if rec.get("lighting", lighting) != lighting:  # a record from before it was kept: no mark
         out.append(f"its Lighting is now {probe.gs_ibl_probe.bl_rna.properties['lighting'].enum_items[lighting].name}")
@@ -124,6 +129,19 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
         names = ", ".join(repr(m) for m in moved[:_NAMED]) + (f" and {len(moved) - _NAMED} more"
                                                                if len(moved) > _NAMED else "")
         out.append(f"{names} moved" if len(moved) == 1 else f"lit meshes {names} moved")
+    return out
+
+
+def _others_reasons(scene: bpy.types.Scene, splats: bpy.types.Object, recorded) -> list[str]:
+    """How the other splat objects that light the probe differ from those its bake recorded."""
+    now = {o.name: o for o in lighting_set(scene, splats)[0][1:]}
+    out = [f"{n!r} now lights it" for n in now if n not in recorded]
+    out += [f"{n!r} no longer lights it" for n in recorded if n not in now]
+    for n, o in now.items():
+        if n in recorded and _differs(_matrix(o), recorded[n].get("matrix", ())):
+            out.append(f"{n!r} moved")
+        elif n in recorded and splat_count(o) != recorded[n].get("count"):
+            out.append(f"{n!r} was edited")
     return out
 
 

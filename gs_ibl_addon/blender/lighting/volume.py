@@ -13,7 +13,6 @@ node spacing. Nothing is written into Blender before the worker's bake is done.
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 
 import bpy
 import numpy as np
@@ -22,11 +21,10 @@ from ...core.probe import volume as pv
 from . import local_light as ll
 from . import volume_nodes as vn
 from ..common.datablocks import packed_float_image
-from ..common.jobs import Job, Step, Work
-from ..splats.object import is_splat_object
+from ..common.jobs import Job, Work
 from .auto_light import AUTO_KEY
 from .object_probes import is_lit_mesh, point_coefficients, probe_renderer_steps, world_box
-from .sources import require_splats, scene_splats
+from .sources import lighting_set, require_splats, set_text
 
 REPORT_PREFIX = "Light volume: "
 MAX_FRAMES = 48  # frames of an animation whose boxes the region covers (evenly over the range, both ends in)
@@ -60,13 +58,6 @@ def _box_of(objects: list[bpy.types.Object]) -> tuple[np.ndarray, np.ndarray]:
     return np.min([b[0] for b in boxes], 0), np.max([b[1] for b in boxes], 0)
 
 
-def visible_splats(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[bpy.types.Object]:
-    """Every splat object that lights the volume: the probe's own (require_splats: refused with the reason when
-    there is none) and every other one shown in renders."""
-    own = require_splats(scene, probe)
-    return [own] + [o for o in scene_splats(scene) if o != own and is_splat_object(o) and not o.hide_render]
-
-
 def volume_boxes(scene: bpy.types.Scene, splats: list[bpy.types.Object]):
     """(lit mesh names, one (lo, hi) box per lit mesh and sampled frame, the splats' box, names of the meshes
     outside it): a mesh is lit when its box centre lies inside the splats' box in any sampled frame. The scene is
@@ -97,21 +88,6 @@ def volume_boxes(scene: bpy.types.Scene, splats: list[bpy.types.Object]):
     return names, [b for n in names for b in boxes[n]], within, outside
 
 
-def _merged_renderer(locals_, progress):
-    """A renderer holding several splat objects in world space, sorted together (the worker's part)."""
-    from ...core.render.renderer import SplatRenderer
-    from ...core.synthetic import concat
-    from ..splats.object import to_world
-    progress(f"merging {len(locals_)} splat objects", 0.0)
-    scenes = [to_world(*x) for x in locals_]
-    spaces = {s.colour_space for s in scenes}
-    if len(spaces) > 1:
-        names = ", ".join(x[2] for x in locals_)
-        raise ValueError(f"splat objects {names} differ in colour space ({', '.join(sorted(spaces))}): set them "
-                         "alike (GS-IBL panel, Colour Space) to light meshes with all of them")
-    return SplatRenderer(replace(concat(scenes, "+".join(x[2] for x in locals_)), colour_space=spaces.pop()))
-
-
 def _bake(renderer, boxes, within, where, budget, face_size, progress):
     """The worker's part: the World probe's SH at its place (the EEVEE output's World light), the region's plan and
     the volume with its bricks, packed. Returns (plan, volume, (irradiance, visibility, cells) images, World
@@ -132,32 +108,17 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
     Its result: (report line, {"lit": names, "outside": names, "probes": count})."""
     from ...core.probe.volume_bake import DEFAULT_FACE
     from ...core.probe.volume_region import DEFAULT_BUDGET
-    splats = visible_splats(scene, probe)
+    splats, left_out = lighting_set(scene, require_splats(scene, probe))
     names, boxes, within, outside = volume_boxes(scene, splats)
     if not names:
         return f"{REPORT_PREFIX}no lit mesh inside the splats: every mesh keeps the World probe", {
             "lit": [], "outside": outside, "probes": 0}
     scene_name, probe_name = scene.name, probe.name
     budget = BUDGET or int(probe.gs_ibl_probe.volume_probes) or DEFAULT_BUDGET
-    if len(splats) == 1:
-        r = yield from probe_renderer_steps(scene, probe, need_world=True)
-        own = None
-    else:
-        if probe.gs_ibl_probe.world is None:
-            raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
-        from ..splats.object import read_steps
-        locals_ = []
-        for o in splats:
-            yield Step(f"reading {o.name}", None)
-            locals_.append((*(yield from read_steps(o)), o.name))
-        r = own = yield Work(_merged_renderer, locals_, span=(0.0, 0.1))
+    r = yield from probe_renderer_steps(scene, probe, need_world=True)
     where = np.array(probe.matrix_world.translation, np.float64)
-    try:
-        plan, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget,
-                                                   FACE or DEFAULT_FACE, span=(0.1, 0.97))
-    finally:
-        if own is not None:
-            own.close()
+    plan, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget, FACE or DEFAULT_FACE,
+                                                     span=(0.1, 0.97))
     scene = bpy.data.scenes.get(scene_name)  # after the worker: by name (see blender/bake.py _named)
     probe = scene.objects.get(probe_name) if scene is not None else None
     if probe is None:
@@ -180,7 +141,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
     lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {vol.timings.get('probes', vol.spec.count)} probes (a grid "
              f"of {' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart, and bricks), from "
              f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
-    lines += plan.messages + vol.report
+    lines += set_text([o.name for o in splats], left_out, lit_line=False) + plan.messages + vol.report
     if outside:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))

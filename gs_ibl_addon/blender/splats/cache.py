@@ -10,6 +10,10 @@ Entries of deleted objects are dropped at the next depsgraph update; everything 
 and when the extension is disabled. Renderers stay on the GPU between bakes (that is what makes "Update When
 Moved" cheap).
 
+Several splat objects that light one probe together (a room and a capture inside it: lighting/sources.py) get an
+entry of their own (``set_steps``): one GPU copy of all of them, merged and sorted together, kept while none of them
+changes and dropped when one is deleted.
+
 Next to the GPU copy an entry keeps a slim host copy (``host``: positions, scales, rotations, opacities and the
 base colour, 56 bytes a splat, 56 MB for 1M splats; the higher SH bands, up to 180 bytes more, are not kept): the
 near-splats check (core/probe/near.py) reads it, so a bake from the cache warns of a probe inside the splats
@@ -26,7 +30,7 @@ from bpy.app.handlers import persistent
 
 from ..common import handlers
 from ..common.jobs import Job, Progress, Step, Work, busy, cancel_all, gpu, run_now
-from .object import colour_space_of, read_steps, splat_count, to_world
+from .object import colour_space_of, merged_world, read_steps, splat_count, to_world
 
 # What a splat object's data can be: a change to one of these is a geometry edit (PointCloud: Blender 5.3 splats).
 _GEOMETRY = tuple(t for t in (bpy.types.Mesh, getattr(bpy.types, "PointCloud", None)) if t is not None)
@@ -46,7 +50,7 @@ def slim(scene):
     return replace(scene, sh=scene.sh[:, :1].copy())
 
 
-_entries: dict[int, CachedSplats] = {}  # uid(object) -> entry
+_entries: dict[int | tuple, CachedSplats] = {}  # uid(object) -> entry; ("set", uid, uid, ...) -> a set's
 _mesh_generation: dict[int, int] = {}  # uid(mesh) -> number of geometry edits seen
 _proxy_only: set[int] = set()  # uid(mesh) whose next geometry update only switched the object's point proxy
 _fingerprints: dict[int, bytes] = {}  # uid(mesh) -> fingerprint() of what its entry uploaded
@@ -117,6 +121,54 @@ def _build(key: tuple, local, matrix: np.ndarray, name: str, progress: Progress)
     entry.timings = {"turning SH": t1 - t0, "upload": time.perf_counter() - t1}
     progress(f"uploaded {scene.count:,} splats", 1.0)
     return entry  # the higher SH bands go with ``scene``
+
+
+def set_steps(objs: list[bpy.types.Object]) -> Job:
+    """get_steps for the splat objects that light one probe together (``objs``, of one colour space: the first's):
+    one object's own entry, or one entry holding all of them in world space, merged (splats.object.merged_world),
+    read and uploaded again only when one of them changed."""
+    if len(objs) == 1:
+        return (yield from get_steps(objs[0]))
+    global uploads
+    key = tuple(data_key(o) for o in objs)
+    set_uid = ("set",) + tuple(uid(o) for o in objs)
+    space = colour_space_of(objs[0])
+    entry = _entries.get(set_uid)
+    if entry is None or entry.key != key:
+        t = time.perf_counter()
+        parts = []
+        for o in objs:
+            yield Step(f"reading {o.name}", None)
+            parts.append((*(yield from read_steps(o)), o.name))
+        reading = time.perf_counter() - t
+        entry = yield Work(_build_set, key, parts)
+        entry.timings = {"reading": reading, **entry.timings}
+        release(set_uid)
+        _entries[set_uid] = entry
+        uploads += 1
+    entry.renderer.colour_space = space
+    if entry.host.colour_space != space:
+        entry.host = replace(entry.host, colour_space=space)
+    return entry
+
+
+def _build_set(key: tuple, parts: list, progress: Progress) -> CachedSplats:
+    """The worker's part of set_steps: each object's splats into world space, merged, uploaded."""
+    from ...core.render.renderer import SplatRenderer
+    progress(f"merging {len(parts)} splat objects in world space", 0.0)
+    t0 = time.perf_counter()
+    scene = merged_world(parts)
+    del parts
+    progress(f"uploading {scene.count:,} splats", 0.5)
+    t1 = time.perf_counter()
+    entry = CachedSplats(key, SplatRenderer(scene), slim(scene))
+    entry.timings = {"turning SH": t1 - t0, "upload": time.perf_counter() - t1}
+    return entry
+
+
+def _members(key: int | tuple) -> set:
+    """The objects (uids) an entry holds."""
+    return set(key[1:]) if isinstance(key, tuple) else {key}
 
 
 def upload_key(obj: bpy.types.Object) -> str:
@@ -221,7 +273,7 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     _after_undo = False
     if _entries:
         live = {uid(o) for o in bpy.data.objects}
-        for gone in [k for k in _entries if k not in live]:
+        for gone in [k for k in _entries if not _members(k) <= live]:
             release(gone)
 
 

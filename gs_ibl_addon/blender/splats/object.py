@@ -28,6 +28,7 @@ Its camera icon (hide_render) is on after an import, like any object's: F12 draw
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Generator
 
 import bpy
@@ -449,6 +450,21 @@ def to_world(local: SplatScene, matrix: np.ndarray, name: str) -> SplatScene:
     except ValueError as e:
         # The core's message says what is wrong with the matrix; the user needs to know which object has it.
         raise ValueError(f"{name}: {e}") from e
+
+
+def merged_world(parts: list[tuple[SplatScene, np.ndarray, str]]) -> SplatScene:
+    """Several objects' splats (read_steps' (local, matrix) and the object's name, each) in world space as one
+    scene, sorted together by whatever renders it: the light of a probe that several captures surround. Their
+    colour spaces must agree (one colour rule draws them: the caller leaves the others out, sources.py)."""
+    from ...core.synthetic import concat
+    if len(parts) == 1:
+        return to_world(*parts[0])
+    scenes = [to_world(*x) for x in parts]
+    spaces = {s.colour_space for s in scenes}
+    if len(spaces) > 1:
+        raise ValueError(f"splat objects {', '.join(x[2] for x in parts)} differ in colour space "
+                         f"({', '.join(sorted(spaces))}): one colour rule draws them together")
+    return replace(concat(scenes, "+".join(x[2] for x in parts)), colour_space=spaces.pop())
 
 
 def scene_from_object(obj: bpy.types.Object) -> SplatScene:
