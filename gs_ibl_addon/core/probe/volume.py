@@ -299,7 +299,7 @@ def brick_bases(refine: np.ndarray) -> np.ndarray:
     return base.reshape(c[2], c[1], c[0]).transpose(2, 1, 0)
 
 
-def _node_frame(spec: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+def node_frame(spec: GridSpec) -> tuple[np.ndarray, np.ndarray]:
     """(first node, node step) per axis: node i at first + i step (one node: the box's middle, step 0)."""
     lo, hi, n = (np.asarray(x, np.float64) for x in (spec.lo, spec.hi, spec.shape))
     return np.where(n > 1, lo, (lo + hi) / 2), np.where(n > 1, (hi - lo) / np.maximum(n - 1, 1), 0.0)
@@ -327,7 +327,7 @@ def brick_keys(spec: GridSpec, refine: np.ndarray) -> np.ndarray:
 
 def key_positions(spec: GridSpec, keys: np.ndarray) -> np.ndarray:
     """(M, 3) world positions of brick_keys' keys."""
-    first, step = _node_frame(spec)
+    first, step = node_frame(spec)
     return first + np.asarray(keys, np.float64) / KEY_UNITS * step
 
 
@@ -359,7 +359,7 @@ def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
     (LightVolume.tiles; None: the grid's alone)."""
     cols, rows = atlas_tiles(spec.count if tiles is None else int(tiles))
     ccols, crows = atlas_tiles(int(np.prod(cell_shape(spec))))
-    first, step = _node_frame(spec)  # one node on an axis: the box's middle, step 0
+    first, step = node_frame(spec)  # one node on an axis: the box's middle, step 0
     return {"lo": tuple(map(float, spec.lo)), "hi": tuple(map(float, spec.hi)), "shape": tuple(spec.shape),
             "cols": cols, "rows": rows, "irr": IRR, "vis": VIS,
             "irradiance_size": (cols * (IRR + 2), rows * (IRR + 2)),  # (width, height)
@@ -378,7 +378,7 @@ def _corners(spec: GridSpec, positions: np.ndarray, normals: np.ndarray, cell_at
     n = n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-30)
     p = np.asarray(positions, np.float64).reshape(-1, 3) + NORMAL_BIAS * spec_spacing(spec) * n
     shape = np.asarray(spec.shape)
-    first, step = _node_frame(spec)
+    first, step = node_frame(spec)
     g = spec.grid_coords(p)
     c = np.minimum(np.floor(g), np.maximum(shape - 2, 0))
     base, r = (np.asarray(x, np.float64) for x in cell_at(c.astype(int)))

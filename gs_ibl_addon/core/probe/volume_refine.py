@@ -36,10 +36,10 @@ from .grid import GridSpec
 from .variation import LUMINANCE
 from ..synthetic import fibonacci_sphere
 from .volume import (BRICK_LEVELS, KEY_UNITS, NORMAL_BIAS, LightVolume, bilinear_map, brick_keys, brick_keys_of,
-                     cell_shape, flat_cells, grid_maps, index_grid, key_positions, node_keys, probe_positions, sample,
-                     spec_spacing)
+                     cell_shape, flat_cells, flat_maps, grid_maps, index_grid, key_positions, node_frame, node_keys,
+                     probe_positions, sample, spec_spacing)
 from .volume_bake import DEFAULT_FACE, bake_probes, far_distance, probe_report
-from .volume_region import DEFAULT_BUDGET, VolumePlan, choose_volume
+from .volume_region import DEFAULT_BUDGET, MAX_NODES, VolumePlan, choose_volume, region_box
 
 # The grid's share of the probe budget; the cells' centres and the bricks take the rest. Over the sample room's five
 # places (volume_bench.py, 2026-12-05, 64 points a sphere): the grid at 0.6 m (300 probes) and bricks to 512 put
@@ -209,3 +209,101 @@ def bake_light_volume(renderer, boxes, budget: int = DEFAULT_BUDGET, within=None
     bricks (bake_refined). ``within``: a box the region stays inside (the splats' bounds)."""
     plan, _coarse = choose_volume(renderer, boxes, budget=budget, within=within, share=GRID_SHARE)
     return plan, bake_refined(renderer, plan.spec, budget, boxes=boxes, face_size=face_size, progress=progress)
+
+
+def grown_spec(spec: GridSpec, boxes, within=None) -> tuple[GridSpec, np.ndarray] | None:
+    """``spec`` grown on its own lattice (same first node, same steps) until it holds ``boxes`` (cut to
+    ``within``): (the grown spec, (3,) nodes added below on each axis), or None when nothing is outside it or it
+    cannot grow along an axis it must (one node there)."""
+    first, step = node_frame(spec)
+    n = np.asarray(spec.shape, int)
+    last = first + (n - 1) * step
+    lo, hi = region_box(boxes, 0.0, within)
+    below = np.where(step > 0, np.ceil((first - lo) / np.where(step > 0, step, 1.0) - 1e-9), 0).astype(int)
+    above = np.where(step > 0, np.ceil((hi - last) / np.where(step > 0, step, 1.0) - 1e-9), 0).astype(int)
+    below, above = np.maximum(below, 0), np.maximum(above, 0)
+    thin = (step == 0) & ((lo < first - 1e-9) | (hi > last + 1e-9))
+    if thin.any() or not (below.any() or above.any()):
+        return None
+    shape = tuple(int(x) for x in n + below + above)
+    return GridSpec(tuple(map(float, first - below * step)), tuple(map(float, last + above * step)), shape), below
+
+
+def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_BUDGET,
+                  tolerance: float = REFINE_TOLERANCE, within=None, face_size: int = DEFAULT_FACE,
+                  progress: Callable[[int, int], None] | None = None, hole_colour=(0.0, 0.0, 0.0),
+                  lod_k: float = 0.0) -> LightVolume | None:
+    """``previous`` grown over ``boxes`` (the lit meshes' boxes now, over an animation) on its own lattice, with only
+    what changed rendered: the new nodes, the centres of the new cells the boxes touch and those cells' bricks; every
+    node and brick it had keeps its maps (rendered with its ``far`` and ``near``, so a grown volume's old part is the
+    old volume). None when the boxes lie inside it, when it cannot grow on its lattice (one node thick along an axis
+    it must grow), or when the grown grid, the old bricks and the new centres pass ``budget`` or MAX_NODES a side:
+    then bake anew (bake_light_volume)."""
+    grown = grown_spec(previous.spec, boxes, within)
+    if grown is None:
+        return None
+    spec, below = grown
+    old = previous.spec
+    far, near = far_distance(old), 0.5 * spec_spacing(old)
+    n_old, n_new = np.asarray(old.shape), np.asarray(spec.shape)
+    old_cells = np.asarray(cell_shape(old))
+    nodes = index_grid(spec.shape)
+    is_old_node = np.all((nodes >= below) & (nodes < below + n_old), 1)
+    cells = index_grid(cell_shape(spec))
+    is_old_cell = np.all((cells >= below) & (cells < below + old_cells), 1)
+    fresh_cells = np.flatnonzero(~is_old_cell & cells_touching(spec, boxes))
+    centre_keys = cell_keys(spec)[fresh_cells]
+    old_bricks = previous.brick_count
+    if (max(spec.shape) > MAX_NODES or spec.count + old_bricks + len(fresh_cells) > budget
+            or min(old.shape) < 2 or np.any(n_new - n_old < 0)):
+        return None
+    new_nodes = np.flatnonzero(~is_old_node)
+    first = bake_probes(renderer, np.vstack([probe_positions(spec)[new_nodes], key_positions(spec, centre_keys)]),
+                        far, near, face_size, progress, hole_colour, True, lod_k)
+    irr = np.empty((spec.count, *previous.irradiance.shape[3:]))
+    mom = np.empty((spec.count, *previous.moments.shape[3:]))
+    old_index = nodes[is_old_node] - below  # the old node each kept node is, in the new grid's linear order
+    flat_old = old_index[:, 0] + n_old[0] * (old_index[:, 1] + n_old[1] * old_index[:, 2])
+    irr[is_old_node], mom[is_old_node] = flat_maps(previous.irradiance)[flat_old], flat_maps(previous.moments)[
+        flat_old]
+    k = len(new_nodes)
+    irr[new_nodes], mom[new_nodes] = first["irradiance"][:k], first["moments"][:k]
+    grid = LightVolume(spec, grid_maps(irr, spec.shape), grid_maps(mom, spec.shape))
+    errors = np.zeros(len(cells))
+    errors[fresh_cells] = np.where(first["inside"][k:], 0.0, centre_errors(grid, first["irradiance"][k:], fresh_cells))
+    refine = choose_bricks(spec, errors, tolerance, budget - spec.count - old_bricks - len(fresh_cells))
+    shift = below * KEY_UNITS
+    old_refine = previous.cells
+    sl = tuple(slice(int(b), int(b) + int(c)) for b, c in zip(below, old_cells))
+    refine[sl] = old_refine  # the old cells keep their bricks (their errors were 0 here: none chosen)
+    keys = brick_keys(spec, refine)
+    known = {tuple(x): ("grid", i) for i, x in enumerate(node_keys(spec))}
+    known.update({tuple(x): ("first", k + j) for j, x in enumerate(centre_keys)})
+    if old_bricks:
+        known.update({tuple(x + shift): ("old", j) for j, x in enumerate(brick_keys(old, old_refine))})
+    new = sorted({tuple(x) for x in keys} - set(known))
+    second = bake_probes(renderer, key_positions(spec, np.array(new, int).reshape(-1, 3)), far, near, face_size,
+                         None, hole_colour, True, lod_k) if new else None
+    known.update({x: ("second", j) for j, x in enumerate(new)})
+    sources = {"grid": (irr, mom), "first": (first["irradiance"], first["moments"]),
+               "old": (previous.brick_irradiance, previous.brick_moments)}
+    if second is not None:
+        sources["second"] = (second["irradiance"], second["moments"])
+    picks = [known[tuple(x)] for x in keys]
+    b_irr = np.array([sources[s][0][i] for s, i in picks]) if picks else None
+    b_mom = np.array([sources[s][1][i] for s, i in picks]) if picks else None
+    vol = LightVolume(spec, grid.irradiance, grid.moments, refine=refine if len(keys) else None,
+                      brick_irradiance=b_irr, brick_moments=b_mom)
+    rendered = len(first["holes"]) + (len(second["holes"]) if second is not None else 0)
+    holes = np.concatenate([first["holes"]] + ([second["holes"]] if second is not None else []))
+    inside = np.concatenate([first["inside"]] + ([second["inside"]] if second is not None else []))
+    added = int((refine > 1).sum()) - int((old_refine > 1).sum())
+    vol.report = [f"light volume grown to {' x '.join(map(str, spec.shape))} nodes over what the meshes reach now: "
+                  f"{rendered} probes rendered ({k} nodes, {len(fresh_cells)} cell centres, {len(new)} for "
+                  f"{max(added, 0)} new bricks), {spec.count - k} nodes and {old_bricks} brick probes kept"]
+    vol.report += probe_report(holes, inside, hole_colour)
+    vol.timings = {"render": first["render_ms"] + (second["render_ms"] if second else 0.0),
+                   "maps": first["maps_ms"] + (second["maps_ms"] if second else 0.0), "probes": rendered,
+                   "grid": spec.count, "kept": int(spec.count - k), "centres": len(fresh_cells), "bricks": len(new),
+                   "face": int(face_size), "per_submission": first["per_submission"], "lod_k": float(lod_k)}
+    return vol
