@@ -328,3 +328,48 @@ def test_no_light_leaks_through_a_splat_wall(blender, tmp_path, write_3dgs_ply):
           f"nodes at x {np.round(x, 3)}")
     assert np.all(np.abs(ratio - 1) < 0.03) and np.all(np.abs(on_grid - 1) < 0.03)
     assert np.max(blind / exact) > 1.5
+
+
+def test_a_mesh_that_leaves_the_volume_grows_it(blender):
+    """Update When Moved with Lighting Volume (issue 37: "re-baked only when ... a mesh leaves it, and then only the
+    part that changed"): a mesh moved inside the volume schedules nothing; moved out of it, the volume is grown
+    over it on its own lattice, rendering only the new part (the report says how many probes were kept), and the
+    mesh is lit by the volume there; the World is not baked again."""
+    from gs_ibl_addon.blender.lighting import auto_update as au
+    from gs_ibl_addon.blender.lighting import local_light as ll
+    from gs_ibl_addon.blender.lighting import volume as bv
+    from gs_ibl_addon.blender.lighting import volume_nodes as vn
+    from tests.test_blender_auto_light import SAMPLE, _mesh
+    assert bpy.ops.gs_ibl.import_splats(native=False, filepath=SAMPLE, show_proxy=False) == {"FINISHED"}
+    scene = bpy.context.scene
+    cube = _mesh("cube", (0.3, 0.2, 0.6), 0.3)
+    _mesh("sphere", (1.0, 0.8, 1.2), 0.2)  # the volume's box spans both meshes
+    for o in bpy.context.view_layer.objects.selected:
+        o.select_set(False)
+    scene.cursor.location = (0.0, 0.0, 1.0)
+    bpy.ops.gs_ibl.add_probe(place="CURSOR")
+    probe = bpy.context.active_object
+    s = probe.gs_ibl_probe
+    s.face_size, s.irradiance_size = 32, 8
+    s.lighting, s.volume_probes = "VOLUME", 160
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    spec0 = vn.volume_spec()
+    world_bakes, relights = au.auto_bakes, au.auto_relights
+    s.auto_update = True
+    cube.location.x += 0.1  # still inside the box: nothing to do
+    bpy.context.view_layer.update()
+    assert not au._pending_meshes and not bpy.app.timers.is_registered(au.run_pending)
+    cube.location = (-0.4, 0.2, 0.6)  # out of the volume's box, by about two node steps
+    bpy.context.view_layer.update()
+    assert au._pending_meshes == {(scene.name, probe.name): {cube.name}}
+    bpy.app.timers.unregister(au.run_pending)
+    assert au.run_pending() is None and au.last_auto_error is None
+    assert au.auto_relights == relights + 1 and au.auto_bakes == world_bakes  # the World stayed
+    spec1 = vn.volume_spec()
+    print("\n" + s.local_report)
+    assert "light volume grown to" in s.local_report and "nodes and" in s.local_report
+    assert spec1.count > spec0.count and np.all(np.asarray(spec1.lo) <= np.array([-0.55, 0.05, 0.45]) + 1e-5)
+    assert bv.kept_volume(scene, probe).spec == spec1 and ll.has_local_light(cube) == "volume"
+    # the lattice is the old one's: every old node is a node of the grown grid
+    old, new = pv.probe_positions(spec0), pv.probe_positions(spec1)
+    assert np.linalg.norm(new[:, None] - old[None], axis=2).min(0).max() < 1e-6

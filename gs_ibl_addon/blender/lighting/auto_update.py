@@ -1,9 +1,11 @@
 """Update When Moved: a probe re-baked once after it or its splat object moved and then stayed still for its
-``update_interval`` seconds (a depsgraph_update_post handler notes what moved; a timer does the bake), and a Lighting
-Auto probe's meshes given their light again when only they moved."""
+``update_interval`` seconds (a depsgraph_update_post handler notes what moved; a timer does the bake), a Lighting
+Auto probe's meshes given their light again when only they moved, and a Lighting Volume probe's volume grown over a
+lit mesh that left it (only the new part rendered: volume.py, core/probe/volume_refine.py extend_volume)."""
 from __future__ import annotations
 
 import bpy
+import numpy as np
 from bpy.app.handlers import persistent
 
 from ..common import handlers
@@ -13,12 +15,13 @@ from ..common.jobs import start as start_job
 from ..common.redraw import tag_redraw
 from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_places, place_key, relight_steps,
                    seen_states)
-from .object_probes import is_lit_mesh
+from .object_probes import is_lit_mesh, world_box
 from .sources import auto_splats, clear_lost_splats
 from .stale import refresh_notice
+from .volume import forget_volumes, kept_volume, volume_light_steps
 
 _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
-_pending_meshes: dict[tuple[str, str], set[str]] = {}  # (scene, probe) -> lit meshes that moved (Lighting Auto)
+_pending_meshes: dict[tuple[str, str], set[str]] = {}  # (scene, probe) -> lit meshes that moved (Auto, Volume)
 auto_relights = 0  # automatic re-choices of moved meshes' light (tests see how often a move re-lit)
 last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
 auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
@@ -26,7 +29,21 @@ _rebaseline_next = False  # an undo or redo happened: the next depsgraph update 
 
 
 def _moved_lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, moved: set[str]) -> set[str]:
-    """The meshes among ``moved`` whose light a Lighting Auto probe should choose again."""
+    """The meshes among ``moved`` whose light a Lighting Auto probe should choose again, or that left a Lighting
+    Volume probe's volume (inside it a mesh is lit where it stands: nothing to do)."""
+    if probe.gs_ibl_probe.lighting == "VOLUME":
+        vol = kept_volume(scene, probe)
+        if vol is None:
+            return set()
+        lo, hi = np.asarray(vol.spec.lo) - 1e-6, np.asarray(vol.spec.hi) + 1e-6
+        out = set()
+        for name in moved:
+            obj = scene.objects.get(name)
+            if obj is not None and is_lit_mesh(obj):
+                blo, bhi = world_box(obj)
+                if np.any(blo < lo) or np.any(bhi > hi):
+                    out.add(name)
+        return out
     if probe.gs_ibl_probe.lighting != "AUTO":
         return set()
     places = lit_places.get((scene.name, probe.name), {})
@@ -166,10 +183,12 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
         if bake_state(probe, splats, scene) == baked_states.get((scene_name, probe_name)):
             meshes = [scene.objects[n] for n in sorted(relight.get((scene_name, probe_name), ()))
                       if n in scene.objects and probe.gs_ibl_probe.world is not None]
-            if meshes:  # only lit meshes moved: their light is chosen again, the World stays
+            if meshes:  # only lit meshes moved: their light is chosen again (the volume grown), the World stays
                 try:
                     auto_relights += 1
-                    text, _choices = yield from within(relight_steps(scene, probe, meshes), *part)
+                    steps = (volume_light_steps(scene, probe, grow=True) if probe.gs_ibl_probe.lighting == "VOLUME"
+                             else relight_steps(scene, probe, meshes))
+                    text, _choices = yield from within(steps, *part)
                     print(f"GS-IBL (update when moved): {text}")
                 except (ValueError, RuntimeError, OSError, MemoryError) as e:
                     last_auto_error = f"{probe_name}: {e}"
@@ -198,6 +217,7 @@ def on_load_pre(*_args) -> None:
     _pending.clear()
     _pending_meshes.clear()
     lit_places.clear()
+    forget_volumes()
     baked_states.clear()  # names of another file's probes
     seen_states.clear()
 

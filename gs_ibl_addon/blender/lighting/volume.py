@@ -88,24 +88,61 @@ def volume_boxes(scene: bpy.types.Scene, splats: list[bpy.types.Object]):
     return names, [b for n in names for b in boxes[n]], within, outside
 
 
-def _bake(renderer, boxes, within, where, budget, face_size, progress):
+def _bake(renderer, boxes, within, where, budget, face_size, previous, progress):
     """The worker's part: the World probe's SH at its place (the EEVEE output's World light), the region's plan and
-    the volume with its bricks, packed. Returns (plan, volume, (irradiance, visibility, cells) images, World
-    coefficients)."""
-    from ...core.probe.volume_refine import bake_light_volume
+    the volume with its bricks, packed; or ``previous`` (the probe's last volume, from the same splats) grown over
+    the boxes where that is cheaper (volume_refine.extend_volume). Returns (the plan's report lines, volume,
+    (irradiance, visibility, cells) images, World coefficients)."""
+    from ...core.probe.volume_refine import bake_light_volume, extend_volume
     try:
-        progress("measuring how fast the light changes", 0.0)
-        plan, vol = bake_light_volume(renderer, boxes, budget, within, face_size, lambda done, total: progress(
-            f"baking {done} of about {total} light volume probes", 0.1 + 0.85 * min(done / max(total, 1), 1)))
+        vol, messages = None, []
+        if previous is not None:
+            progress("growing the light volume over the meshes that left it", 0.0)
+            vol = extend_volume(renderer, previous, boxes, budget, within=within, face_size=face_size,
+                                progress=lambda done, total: progress(
+                                    f"baking {done} of {total} new light volume probes", 0.95 * done / max(total, 1)))
+            if vol is previous:
+                messages = ["the light volume holds every lit mesh already: nothing baked again"]
+        if vol is None:
+            progress("measuring how fast the light changes", 0.0)
+            plan, vol = bake_light_volume(renderer, boxes, budget, within, face_size, lambda done, total: progress(
+                f"baking {done} of about {total} light volume probes", 0.1 + 0.85 * min(done / max(total, 1), 1)))
+            messages = plan.messages
         world = point_coefficients(renderer, np.asarray(where, np.float64)[None])[0]
-        return plan, vol, (*pv.pack_atlas(vol), pv.pack_cells(vol)), world
+        return messages, vol, (*pv.pack_atlas(vol), pv.pack_cells(vol)), world
     finally:
         renderer.trim()
 
 
-def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
+# Each probe's last light volume while the file is open, with what it was baked from (volume_state): Update When
+# Moved grows it when a lit mesh leaves it (volume_light_steps(grow=True)) instead of baking it whole again.
+_kept: dict[tuple[str, str], tuple] = {}
+
+
+def volume_state(scene: bpy.types.Scene, probe: bpy.types.Object, splats: list[bpy.types.Object]) -> tuple:
+    """What a kept volume stands for besides the meshes: the splats that lit it (each one's data key), the probe's
+    place (its World light) and the volume's settings."""
+    from ..splats import cache as splat_cache
+    return (tuple(splat_cache.data_key(o) for o in splats), tuple(round(float(c), 9) for c in
+                                                                   probe.matrix_world.translation),
+            int(probe.gs_ibl_probe.volume_probes), BUDGET, FACE)
+
+
+def forget_volumes() -> None:
+    """Drop every kept volume (another file is being opened: its probes' names mean other probes)."""
+    _kept.clear()
+
+
+def kept_volume(scene: bpy.types.Scene, probe: bpy.types.Object):
+    """The probe's last light volume (core LightVolume), or None."""
+    kept = _kept.get((scene.name, probe.name))
+    return None if kept is None else kept[0]
+
+
+def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bool = False) -> Job:
     """Lighting Volume as a job (blender/jobs.py): boxes read now, the volume baked by a worker, written at the end.
-    Its result: (report line, {"lit": names, "outside": names, "probes": count})."""
+    ``grow``: where the probe's last volume was baked from the same splats, only grow it over the meshes that left
+    it. Its result: (report line, {"lit": names, "outside": names, "probes": count})."""
     from ...core.probe.volume_bake import DEFAULT_FACE
     from ...core.probe.volume_region import DEFAULT_BUDGET
     splats, left_out = lighting_set(scene, require_splats(scene, probe))
@@ -117,8 +154,11 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
     budget = BUDGET or int(probe.gs_ibl_probe.volume_probes) or DEFAULT_BUDGET
     r = yield from probe_renderer_steps(scene, probe, need_world=True)
     where = np.array(probe.matrix_world.translation, np.float64)
-    plan, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget, FACE or DEFAULT_FACE,
-                                                     span=(0.1, 0.97))
+    state = volume_state(scene, probe, splats)
+    kept = _kept.get((scene_name, probe_name))
+    previous = kept[0] if grow and kept is not None and kept[1] == state else None
+    messages, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget,
+                                                         FACE or DEFAULT_FACE, previous, span=(0.1, 0.97))
     scene = bpy.data.scenes.get(scene_name)  # after the worker: by name (see blender/bake.py _named)
     probe = scene.objects.get(probe_name) if scene is not None else None
     if probe is None:
@@ -138,14 +178,17 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object) -> Job:
         if obj is not None and obj.get(AUTO_KEY) == probe.name:
             ll.unlight_object(obj)
             del obj[AUTO_KEY]
-    lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {vol.timings.get('probes', vol.spec.count)} probes (a grid "
+    probes = vol.timings.get("probes", vol.spec.count) + vol.timings.get("kept", 0)  # (a grown volume's kept nodes)
+    lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {probes} probes (a grid "
              f"of {' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart, and bricks), from "
              f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
-    lines += set_text([o.name for o in splats], left_out, lit_line=False) + plan.messages + vol.report
+    _kept[(scene_name, probe_name)] = (vol, state)
+    lines += set_text([o.name for o in splats], left_out, lit_line=False) + messages + vol.report
     if outside:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))
-    lines.append("a mesh moved out of the volume's box fades to the World probe's light; re-bake to cover it")
+    lines.append("a mesh moved out of the volume's box fades to the World probe's light; re-bake to cover it (with "
+                 "Update When Moved the volume grows over it, rendering only the new part)")
     if grids:  # local_light.prune_atlas: one shader cannot hold both lookups in Cycles
         lines.append("Warning: " + ", ".join(grids[:4]) + (", ..." if len(grids) > 4 else "") + " still have "
                      "per-object probes or grids (another probe's, or More Than One Probe's): Cycles cannot hold "

@@ -211,10 +211,10 @@ def bake_light_volume(renderer, boxes, budget: int = DEFAULT_BUDGET, within=None
     return plan, bake_refined(renderer, plan.spec, budget, boxes=boxes, face_size=face_size, progress=progress)
 
 
-def grown_spec(spec: GridSpec, boxes, within=None) -> tuple[GridSpec, np.ndarray] | None:
+def grown_spec(spec: GridSpec, boxes, within=None, thin_ok: bool = False) -> tuple[GridSpec, np.ndarray] | None:
     """``spec`` grown on its own lattice (same first node, same steps) until it holds ``boxes`` (cut to
     ``within``): (the grown spec, (3,) nodes added below on each axis), or None when nothing is outside it or it
-    cannot grow along an axis it must (one node there)."""
+    cannot grow along an axis it must (one node there; ``thin_ok``: then (spec, 0) instead, it must grow)."""
     first, step = node_frame(spec)
     n = np.asarray(spec.shape, int)
     last = first + (n - 1) * step
@@ -223,7 +223,9 @@ def grown_spec(spec: GridSpec, boxes, within=None) -> tuple[GridSpec, np.ndarray
     above = np.where(step > 0, np.ceil((hi - last) / np.where(step > 0, step, 1.0) - 1e-9), 0).astype(int)
     below, above = np.maximum(below, 0), np.maximum(above, 0)
     thin = (step == 0) & ((lo < first - 1e-9) | (hi > last + 1e-9))
-    if thin.any() or not (below.any() or above.any()):
+    if thin.any():
+        return (spec, below) if thin_ok else None
+    if not (below.any() or above.any()):
         return None
     shape = tuple(int(x) for x in n + below + above)
     return GridSpec(tuple(map(float, first - below * step)), tuple(map(float, last + above * step)), shape), below
@@ -236,9 +238,11 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     """``previous`` grown over ``boxes`` (the lit meshes' boxes now, over an animation) on its own lattice, with only
     what changed rendered: the new nodes, the centres of the new cells the boxes touch and those cells' bricks; every
     node and brick it had keeps its maps (rendered with its ``far`` and ``near``, so a grown volume's old part is the
-    old volume). None when the boxes lie inside it, when it cannot grow on its lattice (one node thick along an axis
-    it must grow), or when the grown grid, the old bricks and the new centres pass ``budget`` or MAX_NODES a side:
-    then bake anew (bake_light_volume)."""
+    old volume); ``previous`` itself when the boxes lie inside it (nothing to render); None when it cannot grow on
+    its lattice (one node thick along an axis it must grow) or when the grown grid, the old bricks and the new
+    centres pass ``budget`` or MAX_NODES a side: then bake anew (bake_light_volume)."""
+    if grown_spec(previous.spec, boxes, within, thin_ok=True) is None:
+        return previous
     grown = grown_spec(previous.spec, boxes, within)
     if grown is None:
         return None
@@ -298,9 +302,10 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     holes = np.concatenate([first["holes"]] + ([second["holes"]] if second is not None else []))
     inside = np.concatenate([first["inside"]] + ([second["inside"]] if second is not None else []))
     added = int((refine > 1).sum()) - int((old_refine > 1).sum())
+    bricks = f", {len(new)} for {added} new bricks" if added > 0 else ""
     vol.report = [f"light volume grown to {' x '.join(map(str, spec.shape))} nodes over what the meshes reach now: "
-                  f"{rendered} probes rendered ({k} nodes, {len(fresh_cells)} cell centres, {len(new)} for "
-                  f"{max(added, 0)} new bricks), {spec.count - k} nodes and {old_bricks} brick probes kept"]
+                  f"{rendered} probes rendered ({k} nodes, {len(fresh_cells)} cell centres{bricks}), "
+                  f"{spec.count - k} nodes and {old_bricks} brick probes kept"]
     vol.report += probe_report(holes, inside, hole_colour)
     vol.timings = {"render": first["render_ms"] + (second["render_ms"] if second else 0.0),
                    "maps": first["maps_ms"] + (second["maps_ms"] if second else 0.0), "probes": rendered,
