@@ -355,7 +355,7 @@ def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch
 
 def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path, write_3dgs_ply):
     """Issue 37: a grey shell (the probe's own splats) and a red ball beside the probe (another capture): the
-    World probe is baked from both, merged and sorted together (the report says "lit by 2 splat objects"), and its
+    World probe is baked from both, merged and sorted together (the report says "from 2 splat objects"), and its
     irradiance is redder than with the ball hidden from renders. Moving the ball, hiding it, or giving it another
     colour space marks the bake out of date or leaves it out, and says which."""
     from gs_ibl_addon.blender.lighting.stale import stale_reasons
@@ -386,7 +386,8 @@ def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path,
     assert splat_cache.uploads == uploads + 1  # one merged copy of both (each object's own is not needed)
     bake()
     assert splat_cache.uploads == uploads + 1  # kept for the next bake
-    assert "lit by 2 splat objects: shell, ball" in both_report
+    assert "from 2 splat objects: shell, ball" in both_report
+    assert "2 splat objects" in probe.gs_ibl_probe.last_summary
     assert stale_reasons(scene, probe) == []
     ball_obj.location.x += 0.1
     bpy.context.view_layer.update()
@@ -397,14 +398,16 @@ def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path,
     assert "'ball' no longer lights it" in stale_reasons(scene, probe)
     one_report, one = bake()
     print(f"\nmean irradiance: both {np.round(both, 4)}, the shell alone {np.round(one, 4)}")
-    assert "lit by" not in one_report
+    assert "splat objects" not in one_report
     assert both[0] / both[2] > 1.05 * one[0] / one[2]  # redder with the ball
     ball_obj.hide_render = False
     ball_obj.gs_ibl_splats.colour_space = "LINEAR" if shell_obj.gs_ibl_splats.colour_space == "SRGB" else "SRGB"
     bpy.context.view_layer.update()
     assert "'ball' now lights it" not in stale_reasons(scene, probe)  # another colour space: left out
     left_report, left = bake()
-    assert "left out of the light: ball" in left_report and np.allclose(left, one, rtol=1e-4)
+    assert np.allclose(left, one, rtol=1e-4)
+    assert "Warning: " in left_report and "ball is shown in renders but left out of the light: its Colours differ " \
+        "from shell's" in left_report
     # Update When Moved follows every object that lights the probe
     from gs_ibl_addon.blender.lighting import auto_update as au
     ball_obj.gs_ibl_splats.colour_space = shell_obj.gs_ibl_splats.colour_space

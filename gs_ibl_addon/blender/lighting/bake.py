@@ -26,7 +26,7 @@ from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from .volume import volume_light_steps
 from .object_probes import lit_meshes
 from . import local_light as ll
-from .sources import in_scene, lighting_set, require_splats, set_text
+from .sources import in_scene, left_out_text, lighting_set, require_splats, set_line
 from . import world as gw
 from .lights_from_probe import set_lights_strength, sync_lights
 from ..common.datablocks import is_ours, is_probe
@@ -291,13 +291,17 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
         remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
     seconds = time.perf_counter() - t0
     lines, warning = summary(result, seconds, stages, splats_name)
-    lines[1:1] = set_text(lighting_names, left_out)
+    if set_line(lighting_names):
+        lines.insert(1, set_line(lighting_names))
+    left = left_out_text(lighting_names[0], left_out)
+    if left:  # a capture the user sees in renders and expects in the light: said where the panel shows it
+        warning = f"{warning}; {left}" if warning else left
     if auto:
         lines.append(auto)
     if animated_text(probe) is not None:  # the light is where the probe stands now, not along its path
         lines.append(animated_text(probe, scene.frame_current))
     probe.gs_ibl_probe.last_report = "\n".join(lines + ([WARNING_PREFIX + warning] if warning else []))
-    probe.gs_ibl_probe.last_summary = summary_line(result, seconds, choices)
+    probe.gs_ibl_probe.last_summary = summary_line(result, seconds, choices, len(lighting_names))
     stamp(probe)
     refresh_notice(scene)
     return result, ", ".join(lines), warning
@@ -318,12 +322,14 @@ def lighting_choice(choices) -> str:
     return f"Auto: {len(choices)} mesh{'es' if len(choices) != 1 else ''} ({parts})"
 
 
-def summary_line(result, seconds: float, choices=None) -> str:
-    """The report in one line, what the panel shows with the rest one click away: time, face size, the estimated
-    error (with Face Size 0: the tolerance's estimate) and how meshes are lit."""
+def summary_line(result, seconds: float, choices=None, splat_objects: int = 1) -> str:
+    """The report in one line, what the panel shows with the rest one click away: time, the splat objects when
+    several lit it, face size, the estimated error (with Face Size 0: the tolerance's estimate) and how meshes are
+    lit."""
     st = result.settings
     face = st.get("face_size", np.asarray(result.radiance).shape[1])
-    parts = [f"Baked in {seconds:.1f} s", f"{face}x{face} faces"]
+    parts = [f"Baked in {seconds:.1f} s"] + ([f"{splat_objects} splat objects"] if splat_objects > 1 else []) + [
+        f"{face}x{face} faces"]
     plan = st.get("tolerance_plan") or {}
     if "estimated_error" in plan:
         error = 100 * plan["estimated_error"]

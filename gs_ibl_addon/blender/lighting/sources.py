@@ -54,17 +54,23 @@ def lighting_set(scene: bpy.types.Scene, own: bpy.types.Object) -> tuple[list[bp
     return kept, [o.name for o in left]
 
 
-def set_text(names: list[str], left_out: list[str], lit_line: bool = True) -> list[str]:
-    """What a bake's report says of the splat objects ``names`` it was lit by (the probe's own first; nothing
-    when it alone lit it) and of those ``left_out``; ``lit_line`` False: only the latter."""
-    lines = []
-    if lit_line and len(names) > 1:
-        lines.append(f"lit by {len(names)} splat objects: " + ", ".join(names[:6]) + (", ..." if len(names) > 6
-                                                                                      else ""))
-    if left_out:
-        lines.append(f"left out of the light: {', '.join(left_out[:6])}{', ...' if len(left_out) > 6 else ''} "
-                     f"(a Colour Space other than {names[0]}'s: set them alike in the GS-IBL panel)")
-    return lines
+def set_line(names: list[str]) -> str | None:
+    """What a bake's report says of the splat objects ``names`` that lit it (the probe's own first); None when one
+    lit it alone."""
+    if len(names) < 2:
+        return None
+    return f"from {len(names)} splat objects: " + ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
+
+
+def left_out_text(own: str, left_out: list[str]) -> str | None:
+    """The warning for splat objects shown in renders but left out of the light (another colour space than the
+    probe's own ``own``), or None."""
+    if not left_out:
+        return None
+    names = ", ".join(left_out[:6]) + (", ..." if len(left_out) > 6 else "")
+    return (f"{names} {'is' if len(left_out) == 1 else 'are'} shown in renders but left out of the light: "
+            f"{'its' if len(left_out) == 1 else 'their'} Colours differ from {own}'s (select "
+            f"{'it' if len(left_out) == 1 else 'each'} and set Colours alike in the GS-IBL panel)")
 
 
 def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,

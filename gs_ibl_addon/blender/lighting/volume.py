@@ -24,7 +24,7 @@ from ..common.datablocks import packed_float_image
 from ..common.jobs import Job, Work
 from .auto_light import AUTO_KEY
 from .object_probes import is_lit_mesh, point_coefficients, probe_renderer_steps, world_box
-from .sources import lighting_set, require_splats, set_text
+from .sources import left_out_text, lighting_set, require_splats
 
 REPORT_PREFIX = "Light volume: "
 MAX_FRAMES = 48  # frames of an animation whose boxes the region covers (evenly over the range, both ends in)
@@ -183,7 +183,8 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
              f"of {' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart, and bricks), from "
              f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
     _kept[(scene_name, probe_name)] = (vol, state)
-    lines += set_text([o.name for o in splats], left_out, lit_line=False) + messages + vol.report
+    left = left_out_text(splats[0].name, left_out)
+    lines += (["Warning: " + left] if left else []) + messages + vol.report
     if outside:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))
