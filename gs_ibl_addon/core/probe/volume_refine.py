@@ -46,6 +46,10 @@ from .volume_region import DEFAULT_BUDGET, MAX_NODES, VolumePlan, choose_volume,
 # every place's camera-facing mean within 3% (the grid alone: 3 of 5; at 1.0 m with 430 probes of bricks: 4 of 5,
 # the lamp's 4.7% low), per point 1.3-3.3% mean (the grid alone 1.3-16%).
 GRID_SHARE = 0.6
+# A grown volume (extend_volume) may hold up to this many times the budget: a whole bake fills the budget (its grid
+# coarsened to GRID_SHARE of it, bricks the rest), so a budget for the total would refuse every growth (the sample
+# room, 2026-12-06: drags of 0.4-1.0 m all passed it), while each growth renders only what the move needs.
+GROW_LIMIT = 2.0
 REFINE_TOLERANCE = 0.02  # a cell's error at its centre (mean absolute luminance error over the mean) a brick is for
 CENTRE_CHUNK = 64  # cells a numpy lookup at a time (x ERROR_NORMALS x 8 corners)
 # Directions a centre's error is measured over: 64 read the sample room's 47 centres within 0.31% (absolute, median
@@ -239,8 +243,9 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     what changed rendered: the new nodes, the centres of the new cells the boxes touch and those cells' bricks; every
     node and brick it had keeps its maps (rendered with its ``far`` and ``near``, so a grown volume's old part is the
     old volume); ``previous`` itself when the boxes lie inside it (nothing to render); None when it cannot grow on
-    its lattice (one node thick along an axis it must grow) or when the grown grid, the old bricks and the new
-    centres pass ``budget`` or MAX_NODES a side: then bake anew (bake_light_volume)."""
+    its lattice (one node thick along an axis it must grow), when what it renders would pass ``budget`` (the most a
+    bake renders), or when the grown volume would hold more than GROW_LIMIT x ``budget`` probes or MAX_NODES a side:
+    then bake anew (bake_light_volume), at the spacing the new region's light asks for."""
     if grown_spec(previous.spec, boxes, within, thin_ok=True) is None:
         return previous
     grown = grown_spec(previous.spec, boxes, within)
@@ -258,10 +263,11 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     fresh_cells = np.flatnonzero(~is_old_cell & cells_touching(spec, boxes))
     centre_keys = cell_keys(spec)[fresh_cells]
     old_bricks = previous.brick_count
-    if (max(spec.shape) > MAX_NODES or spec.count + old_bricks + len(fresh_cells) > budget
+    new_nodes = np.flatnonzero(~is_old_node)
+    first_count = len(new_nodes) + len(fresh_cells)
+    if (max(spec.shape) > MAX_NODES or first_count > budget or spec.count + old_bricks > GROW_LIMIT * budget
             or min(old.shape) < 2 or np.any(n_new - n_old < 0)):
         return None
-    new_nodes = np.flatnonzero(~is_old_node)
     first = bake_probes(renderer, np.vstack([probe_positions(spec)[new_nodes], key_positions(spec, centre_keys)]),
                         far, near, face_size, progress, hole_colour, True, lod_k)
     irr = np.empty((spec.count, *previous.irradiance.shape[3:]))
@@ -275,7 +281,7 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     grid = LightVolume(spec, grid_maps(irr, spec.shape), grid_maps(mom, spec.shape))
     errors = np.zeros(len(cells))
     errors[fresh_cells] = np.where(first["inside"][k:], 0.0, centre_errors(grid, first["irradiance"][k:], fresh_cells))
-    refine = choose_bricks(spec, errors, tolerance, budget - spec.count - old_bricks - len(fresh_cells))
+    refine = choose_bricks(spec, errors, tolerance, budget - first_count)
     shift = below * KEY_UNITS
     old_refine = previous.cells
     sl = tuple(slice(int(b), int(b) + int(c)) for b, c in zip(below, old_cells))
