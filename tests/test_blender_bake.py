@@ -397,6 +397,7 @@ def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path,
     bpy.context.view_layer.update()
     assert "'ball' no longer lights it" in stale_reasons(scene, probe)
     one_report, one = bake()
+    assert not [k for k in splat_cache._entries if isinstance(k, tuple)]  # the merged copy was given back
     print(f"\nmean irradiance: both {np.round(both, 4)}, the shell alone {np.round(one, 4)}")
     assert "splat objects" not in one_report
     assert both[0] / both[2] > 1.05 * one[0] / one[2]  # redder with the ball

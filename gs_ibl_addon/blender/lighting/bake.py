@@ -273,7 +273,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     if probe.gs_ibl_probe.splats is None:
         probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
     baked_states[(scene.name, probe.name)] = seen_states[(scene.name, probe.name)] = bake_state(probe, splats, scene)
-    record_bake(probe, splats, [o for o in lighting_set(scene, splats)[0][1:]])
+    record_bake(probe, splats, lighting_set(scene, splats)[0][1:])
     auto, choices = None, None
     if probe.gs_ibl_probe.lighting == "AUTO":
         yield Step("choosing each mesh's light", written)
@@ -291,8 +291,9 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
         remove_auto_light(scene, probe)  # World Probe: the World alone, for meshes Auto lit before too
     seconds = time.perf_counter() - t0
     lines, warning = summary(result, seconds, stages, splats_name)
-    if set_line(lighting_names):
-        lines.insert(1, set_line(lighting_names))
+    line = set_line(lighting_names)
+    if line:
+        lines.insert(1, line)
     left = left_out_text(lighting_names[0], left_out)
     if left:  # a capture the user sees in renders and expects in the light: said where the panel shows it
         warning = f"{warning}; {left}" if warning else left

@@ -22,6 +22,7 @@ from . import local_light as ll
 from . import volume_nodes as vn
 from ..common.datablocks import packed_float_image
 from ..common.jobs import Job, Work
+from ..splats import cache as splat_cache
 from .auto_light import AUTO_KEY
 from .object_probes import is_lit_mesh, point_coefficients, probe_renderer_steps, world_box
 from .sources import left_out_text, lighting_set, require_splats
@@ -119,10 +120,9 @@ def _bake(renderer, boxes, within, where, budget, face_size, previous, progress)
 _kept: dict[tuple[str, str], tuple] = {}
 
 
-def volume_state(scene: bpy.types.Scene, probe: bpy.types.Object, splats: list[bpy.types.Object]) -> tuple:
+def volume_state(probe: bpy.types.Object, splats: list[bpy.types.Object]) -> tuple:
     """What a kept volume stands for besides the meshes: the splats that lit it (each one's data key), the probe's
     place (its World light) and the volume's settings."""
-    from ..splats import cache as splat_cache
     return (tuple(splat_cache.data_key(o) for o in splats), tuple(round(float(c), 9) for c in
                                                                    probe.matrix_world.translation),
             int(probe.gs_ibl_probe.volume_probes), BUDGET, FACE)
@@ -154,7 +154,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
     budget = BUDGET or int(probe.gs_ibl_probe.volume_probes) or DEFAULT_BUDGET
     r = yield from probe_renderer_steps(scene, probe, need_world=True)
     where = np.array(probe.matrix_world.translation, np.float64)
-    state = volume_state(scene, probe, splats)
+    state = volume_state(probe, splats)
     kept = _kept.get((scene_name, probe_name))
     previous = kept[0] if grow and kept is not None and kept[1] == state else None
     messages, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget,

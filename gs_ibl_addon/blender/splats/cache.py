@@ -12,7 +12,7 @@ Moved" cheap).
 
 Several splat objects that light one probe together (a room and a capture inside it: lighting/sources.py) get an
 entry of their own (``set_steps``): one GPU copy of all of them, merged and sorted together, kept while none of them
-changes and dropped when one is deleted.
+changes, dropped when one is deleted or when a bake from the same first object asks for another set.
 
 Next to the GPU copy an entry keeps a slim host copy (``host``: positions, scales, rotations, opacities and the
 base colour, 56 bytes a splat, 56 MB for 1M splats; the higher SH bands, up to 180 bytes more, are not kept): the
@@ -127,11 +127,15 @@ def set_steps(objs: list[bpy.types.Object]) -> Job:
     """get_steps for the splat objects that light one probe together (``objs``, of one colour space: the first's):
     one object's own entry, or one entry holding all of them in world space, merged (splats.object.merged_world),
     read and uploaded again only when one of them changed."""
+    set_uid = ("set",) + tuple(uid(o) for o in objs)
+    # one set per probe's own object at a time: a set it lit with before (another member hidden or shown since)
+    # gives its GPU copy back
+    for old in [k for k in _entries if isinstance(k, tuple) and k[1] == set_uid[1] and k != set_uid]:
+        release(old)
     if len(objs) == 1:
         return (yield from get_steps(objs[0]))
     global uploads
     key = tuple(data_key(o) for o in objs)
-    set_uid = ("set",) + tuple(uid(o) for o in objs)
     space = colour_space_of(objs[0])
     entry = _entries.get(set_uid)
     if entry is None or entry.key != key:
