@@ -246,6 +246,10 @@ def test_single_view_sorts_only_its_drawn_splats(monkeypatch):
             drawn = r.drawn
             keys, order = r.read_depth_order(scene.count)
             out[compact] = (res.images[0], drawn, keys, order)
+            r.render_probes(np.array([[0.1, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, 0.3]]), 16)  # pair buffers grow
+            assert np.array_equal(r.render(batch).images[0], res.images[0])
+            r.trim()  # and are given back
+            assert np.array_equal(r.render(batch).images[0], res.images[0])
     image, drawn, keys, order = out[True]
     assert np.array_equal(image, out[False][0])
     assert 0 < drawn < scene.count // 2  # most of the box is outside a 60-degree view

@@ -749,9 +749,9 @@ class SplatRenderer:
         return self.lod is not None or (COMPACT_VIEWS and len(batch.views) == 1 and batch.n_probes == 1)
 
     def _ensure_compact(self) -> None:
-        """A single view's compaction without a level of detail: sorted for every pair it could draw (the pair
-        buffers' length), so a frame never outgrows it; each shape's budget (_caps) trims what its recordings sort."""
-        m = self.nodes * self.slots
+        """A single view's compaction without a level of detail: sorted for every splat it could draw (one probe's
+        pairs), so a frame never outgrows it; each shape's budget (_caps) trims what its recordings sort."""
+        m = self.nodes
         if self.lod is not None or (self.cut_sorter is not None and self.cut_capacity == m):
             return
         buf = self._buffer
