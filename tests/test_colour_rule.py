@@ -135,3 +135,26 @@ def test_render_and_cubemap_take_the_option(grey_shell_ply, tmp_path, capsys):
     with pytest.raises(SystemExit) as e:
         main(["bake", str(grey_shell_ply), "--colour-space", "rgb", "--out", str(tmp_path / "x")])
     assert e.value.code == 2 and "--colour-space" in capsys.readouterr().err
+
+
+def test_scenes_of_both_spaces_combine_under_blenders_rule():
+    """core.scene.combine_scenes (F12's splats and a probe lit by several splat objects): scenes of one space keep
+    it; a mix is drawn by the sRGB rule with the linear scene re-encoded, so every splat's base colour gives the
+    radiance its own rule gave (exact), and the GPU draws the combined scene as the reference does."""
+    from dataclasses import replace
+    from gs_ibl_addon.core.scene import combine_scenes
+    a = replace(random_scene(300, seed=1, sh_degree=3, extent=2.0), colour_space="srgb")
+    b = replace(random_scene(200, seed=2, sh_degree=1, extent=2.0), colour_space="linear")
+    assert combine_scenes([a, replace(b, colour_space="srgb")]).colour_space == "srgb"
+    assert combine_scenes([replace(a, colour_space="linear"), b]).colour_space == "linear"
+    both = combine_scenes([a, b])
+    assert both.colour_space == "srgb" and both.count == 500 and both.sh.shape[1] == 16
+    C0 = 0.28209479177387814
+    dc = lambda s: s.sh[:, 0] * C0 + 0.5  # noqa: E731
+    np.testing.assert_allclose(splat_radiance(dc(both)[:300], "srgb"), splat_radiance(dc(a), "srgb"), rtol=1e-6)
+    np.testing.assert_allclose(splat_radiance(dc(both)[300:], "srgb"), splat_radiance(dc(b), "linear"), rtol=1e-4,
+                               atol=1e-6)
+    batch = ViewBatch.cubemap([0.1, -0.2, 0.05], 16)
+    gpu = SplatRenderer(both).render(batch).images
+    ref = render_reference(both, batch)
+    assert max(float(np.abs(g - r).max()) for g, r in zip(gpu, ref)) < 2e-4

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .colour import check_colour_space
+from .colour import check_colour_space, linear_sh_for_srgb_rule
 from .sh import C0 as SH_C0  # re-exported: the degree-0 colour rule's constant, under its 3DGS name
 from .sh import coeff_count, degree_of
 from .sh_rotation import rotate_sh
@@ -111,6 +111,24 @@ class SplatScene:
     def empty() -> "SplatScene":
         return SplatScene(np.zeros((0, 3), np.float32), np.ones((0, 3), np.float32),
                           np.zeros((0, 4), np.float32), np.zeros((0,), np.float32), np.zeros((0, 1, 3), np.float32))
+
+
+def combine_scenes(scenes: list[SplatScene], source: str | None = None) -> SplatScene:
+    """One scene of ``scenes`` (sorted together by whatever renders it: a room and a capture standing in it): SH
+    padded to the highest degree; a mix of colour spaces is drawn by Blender's rule (sRGB), linear scenes re-encoded
+    for it (colour.linear_sh_for_srgb_rule: exact for the base colour, the view-dependent bands to first order)."""
+    space = scenes[0].colour_space if len({s.colour_space for s in scenes}) == 1 else "srgb"
+    deg = max(s.sh_degree for s in scenes)
+    parts = []
+    for s in scenes:
+        s = s.with_sh_degree(deg)
+        if s.colour_space != space:
+            s = SplatScene(s.positions, s.scales, s.rotations, s.opacities, linear_sh_for_srgb_rule(s.sh),
+                           source=s.source, colour_space=space)
+        parts.append(s)
+    return SplatScene(*(np.concatenate([getattr(s, f) for s in parts]) for f in
+                        ("positions", "scales", "rotations", "opacities", "sh")),
+                      source=source or ", ".join(s.source for s in scenes), colour_space=space)
 
 
 def _uniform_scale(lin: np.ndarray, source: str) -> float:

@@ -26,7 +26,7 @@ from .auto_light import AUTO_KEY, auto_light_steps, remove_auto_light
 from .volume import volume_light_steps
 from .object_probes import lit_meshes
 from . import local_light as ll
-from .sources import in_scene, left_out_text, lighting_set, require_splats, set_line
+from .sources import in_scene, lighting_set, require_splats, set_line
 from . import world as gw
 from .lights_from_probe import set_lights_strength, sync_lights
 from ..common.datablocks import is_ours, is_probe
@@ -245,7 +245,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     scene, probe, splats = _named(scene_name, probe_name, splats_name)
     meshes = probe.gs_ibl_probe.lighting in ("AUTO", "VOLUME") and bool(lit_meshes(scene, probe))
     baked, written = ((0.05, 0.35), 0.4) if meshes else ((0.05, 0.95), 0.97)
-    lighting, left_out = lighting_set(scene, splats)  # the probe's own splats and every other one in renders
+    lighting = lighting_set(scene, splats)  # the probe's own splats and every other one in renders
     lighting_names = [o.name for o in lighting]  # (the objects may be deleted while a worker bakes)
     yield Step(f"reading {sum(splat_count(o) for o in lighting):,} splats", 0.0)
     uploads = splat_cache.uploads
@@ -261,7 +261,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     if settings.highlight_gain != 1:
         from ..splats.object import read_steps
         local = []
-        for o in lighting_set(scene, splats)[0]:
+        for o in lighting_set(scene, splats):
             local.append((*(yield from read_steps(o)), o.name))
     result, radiance, irradiance = yield Work(_bake_and_resample, where, settings, cached, local, span=baked)
     t = lap("bake", t)  # renders, filters and the host work between them
@@ -273,7 +273,7 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     if probe.gs_ibl_probe.splats is None:
         probe.gs_ibl_probe.splats = splats  # the field says what was baked (and what Update When Moved follows)
     baked_states[(scene.name, probe.name)] = seen_states[(scene.name, probe.name)] = bake_state(probe, splats, scene)
-    record_bake(probe, splats, lighting_set(scene, splats)[0][1:])
+    record_bake(probe, splats, lighting_set(scene, splats)[1:])
     auto, choices = None, None
     if probe.gs_ibl_probe.lighting == "AUTO":
         yield Step("choosing each mesh's light", written)
@@ -294,9 +294,6 @@ def _bake_steps(scene_name: str, probe_name: str, splats: bpy.types.Object, sett
     line = set_line(lighting_names)
     if line:
         lines.insert(1, line)
-    left = left_out_text(lighting_names[0], left_out)
-    if left:  # a capture the user sees in renders and expects in the light: said where the panel shows it
-        warning = f"{warning}; {left}" if warning else left
     if auto:
         lines.append(auto)
     if animated_text(probe) is not None:  # the light is where the probe stands now, not along its path
@@ -356,7 +353,7 @@ def bake_state(probe: bpy.types.Object, splats: bpy.types.Object | None,
     transform did not change (a bake writing the probe's own properties is one), which once made every bake
     schedule the next."""
     others = () if splats is None or scene is None else tuple(
-        (o.name, splat_cache.data_key(o)) for o in lighting_set(scene, splats)[0][1:])
+        (o.name, splat_cache.data_key(o)) for o in lighting_set(scene, splats)[1:])
     return (tuple(round(float(c), 9) for c in probe.matrix_world.translation),
             splat_cache.data_key(splats) if splats is not None else None, others)
 

@@ -66,7 +66,7 @@ def probe_renderer_steps(scene: bpy.types.Scene, probe: bpy.types.Object, need_w
     splats = require_splats(scene, probe)
     if need_world and probe.gs_ibl_probe.world is None:
         raise ValueError(f"Bake {probe.name!r} first: local light is added to the light of its World")
-    return (yield from splat_cache.set_steps(lighting_set(scene, splats)[0])).renderer
+    return (yield from splat_cache.set_steps(lighting_set(scene, splats))).renderer
 
 
 def probe_renderer(scene: bpy.types.Scene, probe: bpy.types.Object, need_world: bool = False):

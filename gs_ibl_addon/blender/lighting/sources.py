@@ -8,7 +8,7 @@ import numpy as np
 from mathutils import Vector
 
 from ..common.datablocks import is_probe
-from ..splats.object import colour_space_of, is_splat_object
+from ..splats.object import is_splat_object
 
 
 def scene_splats(scene: bpy.types.Scene) -> list[bpy.types.Object]:
@@ -42,16 +42,10 @@ def require_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None
     raise ValueError(f"{len(found)} splat objects in the scene ({names}): pick one in the probe's Splats field")
 
 
-def lighting_set(scene: bpy.types.Scene, own: bpy.types.Object) -> tuple[list[bpy.types.Object], list[str]]:
-    """(the splat objects that light a probe whose own is ``own``: it first, then every other one of the scene not
-    hidden from renders, in the scene's order; the names of those left out because their colour space is not
-    ``own``'s: one colour rule draws a merged scene, so the panel's Colour Space of each must agree)."""
-    space = colour_space_of(own)
-    kept, left = [own], []
-    for o in scene_splats(scene):
-        if o != own and not o.hide_render:
-            (kept if colour_space_of(o) == space else left).append(o)
-    return kept, [o.name for o in left]
+def lighting_set(scene: bpy.types.Scene, own: bpy.types.Object) -> list[bpy.types.Object]:
+    """The splat objects that light a probe whose own is ``own``: it first, then every other one of the scene not
+    hidden from renders, in the scene's order (merged as F12 draws them: core.scene.combine_scenes)."""
+    return [own] + [o for o in scene_splats(scene) if o != own and not o.hide_render]
 
 
 def set_line(names: list[str]) -> str | None:
@@ -60,17 +54,6 @@ def set_line(names: list[str]) -> str | None:
     if len(names) < 2:
         return None
     return f"from {len(names)} splat objects: " + ", ".join(names[:6]) + (", ..." if len(names) > 6 else "")
-
-
-def left_out_text(own: str, left_out: list[str]) -> str | None:
-    """The warning for splat objects shown in renders but left out of the light (another colour space than the
-    probe's own ``own``), or None."""
-    if not left_out:
-        return None
-    names = ", ".join(left_out[:6]) + (", ..." if len(left_out) > 6 else "")
-    return (f"{names} {'is' if len(left_out) == 1 else 'are'} shown in renders but left out of the light: "
-            f"{'its' if len(left_out) == 1 else 'their'} Colours differ from {own}'s (select "
-            f"{'it' if len(left_out) == 1 else 'each'} and set Colours alike in the GS-IBL panel)")
 
 
 def find_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None,

@@ -134,7 +134,7 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
 
 def _others_reasons(scene: bpy.types.Scene, splats: bpy.types.Object, recorded) -> list[str]:
     """How the other splat objects that light the probe differ from those its bake recorded."""
-    now = {o.name: o for o in lighting_set(scene, splats)[0][1:]}
+    now = {o.name: o for o in lighting_set(scene, splats)[1:]}
     out = [f"{n!r} now lights it" for n in now if n not in recorded]
     out += [f"{n!r} no longer lights it" for n in recorded if n not in now]
     for n, o in now.items():

@@ -23,9 +23,10 @@ from . import volume_nodes as vn
 from ..common.datablocks import packed_float_image
 from ..common.jobs import Job, Work
 from ..splats import cache as splat_cache
+from ..splats.object import colour_space_of
 from .auto_light import AUTO_KEY
 from .object_probes import is_lit_mesh, point_coefficients, probe_renderer_steps, world_box
-from .sources import left_out_text, lighting_set, require_splats
+from .sources import lighting_set, require_splats
 
 REPORT_PREFIX = "Light volume: "
 MAX_FRAMES = 48  # frames of an animation whose boxes the region covers (evenly over the range, both ends in)
@@ -123,7 +124,7 @@ _kept: dict[tuple[str, str], tuple] = {}
 def volume_state(probe: bpy.types.Object, splats: list[bpy.types.Object]) -> tuple:
     """What a kept volume stands for besides the meshes: the splats that lit it (each one's data key), the probe's
     place (its World light) and the volume's settings."""
-    return (tuple(splat_cache.data_key(o) for o in splats), tuple(round(float(c), 9) for c in
+    return (tuple((splat_cache.data_key(o), colour_space_of(o)) for o in splats), tuple(round(float(c), 9) for c in
                                                                    probe.matrix_world.translation),
             int(probe.gs_ibl_probe.volume_probes), BUDGET, FACE)
 
@@ -145,7 +146,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
     it. Its result: (report line, {"lit": names, "outside": names, "probes": count})."""
     from ...core.probe.volume_bake import DEFAULT_FACE
     from ...core.probe.volume_region import DEFAULT_BUDGET
-    splats, left_out = lighting_set(scene, require_splats(scene, probe))
+    splats = lighting_set(scene, require_splats(scene, probe))
     names, boxes, within, outside = volume_boxes(scene, splats)
     if not names:
         return f"{REPORT_PREFIX}no lit mesh inside the splats: every mesh keeps the World probe", {
@@ -183,8 +184,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
              f"of {' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart, and bricks), from "
              f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
     _kept[(scene_name, probe_name)] = (vol, state)
-    left = left_out_text(splats[0].name, left_out)
-    lines += (["Warning: " + left] if left else []) + messages + vol.report
+    lines += messages + vol.report
     if outside:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))

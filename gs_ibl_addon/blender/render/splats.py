@@ -19,12 +19,10 @@ from __future__ import annotations
 
 import inspect
 from collections import OrderedDict
-from dataclasses import replace
 
 import numpy as np
 
-from ...core.colour import linear_sh_for_srgb_rule
-from ...core.scene import SplatScene
+from ...core.scene import SplatScene, combine_scenes
 from ..common.datablocks import MARKER
 from ..common.jobs import run_now
 from ..splats.cache import data_key
@@ -123,22 +121,6 @@ def _world_scene(ob, matrix: np.ndarray) -> SplatScene:
     return to_world(local, matrix, ob.name)
 
 
-def combined(scenes: list[SplatScene]) -> SplatScene:
-    """One scene of ``scenes``: SH padded to the highest degree; a mix of colour spaces is drawn by Blender's rule
-    (sRGB), linear scenes re-encoded for it (core/colour.py: exact for the base colour)."""
-    space = scenes[0].colour_space if len({s.colour_space for s in scenes}) == 1 else "srgb"
-    deg = max(s.sh_degree for s in scenes)
-    parts = []
-    for s in scenes:
-        s = s.with_sh_degree(deg)
-        if s.colour_space != space:
-            s = replace(s, sh=linear_sh_for_srgb_rule(s.sh), colour_space=space)
-        parts.append(s)
-    return SplatScene(*(np.concatenate([getattr(s, f) for s in parts]) for f in
-                        ("positions", "scales", "rotations", "opacities", "sh")),
-                      source=", ".join(s.source for s in scenes), colour_space=space)
-
-
 def renderer_for(items: list[tuple[object, np.ndarray]], near: float):
     """The GPU scene of ``items`` ((object, world matrix)), uploaded when any of them changed (the caller holds
     the GPU lock: common/jobs.py gpu)."""
@@ -149,7 +131,7 @@ def renderer_for(items: list[tuple[object, np.ndarray]], near: float):
         _renderers.move_to_end(key)
         return r
     from ...core.render.renderer import SplatRenderer  # Vulkan loads when splats are first drawn
-    scene = combined([_world_scene(ob, m) for ob, m in sorted(items, key=lambda it: it[0].name)])
+    scene = combine_scenes([_world_scene(ob, m) for ob, m in sorted(items, key=lambda it: it[0].name)])
     while len(_renderers) >= KEEP:
         _renderers.popitem(last=False)[1].close()
     r = SplatRenderer(scene, near=near)

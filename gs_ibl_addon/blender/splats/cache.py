@@ -124,9 +124,10 @@ def _build(key: tuple, local, matrix: np.ndarray, name: str, progress: Progress)
 
 
 def set_steps(objs: list[bpy.types.Object]) -> Job:
-    """get_steps for the splat objects that light one probe together (``objs``, of one colour space: the first's):
-    one object's own entry, or one entry holding all of them in world space, merged (splats.object.merged_world),
-    read and uploaded again only when one of them changed."""
+    """get_steps for the splat objects that light one probe together (``objs``): one object's own entry, or one
+    entry holding all of them in world space, merged (splats.object.merged_world: a mix of colour spaces re-encoded
+    for Blender's rule, so each one's colour space is part of the key), read and uploaded again only when one of them
+    changed."""
     set_uid = ("set",) + tuple(uid(o) for o in objs)
     # one set per probe's own object at a time: a set it lit with before (another member hidden or shown since)
     # gives its GPU copy back
@@ -135,8 +136,7 @@ def set_steps(objs: list[bpy.types.Object]) -> Job:
     if len(objs) == 1:
         return (yield from get_steps(objs[0]))
     global uploads
-    key = tuple(data_key(o) for o in objs)
-    space = colour_space_of(objs[0])
+    key = tuple((data_key(o), colour_space_of(o)) for o in objs)
     entry = _entries.get(set_uid)
     if entry is None or entry.key != key:
         t = time.perf_counter()
@@ -150,10 +150,7 @@ def set_steps(objs: list[bpy.types.Object]) -> Job:
         release(set_uid)
         _entries[set_uid] = entry
         uploads += 1
-    entry.renderer.colour_space = space
-    if entry.host.colour_space != space:
-        entry.host = replace(entry.host, colour_space=space)
-    return entry
+    return entry  # (its renderer's colour rule is the merged scene's, set when it was made)
 
 
 def _build_set(key: tuple, parts: list, progress: Progress) -> CachedSplats:

@@ -28,7 +28,6 @@ Its camera icon (hide_render) is on after an import, like any object's: F12 draw
 """
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Generator
 
 import bpy
@@ -37,7 +36,7 @@ from bpy.app.handlers import persistent
 from mathutils import Matrix
 
 from ...core.colour import linear_sh_for_srgb_rule
-from ...core.scene import SplatScene, sh_dc_to_rgb
+from ...core.scene import SplatScene, combine_scenes, sh_dc_to_rgb
 from ...core.sh import degree_of
 from ..common import handlers
 from ..common.compat import modifier_input_identifiers, node_output, node_tree, set_modifier_input
@@ -454,17 +453,11 @@ def to_world(local: SplatScene, matrix: np.ndarray, name: str) -> SplatScene:
 
 def merged_world(parts: list[tuple[SplatScene, np.ndarray, str]]) -> SplatScene:
     """Several objects' splats (read_steps' (local, matrix) and the object's name, each) in world space as one
-    scene, sorted together by whatever renders it: the light of a probe that several captures surround. Their
-    colour spaces must agree (one colour rule draws them: the caller leaves the others out, sources.py)."""
-    from ...core.synthetic import concat
+    scene, sorted together by whatever renders it: the light of a probe that several captures surround
+    (core.scene.combine_scenes: a mix of colour spaces drawn by Blender's rule, as F12 draws them)."""
     if len(parts) == 1:
         return to_world(*parts[0])
-    scenes = [to_world(*x) for x in parts]
-    spaces = {s.colour_space for s in scenes}
-    if len(spaces) > 1:
-        raise ValueError(f"splat objects {', '.join(x[2] for x in parts)} differ in colour space "
-                         f"({', '.join(sorted(spaces))}): one colour rule draws them together")
-    return replace(concat(scenes, "+".join(x[2] for x in parts)), colour_space=spaces.pop())
+    return combine_scenes([to_world(*x) for x in parts], "+".join(x[2] for x in parts))
 
 
 def scene_from_object(obj: bpy.types.Object) -> SplatScene:
