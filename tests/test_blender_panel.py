@@ -258,7 +258,7 @@ def test_progress_reaches_100_only_at_the_end(blender, tmp_path, write_3dgs_ply)
     rec = _Recorder(gb.bake_job(bpy.context.scene, probe))
     rec.run()
     _check_progress(rec, "light probes for each mesh's light")
-    assert "Auto lighting: 1 meshes" in probe.gs_ibl_probe.last_report
+    assert "Auto lighting: 1 mesh: " in probe.gs_ibl_probe.last_report
     # the automatic re-bake after a move: two probes, one job
     probe2 = _probe(place="CURSOR", lighting="WORLD", auto_update=True)
     bpy.context.view_layer.update()

@@ -98,6 +98,6 @@ def auto_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object,
     if objects is None:  # a whole bake: the More Than One Probe panel lists why each mesh got what it got
         probe.gs_ibl_probe.local_report = "\n".join(c.message() for c in choices)
     counts = {k: sum(c.kind == k for c in choices) for k in ("world", "probe", "grid")}
-    text = (f"{REPORT_PREFIX}{len(choices)} meshes: {counts['world']} by the World probe, {counts['probe']} with a "
-            f"probe of their own, {counts['grid']} with a grid")
+    text = (f"{REPORT_PREFIX}{len(choices)} mesh{'es' if len(choices) != 1 else ''}: {counts['world']} by the World "
+            f"probe, {counts['probe']} with a probe of their own, {counts['grid']} with a grid")
     return text, choices
