@@ -388,6 +388,9 @@ def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path,
     assert splat_cache.uploads == uploads + 1  # kept for the next bake
     assert "from 2 splat objects: shell, ball" in both_report
     assert "2 splat objects" in probe.gs_ibl_probe.last_summary
+    from tests.panel_recorder import draw_panel
+    shown = " ".join(text for text, _icon in draw_panel().get("labels", []))
+    assert "With ball (shown in renders)" in shown  # under the probe's Splats field, which names the shell alone
     assert stale_reasons(scene, probe) == []
     ball_obj.location.x += 0.1
     bpy.context.view_layer.update()

@@ -218,6 +218,11 @@ class GSIBL_PT_panel(bpy.types.Panel):
         if moving is not None:
             _label_block(col, context, moving[0].upper() + moving[1:], icon="ANIM")
         col.prop(s, "splats")
+        own = s.splats if s.splats is not None and sources.in_scene(context.scene, s.splats) else None
+        others = sources.lighting_set(context.scene, own)[1:] if own is not None else []
+        if others:  # the bake reads them too (every splat object shown in renders)
+            _label_block(col, context, "With " + ", ".join(o.name for o in others[:4])
+                         + (", ..." if len(others) > 4 else "") + " (shown in renders)", icon="LINKED")
         col.prop(s, "lighting")
         if s.lighting == "VOLUME":
             col.prop(s, "volume_probes")
