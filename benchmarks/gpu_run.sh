@@ -59,6 +59,9 @@
 #                                        6M, faces 64² and 1024², camera frames 1920x1080 and 3840x2160, gsplat's
 #                                        kernels by stage at the camera sizes; the LOD probe (lod_bench, 1M at 32²).
 #                                        Into $OUT: peer.csv, camera.csv, lod.csv, ab.log. Carry .gl and .whl
+#   bash benchmarks/gpu_run.sh grow      there, about a minute (issue 37): volume_grow_bench.py (the light volume
+#                                        grown over a dragged mesh against baked whole). Into $OUT: volume_grow.csv,
+#                                        volume_grow.png, grow.log. Carry .gl and .whl
 #   bash benchmarks/gpu_run.sh volume    there, one call of about a minute (issue 37): volume_bench.py (the light
 #                                        volume's accuracy against per-point probes at the five places, its bake's
 #                                        cost against a World-only bake, and with host-made maps: GPU_MAPS A/B),
@@ -90,7 +93,7 @@ prepare)
   python3 benchmarks/kernel_trials.py build
   echo "[gpu_run] carry: .gl .whl out/trials"
   ;;
-trials|grid|full|final|refs|stages|volume|profile|ab)
+trials|grid|full|final|refs|stages|volume|profile|ab|grow)
   t_start=$SECONDS
   for f in .gl/*.deb; do dpkg -x "$f" /; done
   ldconfig
@@ -180,6 +183,15 @@ trials|grid|full|final|refs|stages|volume|profile|ab)
         --out-csv "$out/volume.csv" --png "$out/volume_bench.png" || echo "[gpu_run] volume_bench: exit $?"
       echo "[gpu_run] volume: $((SECONDS - t_start)) s"
     ) 2>&1 | tee "$log"
+  elif [ "$1" = grow ]; then
+    # The light volume grown over a dragged mesh against baked whole (issue 37): about a minute
+    log="$out/grow.log"
+    (
+      set +e
+      timeout --signal=INT --kill-after=10 300 python3 benchmarks/volume_grow_bench.py --csv "$out/volume_grow.csv" \
+        --png "$out/volume_grow.png" || echo "[gpu_run] volume_grow_bench: exit $?"
+      echo "[gpu_run] grow: $((SECONDS - t_start)) s"
+    ) 2>&1 | tee "$log"
   elif [ "$1" = profile ]; then
     log="$out/profile.log"
     (
@@ -232,7 +244,7 @@ trials|grid|full|final|refs|stages|volume|profile|ab)
   fi
   ;;
 *)
-  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume|profile|ab" >&2
+  echo "usage: bash benchmarks/gpu_run.sh prepare|trials|grid|full|final|refs|stages|volume|profile|ab|grow" >&2
   exit 2
   ;;
 esac

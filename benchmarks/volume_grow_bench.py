@@ -73,12 +73,12 @@ def run(points: int, budget: int) -> list[dict]:
                     pts, nrm, facing = data[where]
                     row = {"date": datetime.date.today().isoformat(), "device": device,
                            "load": round(os.getloadavg()[0], 2), "move": dest, "method": method,
-                           "probes": v.timings["probes"], "grid": v.spec.count, "bake_s": round(secs, 2),
+                           "probes": v.timings["probes"], "grid": v.spec.count, "bake_s": round(secs, 4),
                            "sphere": "moved" if where == dest else "still",
                            **errors(vol.sample(v, pts, nrm), refs[where], facing)}
                     rows.append(row)
                     print(f"{row['move']:18} {method:5} {row['sphere']:5} probes {row['probes']:4} "
-                          f"{secs:6.1f} s  err {100 * row['err_mean']:.2f}% (p95 {100 * row['err_p95']:.2f}%) "
+                          f"{secs:8.3f} s  err {100 * row['err_mean']:.2f}% (p95 {100 * row['err_p95']:.2f}%) "
                           f"cell {row['cell_r']:.3f}/{row['cell_g']:.3f}/{row['cell_b']:.3f}", flush=True)
     return rows
 
