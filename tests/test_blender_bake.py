@@ -335,6 +335,7 @@ def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch
     bpy.ops.mesh.primitive_cube_add()
     native = bpy.context.active_object
     native.visible_glossy = False  # the user's own setting, to be given back as it was
+    native.hide_render = True  # a real one shown in renders would light the probe too; a cube has no splats to read
     monkeypatch.setattr(splat_object, "is_native_splats", lambda o: o is not None and o.name == native.name)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
