@@ -354,13 +354,9 @@ def test_native_splats_light_once(blender, tmp_path, write_3dgs_ply, monkeypatch
     assert native.visible_diffuse
 
 
-def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path, write_3dgs_ply):
-    """Issue 37: a grey shell (the probe's own splats) and a red ball beside the probe (another capture): the
-    World probe is baked from both, merged and sorted together (the report says "from 2 splat objects"), and its
-    irradiance is redder than with the ball hidden from renders. Moving the ball, hiding it, or giving it another
-    colour space (merged by Blender's rule, as F12 draws a mix) marks the bake out of date, and says which."""
-    from gs_ibl_addon.blender.lighting.stale import stale_reasons
-    from gs_ibl_addon.blender.splats import cache as splat_cache
+def shell_and_ball(tmp_path, write_3dgs_ply):
+    """Two splat objects imported: a grey shell of radius 3 m about the origin and a red ball at (0.6, 0, 0)
+    (another capture beside a probe at the origin)."""
     from gs_ibl_addon.core import synthetic
     shell = synthetic.shell_scene(lambda d: np.full(d.shape, 0.3), 1500, radius=3.0)
     ball = synthetic.sphere_object((0.6, 0.0, 0.0), 0.2, (0.9, 0.05, 0.05), 0.05)
@@ -368,7 +364,17 @@ def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path,
         write_3dgs_ply(tmp_path / f"{name}.ply", sc)
         assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(tmp_path / f"{name}.ply"),
                                             show_proxy=False) == {"FINISHED"}
-    shell_obj, ball_obj = bpy.data.objects["shell"], bpy.data.objects["ball"]
+    return bpy.data.objects["shell"], bpy.data.objects["ball"]
+
+
+def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path, write_3dgs_ply):
+    """Issue 37: a grey shell (the probe's own splats) and a red ball beside the probe (another capture): the
+    World probe is baked from both, merged and sorted together (the report says "from 2 splat objects"), and its
+    irradiance is redder than with the ball hidden from renders. Moving the ball, hiding it, or giving it another
+    colour space (merged by Blender's rule, as F12 draws a mix) marks the bake out of date, and says which."""
+    from gs_ibl_addon.blender.lighting.stale import stale_reasons
+    from gs_ibl_addon.blender.splats import cache as splat_cache
+    shell_obj, ball_obj = shell_and_ball(tmp_path, write_3dgs_ply)
     bpy.ops.gs_ibl.add_probe(place="CURSOR")
     probe = bpy.context.active_object
     probe.gs_ibl_probe.splats = shell_obj

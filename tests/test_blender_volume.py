@@ -246,14 +246,8 @@ def test_every_visible_splat_object_lights_the_volume(blender, tmp_path, write_3
     volume is baked from both, merged and sorted together ("from 2 splat objects"): the mesh's side facing the ball
     is redder than with the ball hidden from renders (then "from 1 splat object")."""
     from gs_ibl_addon.blender.lighting import volume_nodes as vn
-    from gs_ibl_addon.core import synthetic
-    shell = synthetic.shell_scene(lambda d: np.full(d.shape, 0.3), 1500, radius=3.0)
-    ball = synthetic.sphere_object((0.6, 0.0, 0.0), 0.2, (0.9, 0.05, 0.05), 0.05)
-    for name, sc in (("shell", shell), ("ball", ball)):
-        write_3dgs_ply(tmp_path / f"{name}.ply", sc)
-        assert bpy.ops.gs_ibl.import_splats(native=False, filepath=str(tmp_path / f"{name}.ply"),
-                                            show_proxy=False) == {"FINISHED"}
-    shell_obj, ball_obj = bpy.data.objects["shell"], bpy.data.objects["ball"]
+    from tests.test_blender_bake import shell_and_ball
+    shell_obj, ball_obj = shell_and_ball(tmp_path, write_3dgs_ply)
     bpy.ops.mesh.primitive_cube_add(size=0.2, location=(0.0, 0.0, 0.0))
     for o in bpy.context.view_layer.objects.selected:
         o.select_set(False)

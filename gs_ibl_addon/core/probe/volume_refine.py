@@ -218,7 +218,7 @@ def bake_light_volume(renderer, boxes, budget: int = DEFAULT_BUDGET, within=None
 def grown_spec(spec: GridSpec, boxes, within=None, thin_ok: bool = False) -> tuple[GridSpec, np.ndarray] | None:
     """``spec`` grown on its own lattice (same first node, same steps) until it holds ``boxes`` (cut to
     ``within``): (the grown spec, (3,) nodes added below on each axis), or None when nothing is outside it or it
-    cannot grow along an axis it must (one node there; ``thin_ok``: then (spec, 0) instead, it must grow)."""
+    cannot grow along an axis it must (one node there; ``thin_ok``: then ``spec`` itself and its nodes below)."""
     first, step = node_frame(spec)
     n = np.asarray(spec.shape, int)
     last = first + (n - 1) * step
@@ -246,15 +246,15 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     its lattice (one node thick along an axis it must grow), when what it renders would pass ``budget`` (the most a
     bake renders), or when the grown volume would hold more than GROW_LIMIT x ``budget`` probes or MAX_NODES a side:
     then bake anew (bake_light_volume), at the spacing the new region's light asks for."""
-    if grown_spec(previous.spec, boxes, within, thin_ok=True) is None:
-        return previous
-    grown = grown_spec(previous.spec, boxes, within)
-    if grown is None:
-        return None
-    spec, below = grown
     old = previous.spec
+    grown = grown_spec(old, boxes, within, thin_ok=True)
+    if grown is None:
+        return previous
+    spec, below = grown
+    if spec is old:  # it must grow along an axis of one node
+        return None
     far, near = far_distance(old), 0.5 * spec_spacing(old)
-    n_old, n_new = np.asarray(old.shape), np.asarray(spec.shape)
+    n_old = np.asarray(old.shape)
     old_cells = np.asarray(cell_shape(old))
     nodes = index_grid(spec.shape)
     is_old_node = np.all((nodes >= below) & (nodes < below + n_old), 1)
@@ -266,7 +266,7 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     new_nodes = np.flatnonzero(~is_old_node)
     first_count = len(new_nodes) + len(fresh_cells)
     if (max(spec.shape) > MAX_NODES or first_count > budget or spec.count + old_bricks > GROW_LIMIT * budget
-            or min(old.shape) < 2 or np.any(n_new - n_old < 0)):
+            or min(old.shape) < 2):
         return None
     first = bake_probes(renderer, np.vstack([probe_positions(spec)[new_nodes], key_positions(spec, centre_keys)]),
                         far, near, face_size, progress, hole_colour, True, lod_k)
@@ -304,17 +304,16 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     b_mom = np.array([sources[s][1][i] for s, i in picks]) if picks else None
     vol = LightVolume(spec, grid.irradiance, grid.moments, refine=refine if len(keys) else None,
                       brick_irradiance=b_irr, brick_moments=b_mom)
-    rendered = len(first["holes"]) + (len(second["holes"]) if second is not None else 0)
-    holes = np.concatenate([first["holes"]] + ([second["holes"]] if second is not None else []))
-    inside = np.concatenate([first["inside"]] + ([second["inside"]] if second is not None else []))
+    rs = [first] + ([second] if second is not None else [])
+    holes, inside = np.concatenate([b["holes"] for b in rs]), np.concatenate([b["inside"] for b in rs])
+    rendered = len(holes)
     added = int((refine > 1).sum()) - int((old_refine > 1).sum())
     bricks = f", {len(new)} for {added} new bricks" if added > 0 else ""
     vol.report = [f"light volume grown to {' x '.join(map(str, spec.shape))} nodes over what the meshes reach now: "
                   f"{rendered} probes rendered ({k} nodes, {len(fresh_cells)} cell centres{bricks}), "
                   f"{spec.count - k} nodes and {old_bricks} brick probes kept"]
     vol.report += probe_report(holes, inside, hole_colour)
-    vol.timings = {"render": first["render_ms"] + (second["render_ms"] if second else 0.0),
-                   "maps": first["maps_ms"] + (second["maps_ms"] if second else 0.0), "probes": rendered,
+    vol.timings = {"render": sum(b["render_ms"] for b in rs), "maps": sum(b["maps_ms"] for b in rs), "probes": rendered,
                    "grid": spec.count, "kept": int(spec.count - k), "centres": len(fresh_cells), "bricks": len(new),
                    "face": int(face_size), "per_submission": first["per_submission"], "lod_k": float(lod_k)}
     return vol
