@@ -411,8 +411,25 @@ def test_every_splat_object_shown_in_renders_lights_the_probe(blender, tmp_path,
     print(f"\nmean irradiance: both {np.round(both, 4)}, the shell alone {np.round(one, 4)}")
     assert "splat objects" not in one_report
     assert both[0] / both[2] > 1.05 * one[0] / one[2]  # redder with the ball
-    # another colour space: merged as F12 draws a mix (Blender's rule, the linear one re-encoded), still lighting it
+    # shown in renders but in a collection the view layer excludes: F12 leaves it out, and so does the light
     ball_obj.hide_render = False
+    excluded = bpy.data.collections.new("excluded")
+    scene.collection.children.link(excluded)
+    for c in list(ball_obj.users_collection):
+        c.objects.unlink(ball_obj)
+    excluded.objects.link(ball_obj)
+    bpy.context.view_layer.layer_collection.children[excluded.name].exclude = True
+    bpy.context.view_layer.update()
+    assert stale_reasons(scene, probe) == []  # as it was baked: the shell alone
+    excluded_report, out = bake()
+    assert "splat objects" not in excluded_report and np.allclose(out, one)
+    bpy.context.view_layer.layer_collection.children[excluded.name].exclude = False
+    bpy.context.view_layer.update()
+    assert "'ball' now lights it" in stale_reasons(scene, probe)
+    bpy.context.view_layer.layer_collection.children[excluded.name].exclude = True
+    bpy.context.view_layer.update()
+    # another colour space: merged as F12 draws a mix (Blender's rule, the linear one re-encoded), still lighting it
+    bpy.context.view_layer.layer_collection.children[excluded.name].exclude = False
     ball_obj.gs_ibl_splats.colour_space = "LINEAR" if shell_obj.gs_ibl_splats.colour_space == "SRGB" else "SRGB"
     bpy.context.view_layer.update()
     assert "'ball' now lights it" in stale_reasons(scene, probe)

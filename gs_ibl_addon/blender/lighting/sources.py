@@ -1,6 +1,6 @@
 """Which splat objects light a probe: its own (the probe's Splats field, else the active or the scene's only one),
 and with it every other splat object of the scene shown in renders (a room and a capture standing in it light the
-meshes together, sorted as one scene)."""
+meshes together, sorted as one scene): its camera icon on and in the view layer, as F12 takes them."""
 from __future__ import annotations
 
 import bpy
@@ -8,7 +8,7 @@ import numpy as np
 from mathutils import Vector
 
 from ..common.datablocks import is_probe
-from ..splats.object import is_splat_object
+from ..splats.object import current_layer, in_view_layer, is_splat_object
 
 
 def scene_splats(scene: bpy.types.Scene) -> list[bpy.types.Object]:
@@ -44,8 +44,11 @@ def require_splats(scene: bpy.types.Scene, probe: bpy.types.Object | None = None
 
 def lighting_set(scene: bpy.types.Scene, own: bpy.types.Object) -> list[bpy.types.Object]:
     """The splat objects that light a probe whose own is ``own``: it first, then every other one of the scene not
-    hidden from renders, in the scene's order (merged as F12 draws them: core.scene.combine_scenes)."""
-    return [own] + [o for o in scene_splats(scene) if o != own and not o.hide_render]
+    hidden from renders and in the user's view layer (a collection it excludes is not rendered), in the scene's order
+    (merged as F12 draws them: core.scene.combine_scenes)."""
+    layer = current_layer(scene)
+    return [own] + [o for o in scene_splats(scene)
+                    if o != own and not o.hide_render and in_view_layer(o, layer)]
 
 
 def set_line(names: list[str]) -> str | None:

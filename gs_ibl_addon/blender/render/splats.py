@@ -26,8 +26,8 @@ from ...core.scene import SplatScene, combine_scenes
 from ..common.datablocks import MARKER
 from ..common.jobs import run_now
 from ..splats.cache import data_key
-from ..splats.object import (PROXY_TREE_ROLE, colour_space_of, is_mesh_splats, is_native_splats, read_steps,
-                             to_world)
+from ..splats.object import (PROXY_TREE_ROLE, colour_space_of, current_layer, in_view_layer, is_mesh_splats,
+                             is_native_splats, read_steps, to_world)
 
 KEEP = 2  # GPU scenes kept (two view layers with different objects alternate without uploads)
 _renderers: "OrderedDict[tuple, object]" = OrderedDict()
@@ -82,23 +82,16 @@ def render_visible(scene, view_layer=None) -> tuple[list, list, list]:
     """(splat objects that F12 draws with our renderer, ours with the camera icon off, native ones Blender renders)
     among the scene's objects, as the panel says it (no depsgraph: the objects as they are now). Native ones are in
     the first list with Native Splats: GS-IBL."""
-    layer = view_layer or scene.view_layers[0]
+    layer = view_layer or current_layer(scene)
     with_native = draws_native(scene)
     drawn, hidden, native = [], [], []
     for ob in scene.objects:
         if is_mesh_splats(ob) or (with_native and is_native_splats(ob)):
-            visible = not ob.hide_render and ob.visible_camera and _in_layer(ob, layer)
+            visible = not ob.hide_render and ob.visible_camera and in_view_layer(ob, layer)
             (drawn if visible else hidden).append(ob)
         elif is_native_splats(ob) and not ob.hide_render:
             native.append(ob)
     return drawn, hidden, native
-
-
-def _in_layer(ob, layer) -> bool:
-    try:
-        return ob.name in layer.objects
-    except (AttributeError, ReferenceError):
-        return True
 
 
 def proxy_modifiers(ob) -> list:

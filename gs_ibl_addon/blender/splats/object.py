@@ -71,6 +71,22 @@ def is_splat_object(obj: bpy.types.Object | None) -> bool:
     return is_mesh_splats(obj) or is_native_splats(obj)
 
 
+def in_view_layer(obj: bpy.types.Object, layer: bpy.types.ViewLayer) -> bool:
+    """Whether ``obj`` is in ``layer`` (not in a collection the layer excludes): what a render of that layer holds."""
+    try:
+        return obj.name in layer.objects
+    except (AttributeError, ReferenceError):
+        return True
+
+
+def current_layer(scene: bpy.types.Scene) -> bpy.types.ViewLayer:
+    """The view layer the user works in for ``scene`` (the window's), else the scene's first."""
+    layer = getattr(bpy.context, "view_layer", None)
+    if layer is not None and getattr(bpy.context, "scene", None) == scene:
+        return layer
+    return scene.view_layers[0]
+
+
 def splat_count(obj: bpy.types.Object) -> int:
     return len(obj.data.points) if is_native_splats(obj) else len(obj.data.vertices)
 
