@@ -83,3 +83,28 @@ def test_bricks_go_where_a_probe_removes_the_most_error():
     refine = vr.choose_bricks(spec, errors, 0.02, 18 + 98)
     assert refine[0, 0, 0] == 2 and refine[2, 2, 2] == 2 and (refine > 1).sum() == 2
     assert vr.choose_bricks(spec, errors, 0.02, 18 + 18 + 98)[0, 0, 0] == 4  # room for both: the 4x follows
+
+
+def test_centre_errors_are_the_lookup_at_each_centre(lamp):
+    """centre_errors takes volume.sample apart (every (centre, normal) pair's point lands on the centre: one set of
+    corner weights per centre, one set of texel taps per normal); against volume.sample at each pair, itself checked
+    against the packed images the node group reads (test above), on the lamp room's grid and on the refined volume
+    (bricks: corners inside them)."""
+    plain, v, _, _, _ = lamp
+    normals = fibonacci_sphere(vr.ERROR_NORMALS)
+    rng = np.random.default_rng(3)
+    for volume in (plain, v):
+        spec = volume.spec
+        centres = vol.key_positions(spec, vr.cell_keys(spec))
+        own = rng.uniform(0.2, 1.0, (len(centres), vol.IRR, vol.IRR, 3))  # any centre maps: the same for both ways
+        back = vol.NORMAL_BIAS * vol.spec_spacing(spec) * normals
+        pts = (centres[:, None] - back[None]).reshape(-1, 3)
+        got = vol.sample(volume, pts, np.tile(normals, (len(centres), 1))) @ vr.LUMINANCE
+        want = vol.bilinear_map(own, np.tile(normals, (len(centres), 1)),
+                                np.repeat(np.arange(len(centres)), len(normals))) @ vr.LUMINANCE
+        got, want = got.reshape(len(centres), -1), want.reshape(len(centres), -1)
+        reference = np.abs(got - want).mean(1) / np.abs(want).mean(1)
+        fast = vr.centre_errors(volume, own)
+        assert np.allclose(fast, reference, rtol=1e-9, atol=1e-12)
+        cells = np.array([len(centres) - 1, 0])
+        assert np.allclose(vr.centre_errors(volume, own[cells], cells), reference[cells], rtol=1e-9, atol=1e-12)

@@ -55,6 +55,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -370,7 +371,10 @@ def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
             "variance_floor": VARIANCE_FLOOR, "min_weight": MIN_WEIGHT, "crush": CRUSH}
 
 
-def _corners(spec: GridSpec, positions: np.ndarray, normals: np.ndarray, cell_at):
+CellAt = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def corners(spec: GridSpec, positions: np.ndarray, normals: np.ndarray, cell_at: CellAt) -> Iterator[tuple]:
     """Yields (probe index among LightVolume.all_maps (M,), trilinear (M,), probe position q (M, 3), P' (M, 3), unit
     normals) for the 8 corners of each point. ``cell_at(c)``: (M, 3) cell indices -> (brick base (M,), r (M,)), the
     cells image's texel (the module docstring's lookup)."""
@@ -398,7 +402,8 @@ def _corners(spec: GridSpec, positions: np.ndarray, normals: np.ndarray, cell_at
         yield np.where(fine, brick, coarse).astype(int), tri, q, p, n
 
 
-def _cells_of(volume: LightVolume):
+def cells_of(volume: LightVolume) -> CellAt:
+    """cell_at for ``volume``'s own cells (corners' argument)."""
     bases, r = brick_bases(volume.cells), volume.cells
     return lambda c: (bases[c[:, 0], c[:, 1], c[:, 2]], r[c[:, 0], c[:, 1], c[:, 2]])
 
@@ -417,7 +422,7 @@ def _cells_image(cells: np.ndarray | None, spec: GridSpec):
     return at
 
 
-def _weight(q: np.ndarray, p: np.ndarray, moments: np.ndarray | None, tri: np.ndarray) -> np.ndarray:
+def lookup_weight(q: np.ndarray, p: np.ndarray, moments: np.ndarray | None, tri: np.ndarray) -> np.ndarray:
     """One corner's weight (the module docstring's formula); ``moments`` (M, 2) at P' - q, None: no visibility."""
     w = np.ones(len(p))
     if moments is not None:
@@ -430,7 +435,7 @@ def _weight(q: np.ndarray, p: np.ndarray, moments: np.ndarray | None, tri: np.nd
     return w * tri
 
 
-def _away(p: np.ndarray, q: np.ndarray) -> np.ndarray:
+def away(p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Directions probe -> point (+Z where they coincide: any direction serves, its distance is 0)."""
     d = p - q
     return np.where(np.linalg.norm(d, axis=-1, keepdims=True) > 0, d, [0.0, 0.0, 1.0])
@@ -440,9 +445,9 @@ def sample(volume: LightVolume, positions: np.ndarray, normals: np.ndarray, visi
     """E/pi (M, 3) at (M, 3) positions with (M, 3) normals, from the unpacked maps (sample_packed's reference)."""
     irr, mom = volume.all_maps()
     num, den = 0.0, 0.0
-    for i, tri, q, p, n in _corners(volume.spec, positions, normals, _cells_of(volume)):
-        vis = bilinear_map(mom, _away(p, q), i) if visibility else None
-        w = _weight(q, p, vis, tri)
+    for i, tri, q, p, n in corners(volume.spec, positions, normals, cells_of(volume)):
+        vis = bilinear_map(mom, away(p, q), i) if visibility else None
+        w = lookup_weight(q, p, vis, tri)
         num = num + w[:, None] * bilinear_map(irr, n, i)
         den = den + w
     return num / den[:, None]
@@ -463,9 +468,9 @@ def sample_packed(irr_atlas: np.ndarray, vis_atlas: np.ndarray, spec: GridSpec, 
     """What the node group does with the three images: E/pi (M, 3) at (M, 3) positions with (M, 3) normals
     (``cells``: pack_cells' image; None: a volume without bricks)."""
     num, den = 0.0, 0.0
-    for i, tri, q, p, n in _corners(spec, positions, normals, _cells_image(cells, spec)):
-        vis = _atlas_lookup(vis_atlas, VIS, i, _away(p, q))[:, :2] if visibility else None
-        w = _weight(q, p, vis, tri)
+    for i, tri, q, p, n in corners(spec, positions, normals, _cells_image(cells, spec)):
+        vis = _atlas_lookup(vis_atlas, VIS, i, away(p, q))[:, :2] if visibility else None
+        w = lookup_weight(q, p, vis, tri)
         num = num + w[:, None] * _atlas_lookup(irr_atlas, IRR, i, n)
         den = den + w
     return num / den[:, None]
