@@ -233,3 +233,18 @@ def test_bricks_follow_light_the_grid_misses():
     n = fibonacci_sphere(50)
     p = node - vol.NORMAL_BIAS * vol.spec_spacing(CUBE) * n  # the lookup moves it back onto the node
     assert np.allclose(vol.sample(bricked, p, n), _bump(np.repeat(node, 50, 0), n), rtol=0.02)
+
+
+def test_key_codes_are_places():
+    """Brick keys as one int64 a place (volume.key_codes): a round trip, the key tuples' order, and find_codes
+    keeping the last of a repeated place as a dict filled in order would."""
+    rng = np.random.default_rng(0)
+    keys = rng.integers(-50, 200, (500, 3))
+    codes = vol.key_codes(keys)
+    assert np.array_equal(vol.code_keys(codes), keys)
+    by_tuple = sorted(range(len(keys)), key=lambda i: tuple(keys[i]))
+    assert np.array_equal(np.argsort(codes, kind="stable"), by_tuple)
+    table = np.concatenate([codes, codes[:10]])
+    assert np.array_equal(vol.find_codes(table, codes[:20]), np.r_[500:510, 10:20])
+    with pytest.raises(KeyError):
+        vol.find_codes(codes, vol.key_codes([[999, 999, 999]]))  # a place the table does not hold

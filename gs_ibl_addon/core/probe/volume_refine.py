@@ -36,9 +36,9 @@ from .grid import GridSpec
 from .variation import LUMINANCE
 from ..synthetic import fibonacci_sphere
 from .volume import (BRICK_LEVELS, IRR, KEY_UNITS, NORMAL_BIAS, LightVolume, away, bilinear_map, bilinear_taps,
-                     brick_keys, brick_keys_of, cell_shape, cells_of, corners, flat_cells, flat_maps,
-                     grid_maps, index_grid, key_positions, lookup_weight, node_frame, node_keys, probe_positions,
-                     spec_spacing)
+                     brick_keys, brick_keys_of, cell_shape, cells_of, code_keys, corners, find_codes, flat_cells,
+                     flat_maps, grid_maps, index_grid, key_codes, key_positions, lookup_weight, node_frame, node_keys,
+                     probe_positions, spec_spacing)
 from .volume_bake import DEFAULT_FACE, bake_probes, far_distance, probe_report
 from .volume_region import DEFAULT_BUDGET, MAX_NODES, VolumePlan, choose_volume, region_box
 
@@ -116,7 +116,7 @@ def choose_bricks(spec: GridSpec, errors: np.ndarray, tolerance: float, budget: 
     refine = np.ones(shape, int)
     if min(spec.shape) < 2 or budget <= 0:
         return refine
-    taken = {tuple(k) for k in np.vstack([node_keys(spec), cell_keys(spec)])}
+    taken = set(key_codes(np.vstack([node_keys(spec), cell_keys(spec)])).tolist())
     cells = index_grid(shape)
 
     def worth(i: int, r: int, e: float) -> tuple[float, int, set] | None:
@@ -124,7 +124,7 @@ def choose_bricks(spec: GridSpec, errors: np.ndarray, tolerance: float, budget: 
         nxt = next((x for x in BRICK_LEVELS if x > r), None)
         if nxt is None:
             return None
-        new = {tuple(k) for k in brick_keys_of(cells[i], nxt)} - taken
+        new = set(key_codes(brick_keys_of(cells[i], nxt)).tolist()) - taken
         return e * (1 - (r / nxt) ** 2) / max(len(new), 1), nxt, new
     queue = []
     for i, e in enumerate(errors):
@@ -174,22 +174,21 @@ def bake_refined(renderer, spec: GridSpec, budget: int, tolerance: float = REFIN
     errors[cells] = np.where(first["inside"][n:], 0.0,  # a centre inside an object: no mesh stands there
                              centre_errors(grid, first["irradiance"][n:], cells))
     refine = choose_bricks(spec, errors, tolerance, budget - len(first["holes"]))
-    keys = brick_keys(spec, refine)
-    known = {tuple(k): i for i, k in enumerate(np.vstack([node_keys(spec), centre_keys]))}
-    new = sorted({tuple(k) for k in keys} - set(known))
+    codes = key_codes(brick_keys(spec, refine))
+    known = key_codes(np.vstack([node_keys(spec), centre_keys]))  # first's probes, in its order
+    new = np.setdiff1d(codes, known)  # sorted: the same order whatever the bricks' order
     done = len(first["holes"])
-    second = bake_probes(renderer, key_positions(spec, np.array(new, int).reshape(-1, 3)), far, near, face_size,
+    second = bake_probes(renderer, key_positions(spec, code_keys(new)), far, near, face_size,
                          None if progress is None else lambda d, t: progress(done + d, done + t),
-                         hole_colour, True, lod_k) if new else None
+                         hole_colour, True, lod_k) if len(new) else None
     irr, mom = first["irradiance"], first["moments"]
     holes, inside = first["holes"], first["inside"]
     if second is not None:
         irr, mom = np.concatenate([irr, second["irradiance"]]), np.concatenate([mom, second["moments"]])
         holes, inside = np.concatenate([holes, second["holes"]]), np.concatenate([inside, second["inside"]])
-        known.update({k: done + j for j, k in enumerate(new)})
-    at = np.array([known[tuple(k)] for k in keys], int)
-    vol = LightVolume(spec, grid.irradiance, grid.moments, refine=refine if len(keys) else None,
-                      brick_irradiance=irr[at] if len(keys) else None, brick_moments=mom[at] if len(keys) else None)
+    at = find_codes(np.concatenate([known, new]), codes)
+    vol = LightVolume(spec, grid.irradiance, grid.moments, refine=refine if len(codes) else None,
+                      brick_irradiance=irr[at] if len(codes) else None, brick_moments=mom[at] if len(codes) else None)
     levels = {r: int((refine == r).sum()) for r in BRICK_LEVELS if (refine == r).any()}
     worst = float(errors.max()) if len(errors) else 0.0
     if levels:
@@ -296,21 +295,23 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     sl = tuple(slice(int(b), int(b) + int(c)) for b, c in zip(below, old_cells))
     refine[sl] = old_refine  # the old cells keep their bricks (their errors were 0 here: none chosen)
     keys = brick_keys(spec, refine)
-    known = {tuple(x): ("grid", i) for i, x in enumerate(node_keys(spec))}
-    known.update({tuple(x): ("first", k + j) for j, x in enumerate(centre_keys)})
+    codes = key_codes(keys)
+    # every place a brick may take its maps from, in this order (a later one wins a place: an old brick's corner is
+    # a grid node too, with the same maps): the grid, the new centres, the old bricks, the new bricks' probes
+    table = [key_codes(node_keys(spec)), key_codes(centre_keys)]
+    maps = [(irr, mom), (first["irradiance"][k:], first["moments"][k:])]
     if old_bricks:
-        known.update({tuple(x + shift): ("old", j) for j, x in enumerate(brick_keys(old, old_refine))})
-    new = sorted({tuple(x) for x in keys} - set(known))
-    second = bake_probes(renderer, key_positions(spec, np.array(new, int).reshape(-1, 3)), far, near, face_size,
-                         None, hole_colour, True, lod_k) if new else None
-    known.update({x: ("second", j) for j, x in enumerate(new)})
-    sources = {"grid": (irr, mom), "first": (first["irradiance"], first["moments"]),
-               "old": (previous.brick_irradiance, previous.brick_moments)}
+        table.append(key_codes(brick_keys(old, old_refine) + shift))
+        maps.append((previous.brick_irradiance, previous.brick_moments))
+    new = np.setdiff1d(codes, np.concatenate(table))
+    second = bake_probes(renderer, key_positions(spec, code_keys(new)), far, near, face_size,
+                         None, hole_colour, True, lod_k) if len(new) else None
     if second is not None:
-        sources["second"] = (second["irradiance"], second["moments"])
-    picks = [known[tuple(x)] for x in keys]
-    b_irr = np.array([sources[s][0][i] for s, i in picks]) if picks else None
-    b_mom = np.array([sources[s][1][i] for s, i in picks]) if picks else None
+        table.append(new)
+        maps.append((second["irradiance"], second["moments"]))
+    at = find_codes(np.concatenate(table), codes)
+    b_irr = np.concatenate([m[0] for m in maps])[at] if len(keys) else None
+    b_mom = np.concatenate([m[1] for m in maps])[at] if len(keys) else None
     vol = LightVolume(spec, grid.irradiance, grid.moments, refine=refine if len(keys) else None,
                       brick_irradiance=b_irr, brick_moments=b_mom)
     rs = [first] + ([second] if second is not None else [])
