@@ -324,11 +324,12 @@ def test_no_light_leaks_through_a_splat_wall(blender, tmp_path, write_3dgs_ply):
     assert np.max(blind / exact) > 1.5
 
 
-def test_a_mesh_that_leaves_the_volume_grows_it(blender):
+def test_a_mesh_that_leaves_the_volume_grows_it(blender, tmp_path):
     """Update When Moved with Lighting Volume (issue 37: "re-baked only when ... a mesh leaves it, and then only the
     part that changed"): a mesh moved inside the volume schedules nothing; moved out of it, the volume is grown
     over it on its own lattice, rendering only the new part (the report says how many probes were kept), and the
-    mesh is lit by the volume there; the World is not baked again."""
+    mesh is lit by the volume there; the World is not baked again. Saved and reopened, the file's volume is read
+    back from its images and grows again when the mesh leaves it once more."""
     from gs_ibl_addon.blender.lighting import auto_update as au
     from gs_ibl_addon.blender.lighting import local_light as ll
     from gs_ibl_addon.blender.lighting import volume as bv
@@ -367,3 +368,28 @@ def test_a_mesh_that_leaves_the_volume_grows_it(blender):
     # the lattice is the old one's: every old node is a node of the grown grid
     old, new = pv.probe_positions(spec0), pv.probe_positions(spec1)
     assert np.linalg.norm(new[:, None] - old[None], axis=2).min(0).max() < 1e-6
+    # saved and reopened: the volume comes back from the packed images, and a move out of it grows it again
+    path = str(tmp_path / "grown.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    before, names = bv.kept_volume(scene, probe), (probe.name, cube.name)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    probe, cube = (scene.objects[n] for n in names)
+    back = bv.kept_volume(scene, probe)
+    assert back is not None and back.spec == spec1 and back.tiles == before.tiles
+    for a, b in zip(back.all_maps(), before.all_maps()):
+        assert np.array_equal(a, np.asarray(b, np.float32))
+    bpy.context.view_layer.update()
+    cube.location = (-0.9, 0.2, 0.6)
+    bpy.context.view_layer.update()
+    assert au._pending_meshes == {(scene.name, probe.name): {cube.name}}
+    bpy.app.timers.unregister(au.run_pending)
+    assert au.run_pending() is None and au.last_auto_error is None
+    report = probe.gs_ibl_probe.local_report
+    print(report)
+    assert "light volume grown to" in report and vn.volume_spec().count > spec1.count
+    # another probe's place: the file's volume is not this bake's any more
+    bv.forget_volumes()
+    probe.location.x += 0.05
+    bpy.context.view_layer.update()
+    assert bv.kept_volume(scene, probe) is None

@@ -191,6 +191,20 @@ def test_brick_layout_and_cells_image():
     assert c["irradiance_size"] == (irr.shape[1], irr.shape[0]) and c["cells_size"] == (4, 3)
 
 
+def test_a_packed_volume_unpacks_to_itself():
+    """unpack_volume reads the three images back into the volume they were packed from (what a reopened file's
+    growth starts from), with bricks and without."""
+    for refine in (_refine({(1, 0, 1): 2, (2, 1, 0): 4}), None):
+        v = vol.synthetic_volume(CUBE, _bump, refine=refine)
+        irr, vis = vol.pack_atlas(v)
+        back = vol.unpack_volume(irr, vis, vol.pack_cells(v), CUBE, v.tiles)
+        assert back.tiles == v.tiles and np.array_equal(back.cells, v.cells)
+        for a, b in zip(back.all_maps(), v.all_maps()):
+            assert np.array_equal(a, np.asarray(b, np.float32))
+    with pytest.raises(ValueError, match="maps"):
+        vol.unpack_volume(irr, vis, vol.pack_cells(v), CUBE, v.tiles + 3)
+
+
 def _bump(p, n):
     """A light that peaks inside one cell (a lamp's 1/d^2 softened): linear interpolation between the grid's nodes
     misses it."""

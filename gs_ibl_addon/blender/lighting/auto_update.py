@@ -17,7 +17,7 @@ from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_place
                    seen_states)
 from .object_probes import is_lit_mesh, world_box
 from .sources import auto_splats, clear_lost_splats
-from .stale import refresh_notice
+from .stale import BAKED_KEY, refresh_notice, stale_reasons
 from .volume import forget_volumes, kept_volume, volume_light_steps
 
 _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
@@ -26,6 +26,7 @@ auto_relights = 0  # automatic re-choices of moved meshes' light (tests see how 
 last_auto_error: str | None = None  # the last automatic bake's error, for the panel and tests
 auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
 _rebaseline_next = False  # an undo or redo happened: the next depsgraph update is not a move
+_adopt_saved_next = False  # a file was opened: its next depsgraph update takes its up-to-date bakes as baked
 
 
 def _moved_lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, moved: set[str]) -> set[str]:
@@ -81,6 +82,17 @@ def _rebaseline() -> None:
                         places[name] = place_key(mesh)
 
 
+def _adopt_saved(scene: bpy.types.Scene) -> None:
+    """A bake saved up to date (its record on the probe matches the scene: stale.py) was made from the state seen
+    now: a lit mesh moved after opening the file is relit (the volume grown) without baking the World again. Asked
+    at the first depsgraph update after opening (at load_post the objects' matrices may not be evaluated yet)."""
+    for obj in scene.objects:
+        if is_probe(obj) and obj.get(BAKED_KEY) is not None and not stale_reasons(scene, obj):
+            splats = auto_splats(scene, obj)
+            if splats is not None:
+                baked_states[(scene.name, obj.name)] = bake_state(obj, splats, scene)
+
+
 def _moved_names(depsgraph) -> set[str]:
     return {u.id.original.name for u in depsgraph.updates
             if u.is_updated_transform and isinstance(u.id, bpy.types.Object)}
@@ -104,9 +116,12 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     (seen_states). Blender reports a transform update for any edit of the probe's settings too (Strength, a
     checkbox), and a state that differed from the last bake for another reason (the splats edited, a file opened)
     then re-baked on a Strength change ("re-baking moved probes" though nothing moved)."""
-    global _rebaseline_next
+    global _rebaseline_next, _adopt_saved_next
     clear_lost_splats(scene)
     refresh_notice(scene)  # the status bar says when a bake is out of date (stale.py)
+    if _adopt_saved_next:
+        _adopt_saved_next = False
+        _adopt_saved(scene)
     if _rebaseline_next:
         _rebaseline_next = False
         _rebaseline()
@@ -211,9 +226,9 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
 
 @persistent
 def on_load_pre(*_args) -> None:
-    global _rebaseline_next
+    global _rebaseline_next, _adopt_saved_next
     cancel_all()  # their results would land in the file being closed
-    _rebaseline_next = False
+    _rebaseline_next = _adopt_saved_next = False
     _pending.clear()
     _pending_meshes.clear()
     lit_places.clear()
@@ -224,8 +239,10 @@ def on_load_pre(*_args) -> None:
 
 @persistent
 def on_load_post(*_args) -> None:
+    global _adopt_saved_next
     for scene in bpy.data.scenes:  # the opened file's places: its first move is compared with them
         _look(scene)
+    _adopt_saved_next = True
     if bpy.context.scene is not None:
         refresh_notice(bpy.context.scene)  # a file saved with an out-of-date bake says so when opened
 

@@ -23,7 +23,7 @@ from . import volume_nodes as vn
 from ..common.datablocks import packed_float_image
 from ..common.jobs import Job, Work
 from ..splats import cache as splat_cache
-from ..splats.object import colour_space_of
+from ..splats.object import colour_space_of, splat_count
 from .auto_light import AUTO_KEY
 from .object_probes import is_lit_mesh, point_coefficients, probe_renderer_steps, world_box
 from .sources import lighting_set, require_splats
@@ -117,8 +117,11 @@ def _bake(renderer, boxes, within, where, budget, face_size, previous, progress)
 
 
 # Each probe's last light volume while the file is open, with what it was baked from (volume_state): Update When
-# Moved grows it when a lit mesh leaves it (volume_light_steps(grow=True)) instead of baking it whole again.
+# Moved grows it when a lit mesh leaves it (volume_light_steps(grow=True)) instead of baking it whole again. A
+# reopened file's volume comes back from its packed images (kept_volume), the probe and splats it was baked from
+# named beside them (KEPT_FROM), so that dragging a mesh out after reopening grows it too.
 _kept: dict[tuple[str, str], tuple] = {}
+KEPT_FROM = "gs_ibl_kept_from"  # on the volume's irradiance image: {"scene", "probe", "state": file_state}
 
 
 def volume_state(probe: bpy.types.Object, splats: list[bpy.types.Object]) -> tuple:
@@ -129,14 +132,59 @@ def volume_state(probe: bpy.types.Object, splats: list[bpy.types.Object]) -> tup
             int(probe.gs_ibl_probe.volume_probes), BUDGET, FACE)
 
 
+def file_state(probe: bpy.types.Object, splats: list[bpy.types.Object]) -> dict:
+    """volume_state as a saved file can hold it (names, counts, matrices: the session's data keys do not survive
+    reopening), JSON's own types."""
+    def rounded(values) -> list[float]:
+        return [round(float(v), 6) for v in values]
+    return {"probe": rounded(probe.matrix_world.translation),
+            "splats": [[o.name, splat_count(o), colour_space_of(o), rounded(v for row in o.matrix_world for v in row)]
+                       for o in splats],
+            "settings": [int(probe.gs_ibl_probe.volume_probes), BUDGET, FACE]}
+
+
+def _pixels(image: bpy.types.Image) -> np.ndarray:
+    w, h = image.size
+    px = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(px)
+    return px.reshape(h, w, 4)[..., :3]
+
+
+def _from_file(scene: bpy.types.Scene, probe: bpy.types.Object) -> tuple | None:
+    """(volume, volume_state) of the file's packed volume when it is ``probe``'s, baked from the splats that light
+    it now, where the probe stands now; else None."""
+    img = vn.volume_image()
+    raw = img.get(KEPT_FROM) if img is not None else None
+    if not raw:
+        return None
+    try:
+        splats = lighting_set(scene, require_splats(scene, probe))
+        d = json.loads(raw)
+        if (d.get("scene"), d.get("probe")) != (scene.name, probe.name) or d.get("state") != json.loads(
+                json.dumps(file_state(probe, splats))):
+            return None
+        vis, cells, spec, tiles = vn.visibility_image(), vn.cells_image(), vn.volume_spec(img), vn.volume_tiles(img)
+        if vis is None or cells is None or spec is None or tiles is None:
+            return None
+        vol = pv.unpack_volume(_pixels(img), _pixels(vis), _pixels(cells), spec, int(tiles))
+    except (ValueError, KeyError, TypeError, ReferenceError):  # an image or a property edited or gone: bake anew
+        return None
+    return vol, volume_state(probe, splats)
+
+
 def forget_volumes() -> None:
     """Drop every kept volume (another file is being opened: its probes' names mean other probes)."""
     _kept.clear()
 
 
 def kept_volume(scene: bpy.types.Scene, probe: bpy.types.Object):
-    """The probe's last light volume (core LightVolume), or None."""
+    """The probe's last light volume (core LightVolume), or None: baked in this session, or read back from the
+    file's images (a reopened file) when they are this probe's, from the splats that light it now."""
     kept = _kept.get((scene.name, probe.name))
+    if kept is None:
+        kept = _from_file(scene, probe)
+        if kept is not None:
+            _kept[(scene.name, probe.name)] = kept
     return None if kept is None else kept[0]
 
 
@@ -155,7 +203,9 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
     budget = BUDGET or int(probe.gs_ibl_probe.volume_probes) or DEFAULT_BUDGET
     r = yield from probe_renderer_steps(scene, probe, need_world=True)
     where = np.array(probe.matrix_world.translation, np.float64)
-    state = volume_state(probe, splats)
+    state, saved = volume_state(probe, splats), file_state(probe, splats)
+    if grow:
+        kept_volume(scene, probe)  # a reopened file's, read back
     kept = _kept.get((scene_name, probe_name))
     previous = kept[0] if grow and kept is not None and kept[1] == state else None
     messages, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget,
@@ -171,6 +221,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
     ll.prune_atlas()  # before the group is rebuilt: tiles nobody reads any more (volume_nodes.py says why)
     grids = sorted(o.name for o in bpy.data.objects if ll.has_local_light(o) in ("probe", "grid"))
     store_volume(irr, vis, cells, vol.spec, vol.tiles, world, s.irradiance_image)
+    vn.volume_image()[KEPT_FROM] = json.dumps({"scene": scene_name, "probe": probe_name, "state": saved})
     for obj in lit:
         ll.light_object(obj, float(s.strength))
         obj[AUTO_KEY] = probe.name

@@ -378,6 +378,32 @@ def pack_cells(volume: LightVolume) -> np.ndarray:
     return img.reshape(rows, cols, 3)
 
 
+def _untile(atlas: np.ndarray, n: int, count: int, channels: int) -> np.ndarray:
+    """_tile's inverse: the first ``count`` maps (count, n, n, channels) of an atlas of bordered n x n tiles."""
+    t = n + 2
+    cols, rows = atlas_tiles(count)
+    a = np.asarray(atlas, np.float32)[:rows * t, :cols * t, :channels]
+    tiles = a.reshape(rows, t, cols, t, channels).transpose(0, 2, 1, 3, 4).reshape(rows * cols, t, t, channels)
+    return tiles[:count, 1:-1, 1:-1]
+
+
+def unpack_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, cells: np.ndarray, spec: GridSpec,
+                  tiles: int) -> LightVolume:
+    """The LightVolume that pack_atlas and pack_cells wrote these three images of (``tiles`` maps on ``spec``):
+    what a saved file holds of its volume, so that a growth after reopening it starts from it (float32 maps)."""
+    ncx, ncy, ncz = cell_shape(spec)
+    r = np.asarray(cells, np.float32).reshape(-1, 3)[:ncx * ncy * ncz, 1].astype(int)
+    refine = r.reshape(ncz, ncy, ncx).transpose(2, 1, 0)
+    n, bricks = spec.count, int(sum((int(x) + 1) ** 3 for x in r if x > 1))
+    if tiles != n + bricks:
+        raise ValueError(f"the volume's images say {tiles} maps, not its {n} grid nodes and {bricks} brick probes")
+    irr, mom = _untile(irr_atlas, IRR, tiles, 3), _untile(vis_atlas, VIS, tiles, 2)
+    bricks = tiles > n
+    return LightVolume(spec, grid_maps(irr[:n], spec.shape), grid_maps(mom[:n], spec.shape),
+                       refine=refine if bricks else None, brick_irradiance=irr[n:] if bricks else None,
+                       brick_moments=mom[n:] if bricks else None)
+
+
 # ------------------------------------------------------------------------------------------------------------------
 # Lookup
 
