@@ -62,3 +62,20 @@ def test_bake_probes_on_the_gpu_equals_the_numpy_path(renderer, monkeypatch):
     assert (got["inside"] == want["inside"]).all() and got["inside"][3] and got["inside"].sum() == 1
     monkeypatch.setattr(vb, "GPU_MAPS", None)
     assert vb.bake_probes(renderer, PROBES[:1], FAR, NEAR, 16)["gpu_maps"] == (not renderer.ctx.is_cpu)
+
+
+def test_maps_queued_behind_a_render_drawn_again():
+    """volume_maps given a render still in flight (render(wait=False), as bake_probes does on a GPU) is queued behind
+    it; when that render outgrows its instance list and is drawn again, the maps are made again from the finished
+    frame: the same as from a render waited for first."""
+    scene = rooms.lamp_room()
+    matrices = vb.irradiance_matrix(16), vb.visibility_matrix(16)
+    with SplatRenderer(scene) as r:
+        want = gvm.volume_maps(r.render(ViewBatch.cubemaps(PROBES, 16), depth=True).frame, *matrices, FAR, NEAR, HOLE)
+    with SplatRenderer(scene) as r:
+        r.capacity = 8  # as if every frame so far were tiny: this one is drawn again with room for its instances
+        res = r.render(ViewBatch.cubemaps(PROBES, 16), depth=True, wait=False)
+        got = gvm.volume_maps(res.frame, *matrices, FAR, NEAR, HOLE)
+        assert res.instances > 8
+    for g, w, what in zip(got, want, ("irradiance", "moments", "holes", "closeness")):
+        assert np.array_equal(g, w), what

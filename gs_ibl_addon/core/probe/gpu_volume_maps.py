@@ -3,8 +3,8 @@ probe's two small maps (P x 1447 floats) instead of its cube and depth (P x 6 f^
 matmul: volume_bake.maps_from_cubes is the plain numpy reference, tests/test_gpu_volume_maps.py compares the two.
 The caller (volume_bake.bake_probes) passes the two matrices, so this stage imports nothing of the bake's.
 
-Two kernels in one submission after the render (which may have to draw again once it is waited for: the maps wait
-for it first, as the GPU hole fill does): volume_maps_prep (holes filled, the irradiance's box-average to IRR_FACE,
+Two kernels in one submission queued behind the render (render(wait=False): the host waits once for both, and the
+maps are made again in the rare case the render had to draw again, as filter_probes does): volume_maps_prep (holes filled, the irradiance's box-average to IRR_FACE,
 the radial distances and their squares, each texel's hole and closeness weight) and volume_maps_apply twice (the
 same fixed matrices as the numpy path, transposed, with one more row that sums the hole or closeness weight: the
 hole fraction and the inside test come out with the maps). On a CPU device (lavapipe) numpy's BLAS is ~20-40x
@@ -65,7 +65,7 @@ def volume_maps(frame, irradiance: np.ndarray, visibility: np.ndarray, far: floa
                          f"fit a frame of {f}^2 faces")
     if frame.depth is None:
         raise ValueError("the frame has no depth: render(batch, depth=True) writes it")
-    frame.wait()
+    frame.check()
     ctx, probes = frame.ctx, frame.probes
     n_irr, n_vis = 6 * g * g, 6 * f * f
     irr_in = scratch(ctx, probes * n_irr * 16, "volume-irr-in")
@@ -75,20 +75,31 @@ def volume_maps(frame, irradiance: np.ndarray, visibility: np.ndarray, far: floa
     direct = out.host_visible and out.host_cached
     read = out if direct else kept(ctx, "volume-maps-read", nbytes, staging=True)
     hr, hg, hb = (float(c) for c in hole_colour)
+    prog = None
     try:
-        with Recorder(ctx) as rec:
-            rec.dispatch(KERNELS["volume_maps_prep"], [frame.image, frame.depth, omega_table(ctx, f), irr_in, vis_in],
-                         groups(probes * n_irr, 64, ctx), n=probes * n_irr, f=f, g=g, far=float(far),
-                         near=float(near), covered=COVERED, hole_r=hr, hole_g=hg, hole_b=hb)
-            wg = (-(-(IRR * IRR + 1) // 64), -(-probes // PROBES_PER_GROUP))
-            rec.dispatch(KERNELS["volume_maps_apply"], [_matrix(ctx, "irr", irradiance), irr_in, out], wg, n_in=n_irr,
-                         rows=IRR * IRR + 1, probes=probes, channels=3, stride=STRIDE, at=IRR_AT, extra=3)
-            rec.dispatch(KERNELS["volume_maps_apply"], [_matrix(ctx, "vis", visibility), vis_in, out], wg, n_in=n_vis,
-                         rows=VIS * VIS + 1, probes=probes, channels=2, stride=STRIDE, at=VIS_AT, extra=2)
-            if not direct:
-                rec.copy(out, read, nbytes)
+        rec = Recorder(ctx, reusable=True)
+        rec.dispatch(KERNELS["volume_maps_prep"], [frame.image, frame.depth, omega_table(ctx, f), irr_in, vis_in],
+                     groups(probes * n_irr, 64, ctx), n=probes * n_irr, f=f, g=g, far=float(far),
+                     near=float(near), covered=COVERED, hole_r=hr, hole_g=hg, hole_b=hb)
+        wg = (-(-(IRR * IRR + 1) // 64), -(-probes // PROBES_PER_GROUP))
+        rec.dispatch(KERNELS["volume_maps_apply"], [_matrix(ctx, "irr", irradiance), irr_in, out], wg, n_in=n_irr,
+                     rows=IRR * IRR + 1, probes=probes, channels=3, stride=STRIDE, at=IRR_AT, extra=3)
+        rec.dispatch(KERNELS["volume_maps_apply"], [_matrix(ctx, "vis", visibility), vis_in, out], wg, n_in=n_vis,
+                     rows=VIS * VIS + 1, probes=probes, channels=2, stride=STRIDE, at=VIS_AT, extra=2)
+        if not direct:
+            rec.copy(out, read, nbytes)
+        prog = rec.program()
+        # queued behind a render still in flight (render(wait=False)): the host waits once for both, and makes the
+        # maps again in the rare case the render had to be drawn again after they were queued
+        prog.start()
+        if frame.wait():
+            prog.wait()
+            prog.start()
+        prog.wait()
         flat = read.read(np.float32, probes * STRIDE).reshape(probes, STRIDE)
     finally:
+        if prog is not None:
+            prog.close()
         for b in (irr_in, vis_in, out):
             b.close()
     irr = flat[:, :IRR * IRR * 3].reshape(probes, IRR, IRR, 3)

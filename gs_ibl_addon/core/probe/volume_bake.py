@@ -177,7 +177,7 @@ def bake_probes(renderer, positions: np.ndarray, far: float, near: float, face_s
         t0 = time.perf_counter()
         part = pos[start:start + chunk]
         sl = slice(start, start + len(part))
-        res = renderer.render(ViewBatch.cubemaps(part, face), depth=True, lod_k=lod_k)
+        res = renderer.render(ViewBatch.cubemaps(part, face), depth=True, lod_k=lod_k, wait=not on_gpu)
         if on_gpu:  # the maps and both fractions made behind the render, read back small
             t1 = time.perf_counter()
             irr[sl], mom[sl], holes[sl], close = volume_maps(res.frame, irradiance_matrix(min(face, IRR_FACE)),
