@@ -3,10 +3,10 @@ probe's two small maps (P x 1447 floats) instead of its cube and depth (P x 6 f^
 matmul: volume_bake.maps_from_cubes is the plain numpy reference, tests/test_gpu_volume_maps.py compares the two.
 The caller (volume_bake.bake_probes) passes the two matrices, so this stage imports nothing of the bake's.
 
-Two kernels in one submission queued behind the render (render(wait=False): the host waits once for both, and the
-maps are made again in the rare case the render had to draw again, as filter_probes does): volume_maps_prep (holes filled, the irradiance's box-average to IRR_FACE,
-the radial distances and their squares, each texel's hole and closeness weight) and volume_maps_apply twice (the
-same fixed matrices as the numpy path, transposed, with one more row that sums the hole or closeness weight: the
+Two kernels queued behind the render (render(wait=False): one submission and one wait for both; made again in the
+rare case the render had to draw again, as filter_probes does): volume_maps_prep (holes filled, the irradiance's
+box-average to IRR_FACE, the radial distances and their squares, each texel's hole and closeness weight) and
+volume_maps_apply twice (the same fixed matrices as the numpy path, transposed, with one more row that sums the hole or closeness weight: the
 hole fraction and the inside test come out with the maps). On a CPU device (lavapipe) numpy's BLAS is ~20-40x
 faster than these kernels and the readback a memcpy: bake_probes keeps the host path there (volume_bake.GPU_MAPS).
 """
