@@ -6,9 +6,10 @@ The caller (volume_bake.bake_probes) passes the two matrices, so this stage impo
 Two kernels queued behind the render (render(wait=False): one submission and one wait for both; made again in the
 rare case the render had to draw again, as filter_probes does): volume_maps_prep (holes filled, the irradiance's
 box-average to IRR_FACE, the radial distances and their squares, each texel's hole and closeness weight) and
-volume_maps_apply twice (the same fixed matrices as the numpy path, transposed, with one more row that sums the hole or closeness weight: the
-hole fraction and the inside test come out with the maps). On a CPU device (lavapipe) numpy's BLAS is ~20-40x
-faster than these kernels and the readback a memcpy: bake_probes keeps the host path there (volume_bake.GPU_MAPS).
+volume_maps_apply twice (the same fixed matrices as the numpy path, transposed, with one more row that sums the hole
+or closeness weight: the hole fraction and the inside test come out with the maps). On a CPU device (lavapipe)
+numpy's BLAS is ~20-40x faster than these kernels and the readback a memcpy: bake_probes keeps the host path there
+(volume_bake.GPU_MAPS).
 """
 from __future__ import annotations
 
