@@ -121,7 +121,8 @@ def on_depsgraph_update(scene, depsgraph) -> None:
     refresh_notice(scene)  # the status bar says when a bake is out of date (stale.py)
     if _adopt_saved_next:
         _adopt_saved_next = False
-        _adopt_saved(scene)
+        for sc in bpy.data.scenes:
+            _adopt_saved(sc)
     if _rebaseline_next:
         _rebaseline_next = False
         _rebaseline()

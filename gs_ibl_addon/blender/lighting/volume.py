@@ -201,11 +201,11 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
             "lit": [], "outside": outside, "probes": 0}
     scene_name, probe_name = scene.name, probe.name
     budget = BUDGET or int(probe.gs_ibl_probe.volume_probes) or DEFAULT_BUDGET
+    if grow:
+        kept_volume(scene, probe)  # a reopened file's, read back
     r = yield from probe_renderer_steps(scene, probe, need_world=True)
     where = np.array(probe.matrix_world.translation, np.float64)
     state, saved = volume_state(probe, splats), file_state(probe, splats)
-    if grow:
-        kept_volume(scene, probe)  # a reopened file's, read back
     kept = _kept.get((scene_name, probe_name))
     previous = kept[0] if grow and kept is not None and kept[1] == state else None
     messages, vol, (irr, vis, cells), world = yield Work(_bake, r, boxes, within, where, budget,
