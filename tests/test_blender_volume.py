@@ -214,7 +214,8 @@ def test_volume_bake_lights_every_mesh_and_follows_motion(blender, tmp_path):
     report = probe.gs_ibl_probe.local_report
     print("\n" + report + "\n" + probe.gs_ibl_probe.last_summary)
     assert scene.frame_current == 1
-    assert 8 <= int(re.search(r"share (\d+) probes", report).group(1)) <= 160, report
+    grid = [int(x) for x in re.search(r"a grid of (\d+) x (\d+) x (\d+) probes", report).groups()]
+    assert 8 <= np.prod(grid) <= 160, report
     from gs_ibl_addon.blender.lighting.stale import stale_reasons
     probe.gs_ibl_probe.volume_probes = 200
     assert "its Volume Probes is now 200" in stale_reasons(scene, probe)
@@ -363,6 +364,12 @@ def test_a_mesh_that_leaves_the_volume_grows_it(blender, tmp_path):
     spec1 = vn.volume_spec()
     print("\n" + s.local_report)
     assert "light volume grown to" in s.local_report and "nodes and" in s.local_report
+    # Details (the bake's report) says the grown volume, and when: its volume line replaced
+    volume_lines = [line for line in s.last_report.split("\n") if line.startswith(bv.REPORT_PREFIX)]
+    assert len(volume_lines) == 1 and "after a move" in volume_lines[0] and "a grid of 8 x 4 x 4" in volume_lines[0]
+    # noted again while nothing is outside the grown volume (a drag that paused, then ended): no second growth
+    au._pending_meshes[(scene.name, probe.name)] = {cube.name}
+    assert au.run_pending() is None and au.auto_relights == relights + 1
     assert spec1.count > spec0.count and np.all(np.asarray(spec1.lo) <= np.array([-0.55, 0.05, 0.45]) + 1e-5)
     assert bv.kept_volume(scene, probe).spec == spec1 and ll.has_local_light(cube) == "volume"
     # the lattice is the old one's: every old node is a node of the grown grid

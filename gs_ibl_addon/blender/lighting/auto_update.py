@@ -4,6 +4,8 @@ Auto probe's meshes given their light again when only they moved, and a Lighting
 lit mesh that left it (only the new part rendered: volume.py, core/probe/volume_refine.py extend_volume)."""
 from __future__ import annotations
 
+import time
+
 import bpy
 import numpy as np
 from bpy.app.handlers import persistent
@@ -18,6 +20,7 @@ from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_place
 from .object_probes import is_lit_mesh, world_box
 from .sources import auto_splats, clear_lost_splats
 from .stale import BAKED_KEY, refresh_notice, stale_reasons
+from .volume import REPORT_PREFIX as VOLUME_PREFIX
 from .volume import forget_volumes, kept_volume, volume_light_steps
 
 _pending: set[tuple[str, str]] = set()  # (scene name, probe name) waiting for a re-bake
@@ -91,6 +94,21 @@ def _adopt_saved(scene: bpy.types.Scene) -> None:
             splats = auto_splats(scene, obj)
             if splats is not None:
                 baked_states[(scene.name, obj.name)] = bake_state(obj, splats, scene)
+
+
+def _replace_line(scene_name: str, probe_name: str, prefix: str, text: str) -> None:
+    """The probe's report (Details) with its line starting ``prefix`` replaced by ``text`` (added if it has none)."""
+    scene = bpy.data.scenes.get(scene_name)
+    probe = scene.objects.get(probe_name) if scene is not None else None
+    if probe is None:
+        return
+    lines = probe.gs_ibl_probe.last_report.split("\n") if probe.gs_ibl_probe.last_report else []
+    at = next((i for i, line in enumerate(lines) if line.startswith(prefix)), None)
+    if at is None:
+        lines.append(text)
+    else:
+        lines[at] = text
+    probe.gs_ibl_probe.last_report = "\n".join(lines)
 
 
 def _moved_names(depsgraph) -> set[str]:
@@ -199,13 +217,20 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
         if bake_state(probe, splats, scene) == baked_states.get((scene_name, probe_name)):
             meshes = [scene.objects[n] for n in sorted(relight.get((scene_name, probe_name), ()))
                       if n in scene.objects and probe.gs_ibl_probe.world is not None]
+            volume = probe.gs_ibl_probe.lighting == "VOLUME"
+            if volume:  # noted while an earlier growth ran (a drag paused, then ended): those inside it now are lit
+                meshes = [m for m in meshes if _moved_lit_meshes(scene, probe, {m.name})]
             if meshes:  # only lit meshes moved: their light is chosen again (the volume grown), the World stays
                 try:
                     auto_relights += 1
-                    steps = (volume_light_steps(scene, probe, grow=True) if probe.gs_ibl_probe.lighting == "VOLUME"
-                             else relight_steps(scene, probe, meshes))
+                    t0 = time.perf_counter()
+                    steps = volume_light_steps(scene, probe, grow=True) if volume else relight_steps(scene, probe,
+                                                                                                      meshes)
                     text, _choices = yield from within(steps, *part)
+                    text += f" (after a move, {time.perf_counter() - t0:.1f} s)"
                     print(f"GS-IBL (update when moved): {text}")
+                    if volume:  # Details says what lights the meshes now (the volume's line of the bake's report)
+                        _replace_line(scene_name, probe_name, VOLUME_PREFIX, text)
                 except (ValueError, RuntimeError, OSError, MemoryError) as e:
                     last_auto_error = f"{probe_name}: {e}"
                     print(f"GS-IBL (update when moved): {last_auto_error}")

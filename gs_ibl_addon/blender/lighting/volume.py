@@ -230,12 +230,14 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
         if obj is not None and obj.get(AUTO_KEY) == probe.name:
             ll.unlight_object(obj)
             del obj[AUTO_KEY]
-    probes = vol.timings.get("probes", vol.spec.count) + vol.timings.get("kept", 0)  # (a grown volume's kept nodes)
-    lines = [f"{REPORT_PREFIX}{len(lit)} meshes share {probes} probes (a grid "
-             f"of {' x '.join(map(str, vol.spec.shape))}, {pv.spec_spacing(vol.spec):.2f} m apart, and bricks), from "
-             f"{len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
+    bricks = int((vol.cells > 1).sum())
+    lines = [f"{REPORT_PREFIX}{len(lit)} mesh{'es share' if len(lit) != 1 else ' has'} a grid of "
+             f"{' x '.join(map(str, vol.spec.shape))} probes, {pv.spec_spacing(vol.spec):.2f} m apart"
+             + (f", and {bricks} brick{'s' if bricks != 1 else ''} of finer probes" if bricks else "")
+             + f", from {len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
     _kept[(scene_name, probe_name)] = (vol, state)
-    lines += messages + vol.report
+    # a volume that needed nothing: its report was the bake's that made it (said by messages, not repeated)
+    lines += messages + ([] if previous is not None and vol is previous else vol.report)
     if outside:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))
