@@ -68,7 +68,8 @@ def describe(scene, view_layer=None) -> tuple[str, list[str]]:
     if not enabled(scene):
         return "F12: meshes only (Splats in Renders is off)", notes
     if hidden:
-        notes.append(f"left out (camera icon off, or not in this view layer): {', '.join(o.name for o in hidden)}")
+        names = ", ".join(o.name for o in hidden)
+        notes.append(f"Left out of F12: {names} (camera icon off, or not in this view layer)")
     if not drawn:
         return "F12: no GS-IBL splats (no splat object has its camera icon on)", notes
     if scene.camera is None:
