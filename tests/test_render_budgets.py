@@ -66,3 +66,21 @@ def test_level_of_detail_cut_budget():
         res = r.render(ViewBatch.cubemap(near, 32), lod_k=4.0, wait=False)
         assert r.resolve(res) and r.drawn > cut_far - 4096
         assert np.array_equal(np.stack(res.images), _fresh(scene, ViewBatch.cubemap(near, 32), lod=tree, lod_k=4.0))
+
+
+def test_a_trimmed_renderer_draws_each_batch_once():
+    """After trim() (a renderer kept between bakes gives back what a batch grew) a batch shape it drew before, and a
+    new batch of probes like those it drew, get room in the instance list before they are recorded: drawn once
+    (resolve draws nothing again), the same images as a fresh renderer's. Before, the first batch of every bake was
+    drawn twice."""
+    scene = _scene(3000, 3.0)
+    origins = np.random.default_rng(5).uniform(-0.5, 0.5, (12, 3))
+    four, twelve = ViewBatch.cubemaps(origins[:4], 64), ViewBatch.cubemaps(origins, 64)
+    with SplatRenderer(scene) as r:
+        first = r.render(four, wait=False)
+        assert r.resolve(first)  # a new renderer's list is sized for a probe or two: drawn again
+        r.trim()
+        for batch in (four, twelve):  # the shape drawn before; a new shape, from what its probes drew
+            res = r.render(batch, wait=False)
+            assert not r.resolve(res) and res.instances > 4 * r._per_probe[r._probe_shape(four)] * 0.5
+            assert np.array_equal(np.stack(res.images), _fresh(scene, batch))

@@ -624,6 +624,9 @@ class SplatRenderer:
         # render, grown when a frame outgrows them, so a small face after a large one does not sort its capacity.
         self._budgets: dict[tuple, tuple[int, int]] = {}
         self._min_chunks: dict[tuple, int] = {}  # per batch shape, the chunks the loop limit asked for (LOOP_PAIRS)
+        # The most instances a group of each batch shape drew, and per probe for each probe shape (_presize)
+        self._needed: dict[tuple, int] = {}
+        self._per_probe: dict[tuple, float] = {}
         self._frame: dict[str, Buffer] = {}  # frame buffers, grown to the largest batch so far and kept
         self._host: dict[str, np.ndarray] = {}  # render_camera's last arrays (_host_array)
         self._sorted_depth: tuple[Buffer, Buffer] | None = None  # where the depth sort leaves its result
@@ -821,6 +824,7 @@ class SplatRenderer:
             raise ValueError(f"depth of {probes} probes does not fit one group of this device ({group}): "
                              "render them without depth, or fewer at a time")
         self._ensure_slots(group)
+        self._presize(batch, float(lod_k), group)
         if self._compacts(batch):
             self._ensure_compact()
         last = probes - (-(-probes // group) - 1) * group
@@ -908,6 +912,9 @@ class SplatRenderer:
             # per group: [0] pairs kept, [1] pairs wanted, [2] nodes in the cut
             counts = self._frame["group_counts"].read(np.uint32, 4 * n_groups).reshape(n_groups, 4)
             needed, total = int(counts[:, 1].max()), int(counts[:, 1].sum())
+            self._needed[shape] = max(self._needed.get(shape, 0), needed)
+            key = self._probe_shape(batch, lod_k)
+            self._per_probe[key] = max(self._per_probe.get(key, 0.0), needed / group)
             pairs_cap, cut_cap = self._caps(shape)
             compacts = self._compacts(batch)
             if compacts:
@@ -970,6 +977,25 @@ class SplatRenderer:
         """What sets a render's instance and cut counts, short of where its probes are."""
         return (tuple((v.width, v.height) for v in batch.views), batch.n_probes, group, float(batch.pixel_angle),
                 batch.dilation, lod_k)
+
+    @staticmethod
+    def _probe_shape(batch: ViewBatch, lod_k: float = 0.0) -> tuple:
+        """_shape without the batch's size: what sets one probe's instances."""
+        return (tuple((v.width, v.height) for v in batch.views), float(batch.pixel_angle), batch.dilation, lod_k)
+
+    def _presize(self, batch: ViewBatch, lod_k: float, group: int) -> None:
+        """Room in the instance list, before recording, for what this batch shape drew before (a new shape: what
+        its probes drew in other batches, per probe). A frame learns that it outgrew the list only once drawn, and
+        is then drawn again: after trim() (a renderer kept between bakes) the first batch of every bake was drawn
+        twice (lavapipe: a 76-probe batch of the sample room, ~3 s more a light volume bake)."""
+        need = self._needed.get(self._shape(batch, lod_k, group))
+        if need is None:
+            per = self._per_probe.get(self._probe_shape(batch, lod_k))
+            need = None if per is None else per * group
+        if need:
+            want = int(need * 1.25) + 1024  # the margin a frame that outgrew the list is drawn again with
+            if want > self.capacity:
+                self._ensure_capacity(min(want, _binding_limit(self.ctx) // 4))
 
     def _caps(self, shape: tuple) -> tuple[int, int]:
         """(instances, cut nodes) that recordings of ``shape`` sort and emit: the learnt budget, within the
