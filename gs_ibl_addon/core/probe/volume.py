@@ -394,14 +394,14 @@ def unpack_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, cells: np.ndarra
     ncx, ncy, ncz = cell_shape(spec)
     r = np.asarray(cells, np.float32).reshape(-1, 3)[:ncx * ncy * ncz, 1].astype(int)
     refine = r.reshape(ncz, ncy, ncx).transpose(2, 1, 0)
-    n, bricks = spec.count, int(sum((int(x) + 1) ** 3 for x in r if x > 1))
-    if tiles != n + bricks:
-        raise ValueError(f"the volume's images say {tiles} maps, not its {n} grid nodes and {bricks} brick probes")
+    n, in_bricks = spec.count, int(sum((int(x) + 1) ** 3 for x in r if x > 1))
+    if tiles != n + in_bricks:
+        raise ValueError(f"the volume's images say {tiles} maps, not its {n} grid nodes and {in_bricks} brick probes")
     irr, mom = _untile(irr_atlas, IRR, tiles, 3), _untile(vis_atlas, VIS, tiles, 2)
-    bricks = tiles > n
-    return LightVolume(spec, grid_maps(irr[:n], spec.shape), grid_maps(mom[:n], spec.shape),
-                       refine=refine if bricks else None, brick_irradiance=irr[n:] if bricks else None,
-                       brick_moments=mom[n:] if bricks else None)
+    if not in_bricks:
+        return LightVolume(spec, grid_maps(irr, spec.shape), grid_maps(mom, spec.shape))
+    return LightVolume(spec, grid_maps(irr[:n], spec.shape), grid_maps(mom[:n], spec.shape), refine=refine,
+                       brick_irradiance=irr[n:], brick_moments=mom[n:])
 
 
 # ------------------------------------------------------------------------------------------------------------------
