@@ -59,7 +59,7 @@ from gs_ibl_addon.core.probe.variation import LUMINANCE  # noqa: E402
 from gs_ibl_addon.core.probe.volume_bake import bake_volume, point_irradiance  # noqa: E402
 from gs_ibl_addon.core.probe.volume_refine import bake_light_volume, bake_refined  # noqa: E402
 from gs_ibl_addon.core.probe.volume_region import plan_volume  # noqa: E402
-from gs_ibl_addon.core.render.renderer import SplatRenderer  # noqa: E402
+from gs_ibl_addon.core.render.renderer import BAKE_KEEP_SHARE, SplatRenderer  # noqa: E402
 from gs_ibl_addon.core.stage_times import StageTimes, stages  # noqa: E402
 from gs_ibl_addon.core.synthetic import fibonacci_sphere  # noqa: E402
 
@@ -166,11 +166,11 @@ def budget_sweep(r: SplatRenderer, n_points: int, budgets, faces=(volume_bake.DE
             # timed as Blender's second bake of a scene: the first made the shapes' recordings, and trim() after it
             # gave back what its batches grew (blender/lighting/volume.py _bake)
             bake_light_volume(r, boxes_of(PLACES), budget, face_size=face)
-            r.trim()
+            r.trim(BAKE_KEEP_SHARE)
             t0 = time.perf_counter()
             v = bake_light_volume(r, boxes_of(PLACES), budget, face_size=face)[1]
             secs = time.perf_counter() - t0
-            r.trim()
+            r.trim(BAKE_KEEP_SHARE)
             print(f"budget {budget}, {face}^2 faces: {v.timings['probes']} probes, {secs:.2f} s; {v.report[:1]}",
                   flush=True)
             for p in PLACES:
@@ -223,12 +223,13 @@ def _cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
         bake_probe(None, np.asarray(PROBE, np.float64), ProbeSettings(), renderer=r, host_splats=scene)
         return time.perf_counter() - t0
 
-    def volume(names) -> tuple[float, int, dict]:
+    def volume(names, keep: float = BAKE_KEEP_SHARE) -> tuple[float, int, dict]:
         """Lighting Volume's bake as blender/lighting/volume.py runs it: the light's measurement and the grid's plan
-        (its share of the budget), then grid, centres and bricks. (wall s, probes, its GPU / host ms and
+        (its share of the budget), then grid, centres and bricks, on a renderer trimmed as Blender's bakes leave it
+        (``keep``: trim's keep_within; 0 gives every batch's buffers back). (wall s, probes, its GPU / host ms and
         submissions)."""
         timings: dict = {}
-        r.trim()  # as Blender's bakes leave the cached renderer (blender/lighting/volume.py _bake)
+        r.trim(keep)
         with StageTimes(r.ctx, timings).stage("volume"):
             v = bake_light_volume(r, boxes_of(names))[1]
         t = stages(timings)["volume"]
@@ -257,18 +258,20 @@ def _cost(r: SplatRenderer, scene, repeats: int) -> list[dict]:
                      "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2),
                      **split})
         print(rows[-1], flush=True)
-        # A/B: without making room before recording (SplatRenderer._presize), a trimmed renderer's first batch of
-        # each bake was drawn twice
+        # A/B: every batch's buffers given back before the bake (a large scene's, past BAKE_KEEP_SHARE, and every
+        # bake's before 2026-12-06), with the room made before recording (SplatRenderer._presize) and without it (the
+        # first batch of each bake drawn twice, as before)
         presize = SplatRenderer._presize
-        SplatRenderer._presize = lambda *_args: None
-        try:
-            tv, probes, split = volume(COST_SETS["3 meshes"])
-        finally:
-            SplatRenderer._presize = presize
-        rows.append({"meshes": "3 meshes, first batch drawn twice", "world_s": round(tw, 3), "volume_s": round(tv, 3),
-                     "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2),
-                     **split})
-        print(rows[-1], flush=True)
+        for label, room in (("given back", presize), ("given back, first batch drawn twice", lambda *_args: None)):
+            SplatRenderer._presize = room
+            try:
+                tv, probes, split = volume(COST_SETS["3 meshes"], keep=0.0)
+            finally:
+                SplatRenderer._presize = presize
+            rows.append({"meshes": f"3 meshes, {label}", "world_s": round(tw, 3), "volume_s": round(tv, 3),
+                         "probes": probes, "ratio": round((tw + tv) / tw, 2), "load": round(os.getloadavg()[0], 2),
+                         **split})
+            print(rows[-1], flush=True)
         ta = auto(COST_SETS["3 meshes"])
         rows.append({"meshes": "3 meshes, Auto today", "world_s": round(tw, 3), "volume_s": round(ta, 3),
                      "probes": 0, "ratio": round((tw + ta) / tw, 2), "load": round(os.getloadavg()[0], 2)})

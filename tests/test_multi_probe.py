@@ -220,6 +220,20 @@ def test_a_frame_too_big_for_the_device_is_refused_before_drawing():
         assert e.value.option == "face_size"
 
 
+def test_trim_keeps_a_small_batch_within_its_share():
+    """trim(keep_within): a batch's buffers within that share of the device's heap are kept (a renderer kept between
+    bakes makes them and records its programs again otherwise); past it they are given back."""
+    from gs_ibl_addon.core.limits import device_local_bytes
+    with SplatRenderer(_scene(0)) as r:
+        r.render_probes(_origins(7, seed=3), 64)
+        held = r.held_bytes()
+        assert r.slots == 7 and 0 < held < device_local_bytes(r.ctx)
+        r.trim(keep_within=1.0)
+        assert r.slots == 7 and r.held_bytes() == held and r._frame
+        r.trim(keep_within=0.5 * held / device_local_bytes(r.ctx))
+        assert r.slots == 1 and not r._frame and r.held_bytes() < held
+
+
 @pytest.mark.parametrize("lod", [False, True], ids=["full", "lod"])
 def test_trim_gives_back_what_a_batch_grew(lod):
     scene = _scene(0)

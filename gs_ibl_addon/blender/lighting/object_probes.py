@@ -15,6 +15,7 @@ from mathutils import Vector
 
 from ...core.probe.grid import POINT_FACE_SIZE, bake_sh_points, monomial_coefficients
 from ...core.probe.variation import Variation, box_points, variation_from_sh
+from ...core.render.renderer import BAKE_KEEP_SHARE
 from . import local_light as ll
 from ..splats import cache as splat_cache
 from .sources import find_splats, lighting_set, require_splats
@@ -87,7 +88,7 @@ def check_variation(scene: bpy.types.Scene, probe: bpy.types.Object, objects: li
         try:
             sh = bake_sh_points(r, pts, progress=progress)
         finally:
-            r.trim()  # the cached renderer keeps no more than one probe's buffers (core/render/renderer.py)
+            r.trim(BAKE_KEEP_SHARE)  # the cached renderer keeps a batch's buffers only while small (renderer.py)
     found = [variation_from_sh(n, sh[9 * i:9 * i + 9], pts[9 * i:9 * i + 9]) for i, n in enumerate(boxes)]
     tol = float(probe.gs_ibl_probe.variation_tolerance)
     over = [v for v in found if v.exceeds(tol)]
@@ -110,12 +111,12 @@ def coefficients_with_world(probe: bpy.types.Object, renderer, points: np.ndarra
 def point_coefficients(renderer, points: np.ndarray, progress: Progress | None = None,
                        face_size: int = POINT_FACE_SIZE) -> np.ndarray:
     """Monomial coefficients (P, 9, 3) of SH probes at ``points``, in one batch; the renderer is trimmed after (as
-    check_variation: a batch's buffers are not kept in the splat cache)."""
+    check_variation: a batch's buffers stay in the splat cache only while small, renderer.BAKE_KEEP_SHARE)."""
     with gpu:  # the renderer is shared with the overlay and running jobs (blender/jobs.py)
         try:
             return monomial_coefficients(bake_sh_points(renderer, points, face_size, progress=progress))
         finally:
-            renderer.trim()
+            renderer.trim(BAKE_KEEP_SHARE)
 
 
 def bake_object_probes(scene: bpy.types.Scene, probe: bpy.types.Object, objects: list[bpy.types.Object],

@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 
 from ...core.probe import volume as pv
+from ...core.render.renderer import BAKE_KEEP_SHARE
 from . import local_light as ll
 from . import volume_nodes as vn
 from ..common.datablocks import packed_float_image
@@ -113,7 +114,7 @@ def _bake(renderer, boxes, within, where, budget, face_size, previous, progress)
         world = point_coefficients(renderer, np.asarray(where, np.float64)[None])[0]
         return messages, vol, (*pv.pack_atlas(vol), pv.pack_cells(vol)), world
     finally:
-        renderer.trim()
+        renderer.trim(BAKE_KEEP_SHARE)
 
 
 # Each probe's last light volume while the file is open, with what it was baked from (volume_state): Update When
