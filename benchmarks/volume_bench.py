@@ -300,7 +300,7 @@ def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
     fig, (a, b) = plt.subplots(1, 2, figsize=(13, 4.8), gridspec_kw={"width_ratios": [2.2, 1]})
     width = 0.8 / len(methods)
     for i, m in enumerate(methods):
-        vals = [100 * next(r["err_mean"] for r in acc if r["place"] == p and r["method"].split(" (")[0] == m)
+        vals = [100 * next(float(r["err_mean"]) for r in acc if r["place"] == p and r["method"].split(" (")[0] == m)
                 for p in places]
         a.bar(np.arange(len(places)) + i * width, vals, width, label=m)
     a.set_xticks(np.arange(len(places)) + 0.4 - width / 2, places)
@@ -312,14 +312,16 @@ def plot(acc: list[dict], costs: list[dict], path: str, device: str) -> None:
     a.set_title("White spheres in the sample room vs dense per-point probes")
     a.legend(fontsize=7, ncol=2)
     labels = list(dict.fromkeys(c["meshes"] for c in costs))
-    ratios = [np.median([c["ratio"] for c in costs if c["meshes"] == m]) for m in labels]
-    bars = b.bar(range(len(labels)), ratios, color=["C0", "C1", "C7"][:len(labels)])
-    for bar, v in zip(bars, ratios):
-        b.text(bar.get_x() + bar.get_width() / 2, v, f"{v:.1f}x", ha="center", va="bottom")
-    b.set_xticks(range(len(labels)), [lb.replace(", ", "\n") for lb in labels], fontsize=8)
-    b.set_ylabel("whole bake / World-probe-only bake")
-    b.axhline(2, color="k", lw=0.8, ls="--")
-    b.axhline(4, color="k", lw=0.8, ls=":")
+    ratios = [np.median([float(c["ratio"]) for c in costs if c["meshes"] == m]) for m in labels]
+    b.barh(range(len(labels)), ratios, color=[f"C{i}" for i in range(len(labels))])  # long labels read sideways
+    for i, v in enumerate(ratios):
+        b.text(v, i, f" {v:.1f}x", ha="left", va="center", fontsize=8)
+    b.set_yticks(range(len(labels)), labels, fontsize=8)
+    b.invert_yaxis()
+    b.set_xlim(0, 1.15 * max(ratios))
+    b.set_xlabel("whole bake / World-probe-only bake (median)")
+    b.axvline(2, color="k", lw=0.8, ls="--")
+    b.axvline(4, color="k", lw=0.8, ls=":")
     b.set_title(f"Cost, {device}\n(targets 2x and 4x, lines)", fontsize=10)
     fig.tight_layout()
     os.makedirs(os.path.dirname(path), exist_ok=True)
@@ -340,7 +342,17 @@ def main() -> None:
                     help="probe cube faces for the budget sweep, comma separated (e.g. 16,32)")
     ap.add_argument("--out-csv", default=None)
     ap.add_argument("--png", default=os.path.join(REPO, "docs", "img", "volume_bench.png"))
+    ap.add_argument("--replot", metavar="CSV", help="redraw the chart from a run's CSVs (CSV_accuracy.csv and "
+                    "CSV_cost.csv, e.g. docs/bench/volume_nvidia-h100.csv) and stop")
     a = ap.parse_args()
+    if a.replot:
+        def rows(path):
+            with open(path, newline="") as f:
+                return list(csv.DictReader(f))
+        acc, costs = (rows(a.replot.replace(".csv", f"_{k}.csv")) for k in ("accuracy", "cost"))
+        plot(acc, costs, a.png, costs[0]["device"].lower().replace(" ", "-"))
+        print(f"wrote {a.png}")
+        return
     configs = [tuple(float(x) if i != 1 else int(x) for i, x in enumerate(c.split(":"))) for c in
                a.configs.split(",")]
     volume_bake.GPU_MAPS = None  # the default: the maps on a GPU device, numpy on a CPU one; its A/B row below
