@@ -41,7 +41,7 @@ def room(blender):
     return splats, probe, {"near": near, "far": far, "big": big}
 
 
-def test_each_mesh_gets_the_light_it_needs(room):
+def test_each_mesh_gets_the_light_it_needs(room, tmp_path):
     from gs_ibl_addon.blender.lighting import local_light as ll
     from gs_ibl_addon.core.probe.grid import bake_sh_points, monomial_coefficients
     from gs_ibl_addon.blender.splats import cache as splat_cache
@@ -79,6 +79,20 @@ def test_each_mesh_gets_the_light_it_needs(room):
     bpy.app.timers.unregister(au.run_pending)
     au.run_pending()
     assert ll.has_local_light(meshes["near"]) is None
+    # saved and reopened: a lit mesh moved is relit, the World not baked again
+    path, probe_name, names = str(tmp_path / "auto.blend"), probe.name, {k: o.name for k, o in meshes.items()}
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    scene = bpy.context.scene
+    probe, meshes = scene.objects[probe_name], {k: scene.objects[n] for k, n in names.items()}
+    bakes, relights = au.auto_bakes, au.auto_relights
+    meshes["near"].location = (-2.2, -1.8, 1.0)
+    bpy.context.view_layer.update()
+    assert (scene.name, probe.name) in au._pending_meshes
+    bpy.app.timers.unregister(au.run_pending)
+    au.run_pending()
+    assert au.auto_bakes == bakes and au.auto_relights == relights + 1
+    assert ll.has_local_light(meshes["near"]) is not None
     # World Probe takes Auto's light off again (what the operators gave stays: test_blender_probes.py)
     probe.gs_ibl_probe.lighting = "WORLD"
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}

@@ -86,11 +86,12 @@ def _rebaseline() -> None:
 
 
 def _adopt_saved(scene: bpy.types.Scene) -> None:
-    """A bake saved up to date (its record on the probe matches the scene: stale.py) was made from the state seen
-    now: a lit mesh moved after opening the file is relit (the volume grown) without baking the World again. Asked
-    at the first depsgraph update after opening (at load_post the objects' matrices may not be evaluated yet)."""
+    """A bake saved up to date (its record on the probe matches the scene: stale.py; Lighting Auto's meshes may have
+    moved, which a relight follows) was made from the state seen now: a lit mesh moved after opening the file is
+    relit (the volume grown) without baking the World again. Asked at the first depsgraph update after opening (at
+    load_post the objects' matrices may not be evaluated yet), which may be that move's."""
     for obj in scene.objects:
-        if is_probe(obj) and obj.get(BAKED_KEY) is not None and not stale_reasons(scene, obj):
+        if is_probe(obj) and obj.get(BAKED_KEY) is not None and not stale_reasons(scene, obj, meshes=False):
             splats = auto_splats(scene, obj)
             if splats is not None:
                 baked_states[(scene.name, obj.name)] = bake_state(obj, splats, scene)

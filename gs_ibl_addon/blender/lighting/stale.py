@@ -92,9 +92,10 @@ def animated_text(probe: bpy.types.Object, frame: int | None = None) -> str | No
                                                                        "stands at the current frame"
 
 
-def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
+def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object, meshes: bool = True) -> list[str]:
     """Why the probe's last bake no longer describes the scene (empty: it does, the probe has no record: never
-    baked, or baked by a version before the record, or its bake runs now)."""
+    baked, or baked by a version before the record, or its bake runs now). ``meshes`` False: not Lighting Auto's
+    meshes that moved (what Update When Moved relights without a bake)."""
     rec = probe.get(BAKED_KEY)
     if rec is None or not probe.gs_ibl_probe.last_report or (scene.name, probe.name) in _baking:
         return []
@@ -124,7 +125,7 @@ def stale_reasons(scene: bpy.types.Scene, probe: bpy.types.Object) -> list[str]:
             probe.gs_ibl_probe.volume_probes:
         out.append(f"its Volume Probes is now {probe.gs_ibl_probe.volume_probes}")
     moved = [m for m, place in rec.get("meshes", {}).items()
-             if m in scene.objects and _differs(_matrix(scene.objects[m]), place)]
+             if meshes and m in scene.objects and _differs(_matrix(scene.objects[m]), place)]
     if moved:
         names = ", ".join(repr(m) for m in moved[:_NAMED]) + (f" and {len(moved) - _NAMED} more"
                                                                if len(moved) > _NAMED else "")
