@@ -243,8 +243,8 @@ GROUP_HEAP_SHARE = 0.5  # of the device's largest heap, for the pair and instanc
 
 # A renderer kept between bakes (Blender's splat cache) keeps what its batches grew while that is within this share of
 # the device's largest heap (trim(keep_within=...)): its next bake then makes no buffers and records no programs
-# again. The sample room's light volume in Blender's way on an H100 (volume_bench, trimmed before each bake,
-# 2026-12-06): 82 ms a bake, 67 of them host, where the same bake on a renderer that kept them took 26-33 ms.
+# again. The sample room's light volume on an H100 (volume_bench, 2026-12-06, one run): 131-152 ms a bake with them
+# given back before it (116-121 ms of host), 36-44 ms kept.
 BAKE_KEEP_SHARE = 1 / 16
 
 
@@ -1006,7 +1006,8 @@ class SplatRenderer:
         """Room in the instance list, before recording, for what this batch shape drew before (a new shape: what
         its probes drew in other batches, per probe). A frame learns that it outgrew the list only once drawn, and
         is then drawn again: after trim() (a renderer kept between bakes) the first batch of every bake was drawn
-        twice (lavapipe: a 76-probe batch of the sample room, ~3 s more a light volume bake)."""
+        twice (the sample room's light volume on an H100, buffers given back before each bake: 149-180 ms and 7
+        submissions a bake without this, 131-152 ms and 3 with it; volume_bench, 2026-12-06)."""
         need = self._needed.get(self._shape(batch, lod_k, group))
         if need is None:
             per = self._per_probe.get(self._probe_shape(batch, lod_k))
