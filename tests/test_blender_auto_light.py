@@ -93,6 +93,11 @@ def test_each_mesh_gets_the_light_it_needs(room, tmp_path):
     au.run_pending()
     assert au.auto_bakes == bakes and au.auto_relights == relights + 1
     assert ll.has_local_light(meshes["near"]) is not None
+    assert "Auto lighting after the last move: 1 mesh: " in probe.gs_ibl_probe.last_report  # Details says it
+    # noted again while that relight ran (a drag paused, then ended): it stands where it was relit, nothing to do
+    au._pending_meshes[(scene.name, probe.name)] = {meshes["near"].name}
+    au.run_pending()
+    assert au.auto_relights == relights + 1
     # World Probe takes Auto's light off again (what the operators gave stays: test_blender_probes.py)
     probe.gs_ibl_probe.lighting = "WORLD"
     assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}

@@ -19,6 +19,7 @@ from .bake import (WARNING_PREFIX, bake_job, bake_state, baked_states, lit_place
                    seen_states)
 from .object_probes import is_lit_mesh, world_box
 from .sources import auto_splats, clear_lost_splats
+from .auto_light import REPORT_PREFIX as AUTO_PREFIX
 from .stale import BAKED_KEY, refresh_notice, stale_reasons
 from .volume import REPORT_PREFIX as VOLUME_PREFIX
 from .volume import forget_volumes, kept_volume, volume_light_steps
@@ -30,6 +31,7 @@ last_auto_error: str | None = None  # the last automatic bake's error, for the p
 auto_bakes = 0  # automatic bakes run so far (tests and the console see how often a move re-baked)
 _rebaseline_next = False  # an undo or redo happened: the next depsgraph update is not a move
 _adopt_saved_next = False  # a file was opened: its next depsgraph update takes its up-to-date bakes as baked
+AUTO_MOVED = "Auto lighting after the last move: "  # Details' line for Lighting Auto's relights
 
 
 def _moved_lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, moved: set[str]) -> set[str]:
@@ -219,8 +221,9 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
             meshes = [scene.objects[n] for n in sorted(relight.get((scene_name, probe_name), ()))
                       if n in scene.objects and probe.gs_ibl_probe.world is not None]
             volume = probe.gs_ibl_probe.lighting == "VOLUME"
-            if volume:  # noted while an earlier growth ran (a drag paused, then ended): those inside it now are lit
-                meshes = [m for m in meshes if _moved_lit_meshes(scene, probe, {m.name})]
+            # noted again while an earlier relight or growth ran (a drag paused, then ended; the first update after
+            # opening a file): those it lit where they stand now need nothing
+            meshes = [m for m in meshes if _moved_lit_meshes(scene, probe, {m.name})]
             if meshes:  # only lit meshes moved: their light is chosen again (the volume grown), the World stays
                 try:
                     auto_relights += 1
@@ -230,8 +233,12 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
                     text, _choices = yield from within(steps, *part)
                     text += f" (after a move, {time.perf_counter() - t0:.1f} s)"
                     print(f"GS-IBL (update when moved): {text}")
-                    if volume:  # Details says what lights the meshes now (the volume's line of the bake's report)
+                    # Details says what lights the meshes now: the volume's line of the bake's report, or Auto's
+                    # choice for the meshes that moved beside the bake's own line
+                    if volume:
                         _replace_line(scene_name, probe_name, VOLUME_PREFIX, text)
+                    else:
+                        _replace_line(scene_name, probe_name, AUTO_MOVED, AUTO_MOVED + text.removeprefix(AUTO_PREFIX))
                 except (ValueError, RuntimeError, OSError, MemoryError) as e:
                     last_auto_error = f"{probe_name}: {e}"
                     print(f"GS-IBL (update when moved): {last_auto_error}")

@@ -318,7 +318,7 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     holes, inside = np.concatenate([b["holes"] for b in rs]), np.concatenate([b["inside"] for b in rs])
     rendered = len(holes)
     added = int((refine > 1).sum()) - int((old_refine > 1).sum())
-    bricks = f", {len(new)} for {added} new bricks" if added > 0 else ""
+    bricks = f", {len(new)} for {added} new brick{'s' if added != 1 else ''}" if added > 0 else ""
     vol.report = [f"light volume grown to {' x '.join(map(str, spec.shape))} nodes over what the meshes reach now: "
                   f"{rendered} probes rendered ({k} nodes, {len(fresh_cells)} cell centres{bricks}), "
                   f"{spec.count - k} nodes and {old_bricks} brick probes kept"]
