@@ -242,10 +242,12 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
     if outside:
         lines.append(f"{len(outside)} meshes outside the splats keep the World probe: " + ", ".join(outside[:6])
                      + (", ..." if len(outside) > 6 else ""))
-    lines.append("a mesh moved out of the volume's box grows it once the mesh stays still (Update When Moved: only the "
-                 "new part is rendered)" if s.auto_update else "a mesh moved out of the volume's box fades to the World "
-                 "probe's light; re-bake to cover it (with Update When Moved the volume grows over it, rendering only "
-                 "the new part)")
+    if s.auto_update:
+        lines.append("a mesh moved out of the volume's box grows it once the mesh stays still (Update When Moved: only "
+                     "the new part is rendered)")
+    else:
+        lines.append("a mesh moved out of the volume's box fades to the World probe's light; re-bake to cover it (with "
+                     "Update When Moved the volume grows over it, rendering only the new part)")
     if grids:  # local_light.prune_atlas: one shader cannot hold both lookups in Cycles
         lines.append("Warning: " + ", ".join(grids[:4]) + (", ..." if len(grids) > 4 else "") + " still have "
                      "per-object probes or grids (another probe's, or More Than One Probe's): Cycles cannot hold "
