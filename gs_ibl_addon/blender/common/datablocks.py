@@ -30,6 +30,14 @@ def is_probe(obj) -> bool:
     return obj is not None and obj.type == "EMPTY" and obj.gs_ibl_probe.is_probe
 
 
+def image_pixels(image: bpy.types.Image) -> np.ndarray:
+    """An image's pixels as (H, W, 4) float32, row 0 at the bottom (Blender's order; packed_float_image's input)."""
+    w, h = image.size
+    px = np.empty(w * h * 4, np.float32)
+    image.pixels.foreach_get(px)
+    return px.reshape(h, w, 4)
+
+
 def packed_float_image(pixels: np.ndarray, image: bpy.types.Image | None, role: str, name: str) -> bpy.types.Image:
     """Our packed float image of ``role`` (pixels (H, W, 3), row 0 at the bottom: the grid's atlas, the light
     volume's images), ``image`` updated in place when it is ours (scaled when the size changed), else a new one."""

@@ -40,7 +40,7 @@ import numpy as np
 from ...core.probe.grid import COEFFS, GridSpec
 from ...core.probe.local_mix import EPS, eevee_world_order1
 from ..common.compat import node_tree
-from ..common.datablocks import MARKER, find_ours, is_ours, packed_float_image
+from ..common.datablocks import MARKER, find_ours, image_pixels, is_ours, packed_float_image
 from .node_math import NodeMath as _Nodes
 from .world import albedo_strength_inputs, latlong_lookup
 
@@ -101,11 +101,8 @@ def _atlas() -> tuple[bpy.types.Image | None, dict]:
 
 def _tile_pixels(img: bpy.types.Image, tile: dict) -> np.ndarray:
     """The (nz ny, 9 nx, 3) pixels of one tile of the atlas."""
-    w, h = img.size
-    buf = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(buf)
     nx, ny, nz = tile["shape"]
-    return buf.reshape(h, w, 4)[tile["row0"]:tile["row0"] + nz * ny, :COEFFS * nx, :3].copy()
+    return image_pixels(img)[tile["row0"]:tile["row0"] + nz * ny, :COEFFS * nx, :3].copy()
 
 
 def store_grids(grids: dict[str, tuple[GridSpec, np.ndarray]], world: np.ndarray | None = None,

@@ -21,7 +21,7 @@ from ...core.probe import volume as pv
 from ...core.render.renderer import BAKE_KEEP_SHARE
 from . import local_light as ll
 from . import volume_nodes as vn
-from ..common.datablocks import packed_float_image
+from ..common.datablocks import image_pixels, packed_float_image
 from ..common.jobs import Job, Work
 from ..splats import cache as splat_cache
 from ..splats.object import colour_space_of, splat_count
@@ -144,13 +144,6 @@ def file_state(probe: bpy.types.Object, splats: list[bpy.types.Object]) -> dict:
             "settings": [int(probe.gs_ibl_probe.volume_probes), BUDGET, FACE]}
 
 
-def _pixels(image: bpy.types.Image) -> np.ndarray:
-    w, h = image.size
-    px = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(px)
-    return px.reshape(h, w, 4)[..., :3]
-
-
 def _from_file(scene: bpy.types.Scene, probe: bpy.types.Object) -> tuple | None:
     """(volume, volume_state) of the file's packed volume when it is ``probe``'s, baked from the splats that light
     it now, where the probe stands now; else None."""
@@ -167,7 +160,7 @@ def _from_file(scene: bpy.types.Scene, probe: bpy.types.Object) -> tuple | None:
         vis, cells, spec, tiles = vn.visibility_image(), vn.cells_image(), vn.volume_spec(img), vn.volume_tiles(img)
         if vis is None or cells is None or spec is None or tiles is None:
             return None
-        vol = pv.unpack_volume(_pixels(img), _pixels(vis), _pixels(cells), spec, int(tiles))
+        vol = pv.unpack_volume(*(image_pixels(i)[..., :3] for i in (img, vis, cells)), spec, int(tiles))
     except (ValueError, KeyError, TypeError, ReferenceError):  # an image or a property edited or gone: bake anew
         return None
     return vol, volume_state(probe, splats)

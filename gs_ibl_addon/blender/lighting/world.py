@@ -19,7 +19,7 @@ import bpy
 import numpy as np
 
 from ..common.compat import node_tree
-from ..common.datablocks import MARKER, find_ours, is_ours
+from ..common.datablocks import MARKER, find_ours, image_pixels, is_ours
 
 WORLD_NAME = "GS-IBL World"
 IRRADIANCE_GROUP = "GS-IBL Irradiance"
@@ -126,10 +126,7 @@ def _save_exr(path: str, rgb: np.ndarray) -> None:
 
 def image_latlong_pixels(img: bpy.types.Image) -> np.ndarray:
     """Inverse of latlong_image: (H, W, 3) float, top row first."""
-    w, h = img.size
-    buf = np.empty(w * h * 4, np.float32)
-    img.pixels.foreach_get(buf)
-    return buf.reshape(h, w, 4)[::-1, :, :3].copy()
+    return image_pixels(img)[::-1, :, :3].copy()
 
 
 # ---------------------------------------------------------------------------------------------- World

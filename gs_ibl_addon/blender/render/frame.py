@@ -30,7 +30,7 @@ from ...core import limits
 from ...core.render import shadows
 from ...core.render.mesh_depth import mesh_depth
 from ..common import handlers
-from ..common.datablocks import MARKER, is_probe
+from ..common.datablocks import MARKER, image_pixels, is_probe
 from ..common.jobs import gpu
 from ..splats.object import is_splat_object
 from . import compositor, setup, splats
@@ -314,10 +314,7 @@ def probe_light(scene, scale: float = 1.0) -> tuple[shadows.LightSamples | None,
     image = getattr(env, "image", None)
     if image is None or not image.size[0] or not image.size[1]:
         return None, f"no shadows on the splats: World '{world.name}' has no radiance image (bake its probe again)"
-    w, h = image.size
-    buf = np.empty(w * h * 4, np.float32)
-    image.pixels.foreach_get(buf)
-    latlong = buf.reshape(h, w, 4)[::-1, :, :3]  # rows top first (+Z), as lighting/world.py wrote them
+    latlong = image_pixels(image)[::-1, :, :3]  # rows top first (+Z), as lighting/world.py wrote them
     node = world.node_tree.nodes.get(STRENGTH_NODE)
     strength = float(node.inputs["Strength"].default_value) if node is not None else 1.0
     probes = {o.name for o in scene.objects if is_probe(o) and getattr(o.gs_ibl_probe, "world", None) == world}

@@ -13,6 +13,7 @@ import bpy
 import numpy as np
 
 from ...core.formats import webp
+from ..common.datablocks import image_pixels
 
 
 def decode_webp(data: bytes) -> np.ndarray:
@@ -28,12 +29,9 @@ def decode_webp(data: bytes) -> np.ndarray:
             raise ValueError(f"the WebP image cannot be decoded ({e})".replace(path, "the image")) from None
         img.colorspace_settings.is_data = True
         img.alpha_mode = "STRAIGHT"
-        w, h = img.size
-        if w == 0 or h == 0:
+        if img.size[0] == 0 or img.size[1] == 0:
             raise ValueError("the WebP image cannot be decoded (Blender read no pixels)")
-        px = np.empty(w * h * 4, np.float32)
-        img.pixels.foreach_get(px)
-        return np.round(px.reshape(h, w, 4)[::-1] * 255.0).astype(np.uint8)
+        return np.round(image_pixels(img)[::-1] * 255.0).astype(np.uint8)
     finally:
         if img is not None:
             bpy.data.images.remove(img)
