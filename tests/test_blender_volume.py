@@ -76,12 +76,72 @@ def _eevee() -> str:
     return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
 
 
+OTHER = GridSpec((-2.0, -0.7, -1.6), (0.9, 1.9, 0.4), (6, 2, 5))  # another box, shape, cells and atlas size
+
+
+def _other_volume():
+    refine = np.ones(pv.cell_shape(OTHER), int)
+    refine[4, 0, 3] = 2
+    v = pv.synthetic_volume(OTHER, _irradiance, wall_x=-0.5, refine=refine)
+    store_volume(*pv.pack_atlas(v), pv.pack_cells(v), OTHER, v.tiles)
+
+
+def _signature(tree) -> tuple:
+    """Everything a group's shading depends on: each node's kind, settings and input values (float32, as stored),
+    and every link."""
+    nodes = []
+    for n in sorted(tree.nodes, key=lambda n: n.name):
+        values = [np.asarray(s.default_value, np.float32).tolist() if hasattr(s, "default_value") else None
+                  for s in n.inputs]
+        nodes.append((n.name, n.bl_idname, getattr(n, "operation", None), getattr(n, "use_clamp", None),
+                      n.image.name if getattr(n, "image", None) else None, getattr(n, "interpolation", None),
+                      values))
+    links = sorted((k.from_node.name, k.from_socket.identifier, k.to_node.name, k.to_socket.identifier)
+                   for k in tree.links)
+    return nodes, links
+
+
+def _trees(engine: str) -> list:
+    """The engine's volume group and its corner group."""
+    from gs_ibl_addon.blender.common.datablocks import find_ours
+    from gs_ibl_addon.blender.lighting import volume_nodes as vn
+    role = vn.GROUPS[engine][1]
+    return [vn.volume_group(engine), find_ours(bpy.data.node_groups, f"{role}_corner")]
+
+
+def test_a_new_bake_updates_the_groups_in_place(blender):
+    """A new volume keeps the groups' nodes (making nodes costs seconds of Python in a large tree) and sets only
+    their numbers: the updated groups equal groups built afresh for the new volume, node for node and link for
+    link. A group that is not what the calls made (here a node deleted by hand) is built afresh."""
+    from gs_ibl_addon.blender.lighting import volume_nodes as vn
+    _other_volume()
+    before = {e: [{n.name: n.as_pointer() for n in t.nodes} for t in _trees(e)] for e in vn.GROUPS}
+    _store(_volume())
+    updated = {e: [_signature(t) for t in _trees(e)] for e in vn.GROUPS}
+    for e in vn.GROUPS:
+        assert [{n.name: n.as_pointer() for n in t.nodes} for t in _trees(e)] == before[e]  # the same nodes
+        for t in _trees(e):
+            t.nodes.clear()
+    _store(_volume())
+    fresh = {e: [_signature(t) for t in _trees(e)] for e in vn.GROUPS}
+    for e in vn.GROUPS:
+        assert updated[e] == fresh[e]
+        assert sum(len(nodes) for nodes, _ in fresh[e]) > 150
+    for tree in _trees("EEVEE"):
+        tree.nodes.remove(tree.nodes["gs7"])
+    _other_volume()
+    _store(_volume())
+    assert [_signature(t) for t in _trees("EEVEE")] == fresh["EEVEE"]
+
+
 @pytest.mark.parametrize("engine", ["CYCLES", "EEVEE"])
 def test_group_renders_sample_packed(blender, engine, tmp_path):
     """Sphere pixels (sampled at their centres) within 1% median, 3% at the 95th percentile of sample_packed at the
-    pixel's centre (the worst: along the wall's shadow edge, a step in the Chebyshev weight)."""
+    pixel's centre (the worst: along the wall's shadow edge, a step in the Chebyshev weight). The groups were made
+    for another volume first and updated in place for this one, as a second bake does."""
     scene, sphere, _mat = _camera_scene("CYCLES" if engine == "CYCLES" else _eevee())
     _sharp(scene)
+    _other_volume()
     irr, vis, cells = _store(_volume())
     _emission_material(sphere, engine)
     px = _render(scene, tmp_path, "volume")

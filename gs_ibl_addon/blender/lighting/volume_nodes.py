@@ -17,6 +17,11 @@ Of the core's formula, two terms are written in a form that nodes have: ``w < CR
 ``grid + (r > 1) (brick - grid)``. A bilinear lookup's fraction is the same in every tile (tile
 origins are whole texels), so the normal's is computed once for the eight irradiance lookups.
 
+Each group reads its eight corners through eight instances of one corner group ("... Corner"): Python makes nodes at
+a cost that grows with the tree's size (one flat group of ~1,200 nodes took 6 s to make on a 2-core CPU; the two
+trees of ~110 nodes each take 0.1 s). A new bake does not make them again: the nodes do not change with the volume,
+and every number that does is one shared node (NodeMath.param) whose value is set (~0.02 s a bake).
+
 The images and the group's numbers live in datablocks (the images packed, the spec as JSON on the irradiance
 image), so the group follows undo and save/reload like the local-light group.
 """
@@ -30,7 +35,7 @@ import numpy as np
 from ...core.probe import volume as pv
 from ...core.probe.grid import GridSpec
 from ..common.datablocks import MARKER, find_ours, packed_float_image
-from .node_math import NodeMath
+from .node_math import Mismatch, NodeMath
 
 # one group per engine: Cycles reads Linear texels (Closest texels blended in nodes overflowed its shader stack, the
 # visibility's lookups most: "out of SVM stack space" at eight corners, and the shader rendered black), EEVEE reads
@@ -97,19 +102,59 @@ def build_groups(irr: bpy.types.Image, vis: bpy.types.Image, cells: bpy.types.Im
     return {engine: _group(engine, irr, vis, cells, spec, tiles) for engine in GROUPS}
 
 
+# the group's sockets, and its corner group's (one of the eight trilinear corners: its weighted irradiance and
+# weight; eight instances of one small group, since making nodes in Python costs in proportion to the tree's size)
+SOCKETS = ((("Position", "Vector"), ("Normal", "Vector")), (("Irradiance", "Vector"), ("Inside", "Float")))
+CORNER_SOCKETS = ((("Cell", "Vector"), ("L0", "Vector"), ("F", "Vector"), ("Corner", "Vector"), ("P", "Vector"),
+                   ("InvR", "Float"), ("Fine", "Float"), ("Side", "Float"), ("FirstBrick", "Float"),
+                   ("IrrTexel", "Vector"), ("IrrFrac", "Vector")),
+                  (("Term", "Vector"), ("Weight", "Float")))
+
+
 def _group(engine: str, irr, vis, cells, spec: GridSpec, tiles) -> bpy.types.ShaderNodeTree:
     name, role, linear = GROUPS[engine]
+    k = pv.shader_constants(spec, tiles)
+    for img, size, what in ((irr, k["irradiance_size"], "irradiance"), (vis, k["visibility_size"], "visibility"),
+                            (cells, k["cells_size"], "cells")):
+        if tuple(img.size) != tuple(size):
+            raise ValueError(f"{img.name!r} is {tuple(img.size)} pixels; the volume's {what} atlas must be {size}")
+    corner = _tree(f"{name} Corner", f"{role}_corner", CORNER_SOCKETS)
+    _fill(corner, lambda b: _build_corner(b, irr, vis, k, linear))
+    tree = _tree(name, role, SOCKETS)
+    _fill(tree, lambda b: _build(b, cells, corner, k))
+    return tree
+
+
+def _tree(name: str, role: str, sockets) -> bpy.types.ShaderNodeTree:
+    """The file's group of ``role`` with ``sockets`` ((inputs, outputs) of (name, type)), made or its interface
+    made again where it differs (an older file's)."""
     tree = find_ours(bpy.data.node_groups, role)
     if tree is None:
         tree = bpy.data.node_groups.new(name, "ShaderNodeTree")
         tree[MARKER] = role
-        iface = tree.interface
-        iface.new_socket("Position", in_out="INPUT", socket_type="NodeSocketVector")
-        iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
-        iface.new_socket("Irradiance", in_out="OUTPUT", socket_type="NodeSocketVector")
-        iface.new_socket("Inside", in_out="OUTPUT", socket_type="NodeSocketFloat")
-    _build(tree, irr, vis, cells, spec, tiles, linear)
+    want = [(n, io, f"NodeSocket{t}") for io, group in zip(("INPUT", "OUTPUT"), sockets) for n, t in group]
+    have = [(i.name, i.in_out, i.socket_type) for i in tree.interface.items_tree if i.item_type == "SOCKET"]
+    if sorted(have) != sorted(want):
+        tree.interface.clear()
+        for n, io, t in want:
+            tree.interface.new_socket(n, in_out=io, socket_type=t)
     return tree
+
+
+def _fill(tree, build) -> None:
+    """``build(b)`` on ``tree``: updating the nodes an earlier build made (they do not change with the volume,
+    only their numbers and images), or making them afresh."""
+    if len(tree.nodes):
+        try:
+            build(NodeMath(tree, reuse=True))
+            return
+        except Mismatch:
+            pass
+    tree.nodes.clear()
+    build(NodeMath(tree))
+    # a column per creation order: readable enough, not needed to work (one call: a node's own set updates the tree)
+    at = [(200.0 * (j // 20), -150.0 * (j % 20)) for j in range(len(tree.nodes))]
+    tree.nodes.foreach_set("location", [x for xy in at for x in xy])
 
 
 def _oct_uv(b: NodeMath, d):
@@ -139,17 +184,18 @@ def _in_tile(b: NodeMath, uv, size: int):
     return out
 
 
-def _bilinear(b: NodeMath, image, origin, local, width: int, height: int, linear: bool):
+def _bilinear(b: NodeMath, image, origin, local, texel_size, linear: bool):
     """The bilinear lookup at the tile ``origin`` (column, row sockets) + ``local``: one Linear texture node
-    (``linear``), or four Closest texels blended here."""
+    (``linear``), or four Closest texels blended here. ``texel_size``: (1 / width, 1 / height) sockets."""
     (x0, fx), (y0, fy) = local
     ox, oy = origin
+    du, dv = texel_size
     if linear:  # pixel / size with the texel centres at +0.5, as the core's _bilinear
-        u = b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), b.math("ADD", fx, 0.5)), 1.0 / width)
-        v = b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), b.math("ADD", fy, 0.5)), 1.0 / height)
+        u = b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), b.math("ADD", fx, 0.5)), du)
+        v = b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), b.math("ADD", fy, 0.5)), dv)
         return b.texel(image, u, v, "Linear")
-    xs = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), 0.5 + k), 1.0 / width) for k in (0, 1)]
-    ys = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), 0.5 + k), 1.0 / height) for k in (0, 1)]
+    xs = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", ox, x0), 0.5 + k), du) for k in (0, 1)]
+    ys = [b.math("MULTIPLY", b.math("ADD", b.math("ADD", oy, y0), 0.5 + k), dv) for k in (0, 1)]
     t = {(i, j): b.texel(image, xs[i], ys[j]) for i in (0, 1) for j in (0, 1)}
 
     def lerp(a, c, f):
@@ -157,96 +203,111 @@ def _bilinear(b: NodeMath, image, origin, local, width: int, height: int, linear
     return lerp(lerp(t[0, 0], t[1, 0], fx), lerp(t[0, 1], t[1, 1], fx), fy)
 
 
-def _build(tree, irr, vis, cells, spec: GridSpec, tiles, linear: bool) -> None:
-    """The nodes of sample_packed (the module docstring says which terms take another form)."""
-    tree.nodes.clear()
-    k = pv.shader_constants(spec, tiles)
-    b = NodeMath(tree)
-    gin, gout = b.N.new("NodeGroupInput"), b.N.new("NodeGroupOutput")
+def _build(b: NodeMath, cells, corner, k: dict) -> None:
+    """The nodes of sample_packed (the module docstring says which terms take another form) for shader_constants
+    ``k``, made or updated by ``b``, with eight ``corner`` groups (_build_corner). Every number that changes with
+    the volume is one shared node (b.param), so a new bake sets a few dozen values."""
+    gin, gout = b.new("NodeGroupInput"), b.new("NodeGroupOutput")
     lo, hi = np.asarray(k["lo"], np.float64), np.asarray(k["hi"], np.float64)
-    shape = np.asarray(k["shape"], np.float64)
+    top = np.asarray(k["shape"], np.float64) - 1
     span = np.where(hi > lo, hi - lo, 1.0)
-    top = shape - 1
-    base_pos, step = np.asarray(k["first_node"]), np.asarray(k["node_step"])  # node i at first + i step
-    cols = float(k["cols"])
-    iw, ih = k["irradiance_size"]
-    vw, vh = k["visibility_size"]
-    for img, size, role in ((irr, (iw, ih), "irradiance"), (vis, (vw, vh), "visibility"),
-                            (cells, k["cells_size"], "cells")):
-        if tuple(img.size) != tuple(size):
-            raise ValueError(f"{img.name!r} is {tuple(img.size)} pixels; the volume's {role} atlas must be {size}")
-
-    n = b.vec("NORMALIZE", gin.outputs["Normal"])
-    p = b.vec("MULTIPLY_ADD", n, b.const([k["normal_bias"]] * 3), gin.outputs["Position"])
-    g = b.vec("MINIMUM", b.vec("MAXIMUM", b.vec("MULTIPLY", b.vec("SUBTRACT", p, b.const(lo)),
-                                                     b.const(top / span)), (0.0, 0.0, 0.0)), b.const(top))
-    # the cell, its brick (the cells image: first brick probe, r) and the sub-cell's corner l0 and fractions
-    c = b.vec("MINIMUM", b.vec("FLOOR", g), b.const(np.maximum(top - 1, 0)))
     ncx, ncy, _ = k["cells"]
     ccols, crows = k["cells_size"]
+    P = b.param
+
+    n = b.vec("NORMALIZE", gin.outputs["Normal"])
+    p = b.vec("MULTIPLY_ADD", n, P("normal_bias", [k["normal_bias"]] * 3), gin.outputs["Position"])
+    g = b.vec("MINIMUM", b.vec("MAXIMUM", b.vec("MULTIPLY", b.vec("SUBTRACT", p, P("lo", lo)),
+                                                     P("to_grid", top / span)), (0.0, 0.0, 0.0)), P("top", top))
+    # the cell, its brick (the cells image: first brick probe, r) and the sub-cell's corner l0 and fractions
+    c = b.vec("MINIMUM", b.vec("FLOOR", g), P("last_cell", np.maximum(top - 1, 0)))
+    inv_ccols = P("1/cells_w", 1.0 / ccols)
     cx, cy, cz = b.separate(c)
-    ci = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", cz, float(ncy), cy), float(ncx), cx)
-    crow = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", ci, 0.5), 1.0 / ccols))
-    ccol = b.math("MULTIPLY_ADD", crow, -float(ccols), ci)
-    base, r, _ = b.separate(b.texel(cells, b.math("MULTIPLY", b.math("ADD", ccol, 0.5), 1.0 / ccols),
-                                    b.math("MULTIPLY", b.math("ADD", crow, 0.5), 1.0 / crows)))
+    ci = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", cz, P("cells_y", float(ncy)), cy), P("cells_x", float(ncx)),
+                cx)
+    crow = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", ci, 0.5), inv_ccols))
+    ccol = b.math("MULTIPLY_ADD", crow, P("-cells_w", -float(ccols)), ci)
+    base, r, _ = b.separate(b.texel(cells, b.math("MULTIPLY", b.math("ADD", ccol, 0.5), inv_ccols),
+                                    b.math("MULTIPLY", b.math("ADD", crow, 0.5), P("1/cells_h", 1.0 / crows))))
     local = b.scale(b.vec("SUBTRACT", g, c), r)
     rm1 = b.math("SUBTRACT", r, 1.0)
     l0 = b.vec("MINIMUM", b.vec("FLOOR", local), b.combine(rm1, rm1, rm1))
     f = b.vec("SUBTRACT", local, l0)
-    fs = b.separate(f)
-    one_minus = [b.math("SUBTRACT", 1.0, fa) for fa in fs]
-    inv_r = b.math("DIVIDE", 1.0, r)
-    fine = b.math("GREATER_THAN", r, 1.0)
-    side = b.math("ADD", r, 1.0)
-    first_brick = b.math("ADD", base, float(k["grid_count"]))
-    irr_local = _in_tile(b, _oct_uv(b, n), pv.IRR)
+    (x0, fx), (y0, fy) = _in_tile(b, _oct_uv(b, n), pv.IRR)
+    shared = {"Cell": c, "L0": l0, "F": f, "P": p, "InvR": b.math("DIVIDE", 1.0, r),
+              "Fine": b.math("GREATER_THAN", r, 1.0), "Side": b.math("ADD", r, 1.0),
+              "FirstBrick": b.math("ADD", base, P("grid_count", float(k["grid_count"]))),
+              "IrrTexel": b.combine(x0, y0), "IrrFrac": b.combine(fx, fy)}
     num, den = None, None
-    for corner in range(8):
-        bits = [(corner >> a) & 1 for a in range(3)]
-        tri = b.math("MULTIPLY", b.math("MULTIPLY", *[fs[a] if bits[a] else one_minus[a] for a in range(2)]),
-                     fs[2] if bits[2] else one_minus[2])
-        ll = b.vec("ADD", l0, tuple(map(float, bits)))
-        # q = first node + (c + L / r) step; the grid's index of node min(c + L, top); the brick's base + L's
-        q = b.vec("MULTIPLY_ADD", b.vec("ADD", c, b.scale(ll, inv_r)), b.const(step), b.const(base_pos))
-        nx_, ny_, nz_ = b.separate(b.vec("MINIMUM", b.vec("ADD", c, ll), b.const(top)))
-        coarse = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", nz_, float(shape[1]), ny_), float(shape[0]), nx_)
-        lx, ly, lz = b.separate(ll)
-        brick = b.math("ADD", b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", lz, side, ly), side, lx), first_brick)
-        i = b.math("MULTIPLY_ADD", b.math("SUBTRACT", brick, coarse), fine, coarse)
-        row = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", i, 0.5), 1.0 / cols))
-        col = b.math("MULTIPLY_ADD", row, -cols, i)
-        away = b.vec("SUBTRACT", p, q)
-        r = b.vval("LENGTH", away)
-        # the moments along probe -> point (+Z where they coincide, as the core's _away)
-        away = b.vec("ADD", away, b.combine(0.0, 0.0, b.math("LESS_THAN", r, 1e-12)))
-        vt = float(pv.VIS + 2)
-        mom = _bilinear(b, vis, (b.math("MULTIPLY", col, vt), b.math("MULTIPLY", row, vt)),
-                        _in_tile(b, _oct_uv(b, away), pv.VIS), vw, vh, linear)
-        m, m2, _ = b.separate(mom)
-        var = b.math("MAXIMUM", b.math("SUBTRACT", m2, b.math("MULTIPLY", m, m)),
-                     b.math("POWER", b.math("MULTIPLY", m, k["variance_floor"]), 2.0))
-        beyond = b.math("MAXIMUM", b.math("SUBTRACT", r, m), 0.0)
-        ratio = b.math("DIVIDE", var, b.math("MAXIMUM", b.math("MULTIPLY_ADD", beyond, beyond, var), 1e-30))
-        cheb = b.math("MAXIMUM", b.math("POWER", ratio, 3.0), b.math("SUBTRACT", 1.0, b.math("GREATER_THAN", r, m)))
-        w = b.math("MAXIMUM", cheb, k["min_weight"])
-        w = b.math("MINIMUM", w, b.math("MULTIPLY", b.math("POWER", w, 3.0), 1.0 / k["crush"] ** 2))
-        w = b.math("MULTIPLY", w, tri)
-        it = float(pv.IRR + 2)
-        e = _bilinear(b, irr, (b.math("MULTIPLY", col, it), b.math("MULTIPLY", row, it)), irr_local, iw, ih, linear)
-        term = b.scale(e, w)
+    for k_corner in range(8):
+        node = b.new("ShaderNodeGroup")
+        b.setting(node, "node_tree", corner)
+        for name, socket in shared.items():
+            b.link(socket, node.inputs[name])
+        b.value(node.inputs["Corner"], tuple(float((k_corner >> a) & 1) for a in range(3)))
+        term, w = node.outputs["Term"], node.outputs["Weight"]
         num = term if num is None else b.vec("ADD", num, term)
         den = w if den is None else b.math("ADD", den, w)
-    b.L.new(b.vec("DIVIDE", num, b.combine(den, den, den)), gout.inputs["Irradiance"])
+    b.link(b.vec("DIVIDE", num, b.combine(den, den, den)), gout.inputs["Irradiance"])
     # Inside: 1 in the box, 0 one spacing out (the unbiased position: where the mesh is)
     pos = gin.outputs["Position"]
-    out = b.vec("MAXIMUM", b.vec("MAXIMUM", b.vec("SUBTRACT", b.const(lo), pos), b.vec("SUBTRACT", pos, b.const(hi))),
+    out = b.vec("MAXIMUM", b.vec("MAXIMUM", b.vec("SUBTRACT", P("lo", lo), pos), b.vec("SUBTRACT", pos, P("hi", hi))),
                 (0.0, 0.0, 0.0))
     ox, oy, oz = b.separate(out)
     far = b.math("MAXIMUM", b.math("MAXIMUM", ox, oy), oz)
-    inside = b.math("MULTIPLY_ADD", far, -1.0 / pv.spec_spacing(spec), 1.0)
-    inside.node.use_clamp = True
-    b.L.new(inside, gout.inputs["Inside"])
-    for j, node in enumerate(b.N):  # a column per creation order: readable enough, not needed to work
-        node.location = (200 * (j // 20), -150 * (j % 20))
+    inside = b.math("MULTIPLY_ADD", far, P("-1/spacing", -1.0 / k["spacing"]), 1.0)
+    b.setting(inside.node, "use_clamp", True)
+    b.link(inside, gout.inputs["Inside"])
+    b.finish()
 
+
+def _build_corner(b: NodeMath, irr, vis, k: dict, linear: bool) -> None:
+    """One corner of sample_packed's eight: its probe (grid node or brick probe), the Chebyshev weight from the
+    visibility moments along probe -> point, times the trilinear weight; outputs the weighted irradiance and the
+    weight. The trilinear weight's factor on an axis, f or 1 - f by the corner's bit, is |1 - bit - f|: the same
+    number."""
+    gin, gout = b.new("NodeGroupInput"), b.new("NodeGroupOutput")
+    g = gin.outputs
+    shape = np.asarray(k["shape"], np.float64)
+    cols = float(k["cols"])
+    (iw, ih), (vw, vh) = k["irradiance_size"], k["visibility_size"]
+    P = b.param
+    sel = b.separate(b.vec("ABSOLUTE", b.vec("SUBTRACT", b.vec("SUBTRACT", (1.0, 1.0, 1.0), g["Corner"]), g["F"])))
+    tri = b.math("MULTIPLY", b.math("MULTIPLY", sel[0], sel[1]), sel[2])
+    c, side = g["Cell"], g["Side"]
+    ll = b.vec("ADD", g["L0"], g["Corner"])
+    # q = first node + (c + L / r) step; the grid's index of node min(c + L, top); the brick's base + L's
+    q = b.vec("MULTIPLY_ADD", b.vec("ADD", c, b.scale(ll, g["InvR"])), P("node_step", k["node_step"]),
+              P("first_node", k["first_node"]))
+    nx_, ny_, nz_ = b.separate(b.vec("MINIMUM", b.vec("ADD", c, ll), P("top", shape - 1)))
+    coarse = b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", nz_, P("nodes_y", shape[1]), ny_), P("nodes_x", shape[0]),
+                    nx_)
+    lx, ly, lz = b.separate(ll)
+    brick = b.math("ADD", b.math("MULTIPLY_ADD", b.math("MULTIPLY_ADD", lz, side, ly), side, lx), g["FirstBrick"])
+    i = b.math("MULTIPLY_ADD", b.math("SUBTRACT", brick, coarse), g["Fine"], coarse)
+    row = b.math("FLOOR", b.math("MULTIPLY", b.math("ADD", i, 0.5), P("1/cols", 1.0 / cols)))
+    col = b.math("MULTIPLY_ADD", row, P("-cols", -cols), i)
+    away = b.vec("SUBTRACT", g["P"], q)
+    r = b.vval("LENGTH", away)
+    # the moments along probe -> point (+Z where they coincide, as the core's _away)
+    away = b.vec("ADD", away, b.combine(0.0, 0.0, b.math("LESS_THAN", r, 1e-12)))
+    vt = float(pv.VIS + 2)
+    mom = _bilinear(b, vis, (b.math("MULTIPLY", col, vt), b.math("MULTIPLY", row, vt)),
+                    _in_tile(b, _oct_uv(b, away), pv.VIS), (P("1/vis_w", 1.0 / vw), P("1/vis_h", 1.0 / vh)), linear)
+    m, m2, _ = b.separate(mom)
+    var = b.math("MAXIMUM", b.math("SUBTRACT", m2, b.math("MULTIPLY", m, m)),
+                 b.math("POWER", b.math("MULTIPLY", m, k["variance_floor"]), 2.0))
+    beyond = b.math("MAXIMUM", b.math("SUBTRACT", r, m), 0.0)
+    ratio = b.math("DIVIDE", var, b.math("MAXIMUM", b.math("MULTIPLY_ADD", beyond, beyond, var), 1e-30))
+    cheb = b.math("MAXIMUM", b.math("POWER", ratio, 3.0), b.math("SUBTRACT", 1.0, b.math("GREATER_THAN", r, m)))
+    w = b.math("MAXIMUM", cheb, k["min_weight"])
+    w = b.math("MINIMUM", w, b.math("MULTIPLY", b.math("POWER", w, 3.0), 1.0 / k["crush"] ** 2))
+    w = b.math("MULTIPLY", w, tri)
+    it = float(pv.IRR + 2)
+    x0, y0, _ = b.separate(g["IrrTexel"])
+    fx, fy, _ = b.separate(g["IrrFrac"])
+    e = _bilinear(b, irr, (b.math("MULTIPLY", col, it), b.math("MULTIPLY", row, it)), ((x0, fx), (y0, fy)),
+                  (P("1/irr_w", 1.0 / iw), P("1/irr_h", 1.0 / ih)), linear)
+    b.link(b.scale(e, w), gout.inputs["Term"])
+    b.link(w, gout.inputs["Weight"])
+    b.finish()

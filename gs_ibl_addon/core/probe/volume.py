@@ -427,7 +427,7 @@ def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
             "visibility_size": (cols * (VIS + 2), rows * (VIS + 2)),
             "cells": cell_shape(spec), "cells_size": (ccols, crows), "grid_count": spec.count,
             "first_node": tuple(map(float, first)), "node_step": tuple(map(float, step)),
-            "normal_bias": NORMAL_BIAS * spec_spacing(spec),
+            "normal_bias": NORMAL_BIAS * spec_spacing(spec), "spacing": spec_spacing(spec),
             "variance_floor": VARIANCE_FLOOR, "min_weight": MIN_WEIGHT, "crush": CRUSH}
 
 
