@@ -30,6 +30,11 @@ def test_a_plan_within_the_budget():
     step = (np.subtract(plan.spec.hi, plan.spec.lo)) / (np.array(plan.spec.shape) - 1)
     assert np.all(step <= 0.5 + 1e-9)
     assert "112 probes" in plan.messages[-1]
+    # the spacings the grid has, not the one asked for (each axis rounds its node count up): the same words as
+    # Blender's report
+    words = f"{step.min():.2f}-{step.max():.2f} m apart"
+    assert plan.messages[-1].endswith(words) and vol.spacing_words(plan.spec) == words
+    assert vol.spacing_words(GridSpec((0, 0, 0), (1, 1, 1), (3, 3, 3))) == "0.50 m apart"
 
 
 def test_too_large_is_refused_before_work_with_what_fits():

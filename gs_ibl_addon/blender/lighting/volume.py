@@ -226,7 +226,7 @@ def volume_light_steps(scene: bpy.types.Scene, probe: bpy.types.Object, grow: bo
             del obj[AUTO_KEY]
     bricks = int((vol.cells > 1).sum())
     lines = [f"{REPORT_PREFIX}{len(lit)} mesh{'es share' if len(lit) != 1 else ' has'} a grid of "
-             f"{' x '.join(map(str, vol.spec.shape))} probes, {pv.spec_spacing(vol.spec):.2f} m apart"
+             f"{' x '.join(map(str, vol.spec.shape))} probes, {pv.spacing_words(vol.spec)}"
              + (f", and {bricks} brick{'s' if bricks != 1 else ''} of finer probes" if bricks else "")
              + f", from {len(splats)} splat object{'s' if len(splats) != 1 else ''}"]
     _kept[(scene_name, probe_name)] = (vol, state)

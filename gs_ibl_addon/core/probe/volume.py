@@ -415,6 +415,15 @@ def spec_spacing(spec: GridSpec) -> float:
     return float(min(steps)) if steps else float(max(np.max(hi - lo), 1.0))
 
 
+def spacing_words(spec: GridSpec) -> str:
+    """"0.26-0.33 m apart": the node spacings over the axes with more than one node (each axis rounds its node count
+    up, so they differ), as the reports say it."""
+    lo, hi, n = np.asarray(spec.lo), np.asarray(spec.hi), np.asarray(spec.shape)
+    steps = [(hi[a] - lo[a]) / (n[a] - 1) for a in range(3) if n[a] > 1 and hi[a] > lo[a]]
+    low, high = (min(steps), max(steps)) if steps else (spec_spacing(spec),) * 2
+    return f"{low:.2f} m apart" if f"{low:.2f}" == f"{high:.2f}" else f"{low:.2f}-{high:.2f} m apart"
+
+
 def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
     """Every number the node group needs beside the three images, by name; ``tiles``: the atlases' maps
     (LightVolume.tiles; None: the grid's alone)."""

@@ -18,7 +18,7 @@ import numpy as np
 
 from .grid import GridSpec
 from .variation import LUMINANCE
-from .volume import LightVolume
+from .volume import LightVolume, spacing_words
 
 # Metres around the lit boxes. None: the lookup clamps a point outside the box to its face, and nodes beyond the lit
 # surfaces only see what the surfaces do not (0.15 m put a node 2 cm under the sample room's lamp: the sphere below
@@ -102,7 +102,7 @@ def plan_volume(boxes, spacing: float, budget: int = DEFAULT_BUDGET, margin: flo
                         f"{what}")
     spec = GridSpec(tuple(map(float, lo)), tuple(map(float, hi)), shape)
     messages.append(f"light volume: {spec.count} probes ({shape[0]} x {shape[1]} x {shape[2]}) over "
-                    f"{hi[0] - lo[0]:.1f} x {hi[1] - lo[1]:.1f} x {hi[2] - lo[2]:.1f} m, {fits:.2f} m apart")
+                    f"{hi[0] - lo[0]:.1f} x {hi[1] - lo[1]:.1f} x {hi[2] - lo[2]:.1f} m, {spacing_words(spec)}")
     return VolumePlan(spec, fits, messages)
 
 
