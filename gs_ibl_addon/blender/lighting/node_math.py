@@ -11,9 +11,9 @@ corner ran out of Cycles' shader stack ("out of SVM stack space": the material r
 ``NodeMath(tree, reuse=True)`` walks a tree an earlier NodeMath built with the same calls and only sets what
 differs (operations, values, images): each node made, linked or set from Python updates the whole tree, so making
 costs grow with the tree's size (a flat light volume group of ~1,200 nodes took 6 s), and a new bake changes only
-numbers. ``param`` gives such a number one node of its own, shared by every node that reads it. Nodes are found by the names given at creation (the node editor reorders the
-tree's list when a node is clicked); any difference in the nodes' kinds or links raises Mismatch, and the caller
-builds afresh."""
+numbers. ``param`` gives such a number one node of its own, shared by every node that reads it. Nodes are found
+by the names given at creation (the node editor reorders the tree's list when a node is clicked); any difference in
+the nodes' kinds or links raises Mismatch, and the caller builds afresh."""
 from __future__ import annotations
 
 import numpy as np
