@@ -2,12 +2,16 @@
 (issue 37's cost targets: three meshes <= 2x a World-Probe-only bake of the same probe, ten <= 4x, two in the GUI
 <= 3 s).
 
-Run:  .venv/bin/python benchmarks/volume_light_bench.py [--meshes 2,3,10] [--lightings WORLD,AUTO,VOLUME]
+Run:  .venv/bin/python benchmarks/volume_light_bench.py [--meshes 2,3,10] [--lightings AUTO,VOLUME,VOLUME]
       [--budget N] [--face N] [--no-write]
 In the bpy module (.venv, Blender 5.0.1): the sample room imported by our importer, the probe at the room's centre
 with the panel's defaults, then per mesh count a fresh scene's bakes in the order World Probe (its first bake reads
 and uploads the splats: the cold number, not the peer), World Probe again (the peer: warm), Auto, Volume; each
-whole bake timed around bpy.ops.gs_ibl.bake_probe() as the panel's button runs it. The meshes: spheres and
+whole bake timed around bpy.ops.gs_ibl.bake_probe() as the panel's button runs it. A lighting named twice is baked
+twice (columns "_again"): Volume's first bake makes the volume's node groups, the next updates them. Every submission
+is timestamped (the context's stamp_all), so each bake has its device time (the GPU's; on lavapipe the CPU's Vulkan
+work) beside its wall, host = wall - device, and the seconds spent in the volume's node groups
+(volume_nodes.build_groups). The meshes: spheres and
 Suzannes at auto_light_bench's five places, the first N of them. The load average is printed with the table:
 only ratios within one run mean anything on this shared 2-core machine. --budget / --face: a trial of the volume's
 probe budget and cube face (blender/lighting/volume.py BUDGET, FACE; default the core's).
@@ -60,19 +64,38 @@ def _scene(n: int):
     return bpy.context.active_object
 
 
-def _bake(probe, lighting: str) -> float:
+def _bake(probe, lighting: str) -> dict:
+    """{"s": wall, "device_s", "host_s", "groups_s"} of one bake."""
     import bpy
+
+    from gs_ibl_addon.blender.lighting import volume_nodes
+    from gs_ibl_addon.core.vk.context import get_context
     probe.gs_ibl_probe.lighting = lighting
     bpy.context.view_layer.objects.active = probe
-    t0 = time.perf_counter()
-    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
-    return time.perf_counter() - t0
+    ctx, build, groups = get_context(), volume_nodes.build_groups, [0.0]
+
+    def timed(*args, **kwargs):
+        t = time.perf_counter()
+        try:
+            return build(*args, **kwargs)
+        finally:
+            groups[0] += time.perf_counter() - t
+    ctx.stamp_all, gpu0, volume_nodes.build_groups = True, ctx.stats.gpu_ms, timed
+    try:
+        t0 = time.perf_counter()
+        assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+        wall = time.perf_counter() - t0
+    finally:
+        ctx.stamp_all, volume_nodes.build_groups = False, build
+    device = (ctx.stats.gpu_ms - gpu0) / 1e3
+    return {"s": round(wall, 2), "device_s": round(device, 2), "host_s": round(wall - device, 2),
+            "groups_s": round(groups[0], 3)}
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--meshes", default="2,3,10")
-    ap.add_argument("--lightings", default="AUTO,VOLUME")
+    ap.add_argument("--lightings", default="AUTO,VOLUME,VOLUME")
     ap.add_argument("--budget", type=int, default=None)
     ap.add_argument("--face", type=int, default=None)
     ap.add_argument("--no-write", action="store_true")
@@ -82,14 +105,16 @@ def main() -> None:
     rows = []
     for n in (int(x) for x in a.meshes.split(",")):
         probe = _scene(n)
-        cold = _bake(probe, "WORLD")
+        cold = _bake(probe, "WORLD")["s"]
         world = _bake(probe, "WORLD")
-        row = {"date": time.strftime("%Y-%m-%d"), "meshes": n, "world_cold_s": round(cold, 2),
-               "world_s": round(world, 2), "load": round(os.getloadavg()[0], 1)}
+        row = {"date": time.strftime("%Y-%m-%d"), "meshes": n, "world_cold_s": cold,
+               **{f"world_{k}" if k != "s" else "world_s": v for k, v in world.items() if k != "groups_s"},
+               "load": round(os.getloadavg()[0], 1)}
         for lighting in a.lightings.split(","):
-            t = _bake(probe, lighting)
-            row[f"{lighting.lower()}_s"] = round(t, 2)
-            row[f"{lighting.lower()}_x_world"] = round(t / world, 1)
+            label = lighting.lower() if f"{lighting.lower()}_s" not in row else f"{lighting.lower()}_again"
+            for k, v in _bake(probe, lighting).items():
+                row[f"{label}_{k}" if k != "s" else f"{label}_s"] = v
+            row[f"{label}_x_world"] = round(row[f"{label}_s"] / world["s"], 1)
             if lighting == "VOLUME":
                 row["volume_report"] = probe.gs_ibl_probe.local_report.splitlines()[0]
         rows.append(row)
