@@ -94,6 +94,7 @@ def test_each_mesh_gets_the_light_it_needs(room, tmp_path):
     assert au.auto_bakes == bakes and au.auto_relights == relights + 1
     assert ll.has_local_light(meshes["near"]) is not None
     assert "Auto lighting after the last move: 1 mesh: " in probe.gs_ibl_probe.last_report  # Details says it
+    assert "; after a move: 1 mesh relit in " in probe.gs_ibl_probe.last_summary  # and the panel's line
     # noted again while that relight ran (a drag paused, then ended): it stands where it was relit, nothing to do
     au._pending_meshes[(scene.name, probe.name)] = {meshes["near"].name}
     au.run_pending()

@@ -337,6 +337,30 @@ def test_the_report_is_one_line_with_its_details_a_click_away(blender, tmp_path,
 
 # ---- 3. A stale mark on the report and in the status bar
 
+def test_an_opened_file_is_marked_only_when_its_bake_is_out_of_date(blender, tmp_path, write_3dgs_ply):
+    """Every saved bake opened with "the probe moved" in the status bar until the next bake (the real-GUI check,
+    Blender 5.2.2): at load_post the objects' matrices are not evaluated yet. The line is made by a timer after
+    opening (run here by hand: timers do not run in the bpy module)."""
+    from gs_ibl_addon.blender.common.jobs import notices
+    from gs_ibl_addon.blender.lighting import auto_update as au
+    _import(tmp_path, write_3dgs_ply)
+    probe = _probe(place="CURSOR", lighting="WORLD")
+    probe.location = (0.2, -0.1, 0.3)  # away from the origin, where unevaluated objects stand
+    assert bpy.ops.gs_ibl.bake_probe() == {"FINISHED"}
+    name = probe.name
+    for path, stale in ((tmp_path / "baked.blend", False), (tmp_path / "moved.blend", True)):
+        if stale:
+            bpy.data.objects[name].location.x += 0.5
+        bpy.ops.wm.save_as_mainfile(filepath=str(path))
+        bpy.ops.wm.open_mainfile(filepath=str(path))
+        assert bpy.app.timers.is_registered(au.notice_after_load)
+        bpy.app.timers.unregister(au.notice_after_load)
+        au.notice_after_load()
+        marks = [n for n in notices() if "out of date" in n]
+        assert marks == (["GS-IBL: the bake of 'GS-IBL Probe' is out of date (the probe moved): Bake / Refresh"]
+                         if stale else []), marks
+
+
 def test_an_out_of_date_bake_is_marked(blender, tmp_path, write_3dgs_ply):
     """After a mesh or the probe moved, or an undo, the report still described the old bake with no sign."""
     from gs_ibl_addon.blender.common.jobs import notices

@@ -423,10 +423,12 @@ def test_a_mesh_that_leaves_the_volume_grows_it(blender, tmp_path):
     assert au.auto_relights == relights + 1 and au.auto_bakes == world_bakes  # the World stayed
     spec1 = vn.volume_spec()
     print("\n" + s.local_report)
-    assert "light volume grown to" in s.local_report and "nodes and" in s.local_report
+    assert "light volume grown to a grid of" in s.local_report and "grid probes and" in s.local_report
     # Details (the bake's report) says the grown volume, and when: its volume line replaced
     volume_lines = [line for line in s.last_report.split("\n") if line.startswith(bv.REPORT_PREFIX)]
     assert len(volume_lines) == 1 and "after a move" in volume_lines[0] and "a grid of 8 x 4 x 4" in volume_lines[0]
+    # the panel's line says it too, after the bake's
+    assert s.last_summary.startswith("Baked in ") and "; after a move: light volume grown in " in s.last_summary
     # noted again while nothing is outside the grown volume (a drag that paused, then ended): no second growth
     au._pending_meshes[(scene.name, probe.name)] = {cube.name}
     assert au.run_pending() is None and au.auto_relights == relights + 1
@@ -454,6 +456,7 @@ def test_a_mesh_that_leaves_the_volume_grows_it(blender, tmp_path):
     assert au.run_pending() is None and au.last_auto_error is None
     report = probe.gs_ibl_probe.local_report
     print(report)
+    assert probe.gs_ibl_probe.last_summary.count(au.MOVED_SUMMARY) == 1  # the last move's, not every move's
     assert "light volume grown to" in report and vn.volume_spec().count > spec1.count
     # another probe's place: the file's volume is not this bake's any more
     bv.forget_volumes()

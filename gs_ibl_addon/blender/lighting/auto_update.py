@@ -32,6 +32,7 @@ auto_bakes = 0  # automatic bakes run so far (tests and the console see how ofte
 _rebaseline_next = False  # an undo or redo happened: the next depsgraph update is not a move
 _adopt_saved_next = False  # a file was opened: its next depsgraph update takes its up-to-date bakes as baked
 AUTO_MOVED = "Auto lighting after the last move: "  # Details' line for Lighting Auto's relights
+MOVED_SUMMARY = "; after a move: "  # the panel's line after a relight or growth: "...; after a move: ... in N s"
 
 
 def _moved_lit_meshes(scene: bpy.types.Scene, probe: bpy.types.Object, moved: set[str]) -> set[str]:
@@ -112,6 +113,15 @@ def _replace_line(scene_name: str, probe_name: str, prefix: str, text: str) -> N
     else:
         lines[at] = text
     probe.gs_ibl_probe.last_report = "\n".join(lines)
+
+
+def _summary_after_move(scene_name: str, probe_name: str, what: str, seconds: float) -> None:
+    """The panel's one line (the bake's) with what the last move did after it, replacing an earlier move's."""
+    scene = bpy.data.scenes.get(scene_name)
+    probe = scene.objects.get(probe_name) if scene is not None else None
+    if probe is not None:
+        s = probe.gs_ibl_probe
+        s.last_summary = f"{s.last_summary.split(MOVED_SUMMARY)[0]}{MOVED_SUMMARY}{what} in {seconds:.1f} s"
 
 
 def _moved_names(depsgraph) -> set[str]:
@@ -231,7 +241,10 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
                     steps = volume_light_steps(scene, probe, grow=True) if volume else relight_steps(scene, probe,
                                                                                                       meshes)
                     text, _choices = yield from within(steps, *part)
-                    text += f" (after a move, {time.perf_counter() - t0:.1f} s)"
+                    seconds = time.perf_counter() - t0
+                    text += f" (after a move, {seconds:.1f} s)"
+                    _summary_after_move(scene_name, probe_name, "light volume grown" if volume else
+                                        f"{len(meshes)} mesh{'es' if len(meshes) != 1 else ''} relit", seconds)
                     print(f"GS-IBL (update when moved): {text}")
                     # Details says what lights the meshes now: the volume's line of the bake's report, or Auto's
                     # choice for the meshes that moved beside the bake's own line
@@ -277,8 +290,18 @@ def on_load_post(*_args) -> None:
     for scene in bpy.data.scenes:  # the opened file's places: its first move is compared with them
         _look(scene)
     _adopt_saved_next = True
+    # a file saved with an out-of-date bake says so when opened, once the objects' matrices are evaluated: at
+    # load_post they are not, and every saved bake read "the probe moved" until the next bake (the GUI evaluates
+    # the file before a timer's first call; headless, no status bar shows it)
+    if not bpy.app.timers.is_registered(notice_after_load):
+        bpy.app.timers.register(notice_after_load, first_interval=0.0)
+
+
+def notice_after_load() -> None:
+    """Timer (one-shot): the status bar's line about the opened file's out-of-date bakes."""
     if bpy.context.scene is not None:
-        refresh_notice(bpy.context.scene)  # a file saved with an out-of-date bake says so when opened
+        bpy.context.evaluated_depsgraph_get()  # evaluated already in the GUI; in case it is not
+        refresh_notice(bpy.context.scene)
 
 
 _HANDLERS = (("depsgraph_update_post", on_depsgraph_update), ("load_pre", on_load_pre), ("load_post", on_load_post))
@@ -290,6 +313,7 @@ def register_handlers() -> None:
 
 def unregister_handlers() -> None:
     handlers.remove(_HANDLERS)
-    if bpy.app.timers.is_registered(run_pending):
-        bpy.app.timers.unregister(run_pending)
+    for timer in (run_pending, notice_after_load):
+        if bpy.app.timers.is_registered(timer):
+            bpy.app.timers.unregister(timer)
     on_load_pre()

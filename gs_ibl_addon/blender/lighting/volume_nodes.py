@@ -152,9 +152,11 @@ def _fill(tree, build) -> None:
             pass
     tree.nodes.clear()
     build(NodeMath(tree))
-    # a column per creation order: readable enough, not needed to work (one call: a node's own set updates the tree)
-    at = [(200.0 * (j // 20), -150.0 * (j % 20)) for j in range(len(tree.nodes))]
-    tree.nodes.foreach_set("location", [x for xy in at for x in xy])
+    # columns in creation order, rows as tall as an Image Texture node, none selected: readable enough, not needed
+    # to work (one call each: a node's own set updates the whole tree)
+    n = len(tree.nodes)
+    tree.nodes.foreach_set("location", [x for j in range(n) for x in (260.0 * (j // 10), -300.0 * (j % 10))])
+    tree.nodes.foreach_set("select", [False] * n)
 
 
 def _oct_uv(b: NodeMath, d):

@@ -319,9 +319,9 @@ def extend_volume(renderer, previous: LightVolume, boxes, budget: int = DEFAULT_
     rendered = len(holes)
     added = int((refine > 1).sum()) - int((old_refine > 1).sum())
     bricks = f", {len(new)} for {added} new brick{'s' if added != 1 else ''}" if added > 0 else ""
-    vol.report = [f"light volume grown to {' x '.join(map(str, spec.shape))} nodes over what the meshes reach now: "
-                  f"{rendered} probes rendered ({k} nodes, {len(fresh_cells)} cell centres{bricks}), "
-                  f"{spec.count - k} nodes and {old_bricks} brick probes kept"]
+    vol.report = [f"light volume grown to a grid of {' x '.join(map(str, spec.shape))} probes over what the meshes "
+                  f"reach now: {rendered} probes rendered ({k} new grid probes, {len(fresh_cells)} cell centres"
+                  f"{bricks}), {spec.count - k} grid probes and {old_bricks} brick probes kept"]
     vol.report += probe_report(holes, inside, hole_colour)
     vol.timings = {"render": sum(b["render_ms"] for b in rs), "maps": sum(b["maps_ms"] for b in rs), "probes": rendered,
                    "grid": spec.count, "kept": int(spec.count - k), "centres": len(fresh_cells), "bricks": len(new),
