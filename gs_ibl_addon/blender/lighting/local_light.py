@@ -57,6 +57,7 @@ WORLD_COEFFS = "gs_ibl_world"  # atlas custom property: JSON (9, 3) monomial coe
 WORLD_IRRADIANCE = "gs_ibl_world_irradiance"  # atlas custom property: the World probe's irradiance image (E/pi)
 AO_SAMPLES = 4  # Cycles' rays per shading point for the correction's occlusion (its samples average them)
 AO_DISTANCE = 1.0  # metres
+AO_LIT_POWER = 2.0  # Cycles: the AO stand-in's power on light the mesh adds (D > 0); 1 on light it takes away
 EEVEE_OUTPUT = "GS-IBL EEVEE Output"  # our Material Output (target EEVEE) in a lit material
 GRID_IMAGE = "GS-IBL Grid"
 DEFAULT_MATERIAL_ROLE = "local_material"
@@ -267,6 +268,7 @@ def _build(tree, atlas) -> None:
     ao = N.new("ShaderNodeAmbientOcclusion")
     ao.only_local, ao.samples = True, AO_SAMPLES
     ao.inputs["Distance"].default_value = AO_DISTANCE
+    ao_lit = b.math("POWER", ao.outputs["AO"], AO_LIT_POWER)
     for out_name, (here, base) in paths.items():
         rx, ry, rz = b.separate(b.vec("DIVIDE", here, b.vec("MAXIMUM", base, (EPS, EPS, EPS))))
         s = b.math("MINIMUM", b.math("MINIMUM", rx, ry), rz)
@@ -281,7 +283,11 @@ def _build(tree, atlas) -> None:
             diffuse = N.new("ShaderNodeBsdfDiffuse")
             L.new(gin.outputs["Albedo"], diffuse.inputs["Color"])
             L.new(diffuse.outputs[0], mixer.inputs[2])
-            rest = b.scale(b.vec("SUBTRACT", here, base), ao.outputs["AO"])
+            d = b.vec("SUBTRACT", here, base)
+            # light the mesh adds (D > 0) is mostly one-directional (a window, a lamp), which the cosine-weighted AO
+            # under-shadows: AO^2 (accuracy.md); light it takes away keeps one AO
+            rest = b.vec("ADD", b.scale(b.vec("MAXIMUM", d, (0.0, 0.0, 0.0)), ao_lit),
+                         b.scale(b.vec("MINIMUM", d, (0.0, 0.0, 0.0)), ao.outputs["AO"]))
         else:
             rest = b.scale(b.vec("SUBTRACT", here, b.scale(base, s)), ao.outputs["AO"])
         lit = b.vec("MULTIPLY", b.scale(rest, gin.outputs["Strength"]), gin.outputs["Albedo"])
