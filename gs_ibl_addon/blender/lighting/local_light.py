@@ -10,7 +10,8 @@ where H is the mesh's light (the World probe's plus D, the mesh's difference: it
 shading point), B what the user's shader gets from the World in this engine and s the largest scale in 0..1 that
 keeps H - s B non-negative (EEVEE clamps negative emission; Cycles keeps it, so there the emission is H - B and the
 World's diffuse stays traced): core/probe/local_mix.py is the numpy twin and says why. The emission is also scaled
-by the mesh's own ambient occlusion (Only Local): the engines shadow the user's shader, not emission. The group has
+by the mesh's own ambient occlusion (Only Local): the engines shadow the user's shader, not emission (in Cycles its
+square where the emission adds light, which is mostly one-directional there; docs/accuracy.md). The group has
 two outputs, one per engine, read by the user's Material Output and by an EEVEE-only output of ours: Cycles H = E +
 D over B = E (the World probe's irradiance image), EEVEE H = W + D over its order-1 part of W (the World probe's
 order-2 coefficients) as EEVEE derings it. Irradiance is order-2 SH, kept as the nine monomial coefficients of
