@@ -152,10 +152,10 @@ def _fill(tree, build) -> None:
             pass
     tree.nodes.clear()
     build(NodeMath(tree))
-    # columns in creation order, rows as tall as an Image Texture node, none selected: readable enough, not needed
-    # to work (one call each: a node's own set updates the whole tree)
+    # columns in creation order, rows as tall as the tallest node (a Corner group node: ~420 units), none selected:
+    # readable enough, not needed to work (one call each: a node's own set updates the whole tree)
     n = len(tree.nodes)
-    tree.nodes.foreach_set("location", [x for j in range(n) for x in (260.0 * (j // 10), -300.0 * (j % 10))])
+    tree.nodes.foreach_set("location", [x for j in range(n) for x in (260.0 * (j // 10), -450.0 * (j % 10))])
     tree.nodes.foreach_set("select", [False] * n)
 
 
