@@ -100,10 +100,15 @@ def _adopt_saved(scene: bpy.types.Scene) -> None:
                 baked_states[(scene.name, obj.name)] = bake_state(obj, splats, scene)
 
 
+def _probe_named(scene_name: str, probe_name: str) -> bpy.types.Object | None:
+    """The object of that name in the scene of that name, if both are still there (a job's names outlive them)."""
+    scene = bpy.data.scenes.get(scene_name)
+    return scene.objects.get(probe_name) if scene is not None else None
+
+
 def _replace_line(scene_name: str, probe_name: str, prefix: str, text: str) -> None:
     """The probe's report (Details) with its line starting ``prefix`` replaced by ``text`` (added if it has none)."""
-    scene = bpy.data.scenes.get(scene_name)
-    probe = scene.objects.get(probe_name) if scene is not None else None
+    probe = _probe_named(scene_name, probe_name)
     if probe is None:
         return
     lines = probe.gs_ibl_probe.last_report.split("\n") if probe.gs_ibl_probe.last_report else []
@@ -117,8 +122,7 @@ def _replace_line(scene_name: str, probe_name: str, prefix: str, text: str) -> N
 
 def _summary_after_move(scene_name: str, probe_name: str, what: str, seconds: float) -> None:
     """The panel's one line (the bake's) with what the last move did after it, replacing an earlier move's."""
-    scene = bpy.data.scenes.get(scene_name)
-    probe = scene.objects.get(probe_name) if scene is not None else None
+    probe = _probe_named(scene_name, probe_name)
     if probe is not None:
         s = probe.gs_ibl_probe
         s.last_summary = f"{s.last_summary.split(MOVED_SUMMARY)[0]}{MOVED_SUMMARY}{what} in {seconds:.1f} s"
@@ -263,8 +267,7 @@ def _pending_job(keys: list[tuple[str, str]], relight: dict[tuple[str, str], set
             print(f"GS-IBL (update when moved): {text}" + (f"; WARNING: {warning}" if warning else ""))
         except (ValueError, RuntimeError, OSError, MemoryError) as e:
             last_auto_error = f"{probe_name}: {e}"
-            scene = bpy.data.scenes.get(scene_name)
-            probe = scene.objects.get(probe_name) if scene is not None else None
+            probe = _probe_named(scene_name, probe_name)
             if probe is not None and is_probe(probe):
                 probe.gs_ibl_probe.last_report = f"{WARNING_PREFIX}automatic re-bake failed:\n{e}"
                 probe.gs_ibl_probe.last_summary = "Automatic re-bake failed: the World keeps the last bake's light"

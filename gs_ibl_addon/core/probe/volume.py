@@ -407,19 +407,23 @@ def unpack_volume(irr_atlas: np.ndarray, vis_atlas: np.ndarray, cells: np.ndarra
 # ------------------------------------------------------------------------------------------------------------------
 # Lookup
 
+def _node_steps(spec: GridSpec) -> list[float]:
+    """The node spacing of each axis with more than one node."""
+    lo, hi, n = np.asarray(spec.lo), np.asarray(spec.hi), np.asarray(spec.shape)
+    return [float((hi[a] - lo[a]) / (n[a] - 1)) for a in range(3) if n[a] > 1 and hi[a] > lo[a]]
+
+
 def spec_spacing(spec: GridSpec) -> float:
     """The smallest node spacing over the axes with more than one node (the box's largest side, at least 1 m, with
     none)."""
-    lo, hi, n = np.asarray(spec.lo), np.asarray(spec.hi), np.asarray(spec.shape)
-    steps = [(hi[a] - lo[a]) / (n[a] - 1) for a in range(3) if n[a] > 1 and hi[a] > lo[a]]
-    return float(min(steps)) if steps else float(max(np.max(hi - lo), 1.0))
+    steps = _node_steps(spec)
+    return min(steps) if steps else float(max(np.max(np.subtract(spec.hi, spec.lo)), 1.0))
 
 
 def spacing_words(spec: GridSpec) -> str:
     """"0.26-0.33 m apart": the node spacings over the axes with more than one node (each axis rounds its node count
     up, so they differ), as the reports say it."""
-    lo, hi, n = np.asarray(spec.lo), np.asarray(spec.hi), np.asarray(spec.shape)
-    steps = [(hi[a] - lo[a]) / (n[a] - 1) for a in range(3) if n[a] > 1 and hi[a] > lo[a]]
+    steps = _node_steps(spec)
     low, high = (min(steps), max(steps)) if steps else (spec_spacing(spec),) * 2
     return f"{low:.2f} m apart" if f"{low:.2f}" == f"{high:.2f}" else f"{low:.2f}-{high:.2f} m apart"
 
@@ -430,13 +434,14 @@ def shader_constants(spec: GridSpec, tiles: int | None = None) -> dict:
     cols, rows = atlas_tiles(spec.count if tiles is None else int(tiles))
     ccols, crows = atlas_tiles(int(np.prod(cell_shape(spec))))
     first, step = node_frame(spec)  # one node on an axis: the box's middle, step 0
+    spacing = spec_spacing(spec)
     return {"lo": tuple(map(float, spec.lo)), "hi": tuple(map(float, spec.hi)), "shape": tuple(spec.shape),
             "cols": cols, "rows": rows, "irr": IRR, "vis": VIS,
             "irradiance_size": (cols * (IRR + 2), rows * (IRR + 2)),  # (width, height)
             "visibility_size": (cols * (VIS + 2), rows * (VIS + 2)),
             "cells": cell_shape(spec), "cells_size": (ccols, crows), "grid_count": spec.count,
             "first_node": tuple(map(float, first)), "node_step": tuple(map(float, step)),
-            "normal_bias": NORMAL_BIAS * spec_spacing(spec), "spacing": spec_spacing(spec),
+            "normal_bias": NORMAL_BIAS * spacing, "spacing": spacing,
             "variance_floor": VARIANCE_FLOOR, "min_weight": MIN_WEIGHT, "crush": CRUSH}
 
 
